@@ -1,0 +1,61 @@
+//! CAN frames and transports. The CANopen code above works on [`CanFrame`] values and
+//! never touches a socket; a transport only moves frames.
+
+mod frame;
+pub mod inproc;
+pub mod socketcan;
+
+pub use frame::CanFrame;
+
+use core::time::Duration;
+
+/// What failed in a transport.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum TransportErrorKind {
+    /// The interface does not exist or could not be opened.
+    Open,
+    /// A receive queue overflowed; frames were lost.
+    Overrun,
+    /// The interface went down or reports bus-off.
+    BusOff,
+    /// The bus this endpoint belonged to was closed.
+    Closed,
+    /// Any other I/O error.
+    Io,
+}
+
+#[derive(Debug, thiserror::Error)]
+#[error("CAN transport {kind:?}: {message}")]
+pub struct TransportError {
+    pub kind: TransportErrorKind,
+    pub message: String,
+}
+
+impl TransportError {
+    pub fn new(kind: TransportErrorKind, message: impl Into<String>) -> Self {
+        Self {
+            kind,
+            message: message.into(),
+        }
+    }
+}
+
+/// A CAN interface: send a frame, receive the next frame from other nodes.
+pub trait CanTransport: Send {
+    /// Queues one frame for transmission.
+    fn transmit(&mut self, frame: &CanFrame) -> Result<(), TransportError>;
+
+    /// Next frame from the bus, waiting at most `timeout` (`Duration::ZERO`: do not
+    /// wait). `Ok(None)` when none arrived in time.
+    fn receive(&mut self, timeout: Duration) -> Result<Option<CanFrame>, TransportError>;
+}
+
+impl<T: CanTransport + ?Sized> CanTransport for Box<T> {
+    fn transmit(&mut self, frame: &CanFrame) -> Result<(), TransportError> {
+        (**self).transmit(frame)
+    }
+    fn receive(&mut self, timeout: Duration) -> Result<Option<CanFrame>, TransportError> {
+        (**self).receive(timeout)
+    }
+}

@@ -1,0 +1,1 @@
+//! CANopen (CiA 301) protocol core: frames in, frames out, no I/O.

@@ -1,0 +1,1 @@
+//! CiA 402 drive profile: state machine, controlword/statusword, touch probe.

@@ -1,0 +1,448 @@
+//! The machine description: axes and their drives, bus timing, kinematic chain, probe
+//! table and the measuring cycles' machine parameters. One TOML file per machine under
+//! `configs/machines/`. Parsing is strict: an unknown key or a value out of range is an
+//! error naming the file, the key and why, before anything moves.
+
+use crate::axis::Axis;
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("cannot read {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: {message}")]
+    Parse { path: PathBuf, message: String },
+    #[error("{path}: {key}: {message}")]
+    Invalid {
+        path: PathBuf,
+        key: String,
+        message: String,
+    },
+}
+
+/// One axis and the CiA 402 drive that moves it.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct AxisConfig {
+    pub name: Axis,
+    /// CANopen node ID of the drive, 1..=127.
+    pub node: u8,
+    /// Drive position increments per mm (linear) or per degree (rotary).
+    pub increments_per_unit: f64,
+    /// Software limits, mm or deg.
+    pub min: f64,
+    pub max: f64,
+    /// mm/min (deg/min).
+    pub max_feed: f64,
+    /// mm/s^2 (deg/s^2).
+    pub max_acceleration: f64,
+    /// Hirth coupling grid in degrees (rotary axes only); 0 = none.
+    #[serde(default)]
+    pub hirth: f64,
+}
+
+/// CANopen bus timing.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BusConfig {
+    /// Bit rate in bit/s.
+    #[serde(default = "default_bitrate")]
+    pub bitrate: u32,
+    /// SYNC period, microseconds.
+    #[serde(default = "default_sync_period_us")]
+    pub sync_period_us: u32,
+    /// Heartbeat period the drives are configured to produce (0x1017), ms.
+    #[serde(default = "default_heartbeat_ms")]
+    pub heartbeat_producer_ms: u16,
+    /// A node whose heartbeat is missing this long is lost, ms.
+    #[serde(default = "default_heartbeat_timeout_ms")]
+    pub heartbeat_timeout_ms: u16,
+    /// SDO answer timeout, ms.
+    #[serde(default = "default_sdo_timeout_ms")]
+    pub sdo_timeout_ms: u16,
+    /// Most bus load the cyclic PDO traffic may take, percent.
+    #[serde(default = "default_max_load")]
+    pub max_load_percent: f64,
+}
+
+fn default_bitrate() -> u32 {
+    1_000_000
+}
+fn default_sync_period_us() -> u32 {
+    2000
+}
+fn default_heartbeat_ms() -> u16 {
+    50
+}
+fn default_heartbeat_timeout_ms() -> u16 {
+    150
+}
+fn default_sdo_timeout_ms() -> u16 {
+    200
+}
+fn default_max_load() -> f64 {
+    70.0
+}
+
+impl Default for BusConfig {
+    fn default() -> Self {
+        Self {
+            bitrate: default_bitrate(),
+            sync_period_us: default_sync_period_us(),
+            heartbeat_producer_ms: default_heartbeat_ms(),
+            heartbeat_timeout_ms: default_heartbeat_timeout_ms(),
+            sdo_timeout_ms: default_sdo_timeout_ms(),
+            max_load_percent: default_max_load(),
+        }
+    }
+}
+
+/// The nominal kinematic chain.
+///
+/// Conventions (shared by the simulator and the cycles' model):
+/// - With every rotary axis at 0, machine, table and program coordinates coincide.
+/// - A rotary axis turns right-handed about its nominal direction (A: +X, B: +Y,
+///   C: +Z) through its pivot point, by its angle.
+/// - Table side: `table` lists the rotary axes from the machine bed outward (the last
+///   one carries the workpiece). A point `p` fixed to the table is, in machine
+///   coordinates, `T_first(a1) * ... * T_last(an) * p`.
+/// - Head side: `head` lists rotary axes from the machine frame toward the tool. The
+///   stylus ball centre is `XYZ + T_first(h1) * ... * T_last(hn) * 0`, each pivot given
+///   relative to the ball centre with all axes at 0 (so at 0 the ball centre is XYZ).
+#[derive(Clone, Debug, Deserialize, PartialEq, Default)]
+#[serde(deny_unknown_fields)]
+pub struct KinematicsConfig {
+    #[serde(default)]
+    pub table: Vec<Axis>,
+    #[serde(default)]
+    pub head: Vec<Axis>,
+    /// A point on each rotary axis's line (see above), mm.
+    #[serde(default)]
+    pub pivot: BTreeMap<Axis, [f64; 3]>,
+}
+
+/// One entry of the touch-probe table (the TNC's tchprobe.tp).
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ProbeEntry {
+    /// Tool name as in `TOOL CALL "NAME"`.
+    pub name: String,
+    /// Stylus ball radius R, mm.
+    pub radius: f64,
+    /// Clearance added to Q320, mm.
+    pub set_up: f64,
+    /// Positioning feed, mm/min.
+    pub fmax: f64,
+    /// Probing feed, mm/min.
+    pub f: f64,
+    /// Most probing travel beyond the nominal point, mm.
+    pub dist: f64,
+    /// Spindle orientation tracking (recorded).
+    #[serde(default)]
+    pub track: bool,
+    /// Retract distance after a contact, mm.
+    pub mb: f64,
+}
+
+/// Machine parameters of the measuring cycles.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CycleParameters {
+    /// Largest allowed difference between fitted and nominal calibration sphere
+    /// radius (cycle 451), mm.
+    #[serde(default = "default_max_dev_cal_ball", rename = "maxDevCalBall")]
+    pub max_dev_cal_ball: f64,
+    /// Largest kinematics correction written without confirmation, mm / deg.
+    #[serde(default = "default_max_modification", rename = "maxModification")]
+    pub max_modification: f64,
+    /// Values of parameters given as `PREDEF` in a program, by Q number ("Q320").
+    #[serde(default)]
+    pub predef: BTreeMap<String, f64>,
+}
+
+fn default_max_dev_cal_ball() -> f64 {
+    0.1
+}
+fn default_max_modification() -> f64 {
+    0.5
+}
+
+impl Default for CycleParameters {
+    fn default() -> Self {
+        Self {
+            max_dev_cal_ball: default_max_dev_cal_ball(),
+            max_modification: default_max_modification(),
+            predef: BTreeMap::new(),
+        }
+    }
+}
+
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MachineConfig {
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    #[serde(rename = "axis")]
+    pub axes: Vec<AxisConfig>,
+    #[serde(default)]
+    pub bus: BusConfig,
+    #[serde(default)]
+    pub kinematics: KinematicsConfig,
+    #[serde(rename = "probe", default)]
+    pub probes: Vec<ProbeEntry>,
+    #[serde(default)]
+    pub cycles: CycleParameters,
+    /// Where this configuration was read from (set by [`MachineConfig::load`]).
+    #[serde(skip)]
+    pub path: PathBuf,
+}
+
+impl MachineConfig {
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses and validates; `path` names the source in errors.
+    pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
+        let mut cfg: MachineConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        cfg.path = path.to_path_buf();
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    pub fn axis(&self, axis: Axis) -> Option<&AxisConfig> {
+        self.axes.iter().find(|a| a.name == axis)
+    }
+
+    /// Mask of configured axes (bit = [`Axis::index`]).
+    pub fn axis_mask(&self) -> u8 {
+        self.axes.iter().fold(0, |m, a| m | 1 << a.name.index())
+    }
+
+    pub fn probe(&self, name: &str) -> Option<&ProbeEntry> {
+        self.probes.iter().find(|p| p.name == name)
+    }
+
+    fn invalid(&self, key: impl Into<String>, message: impl Into<String>) -> ConfigError {
+        ConfigError::Invalid {
+            path: self.path.clone(),
+            key: key.into(),
+            message: message.into(),
+        }
+    }
+
+    fn validate(&self) -> Result<(), ConfigError> {
+        if self.axes.is_empty() {
+            return Err(self.invalid("axis", "no axes configured"));
+        }
+        for lin in Axis::LINEAR {
+            if self.axis(lin).is_none() {
+                return Err(self.invalid("axis", format!("linear axis {lin} is missing")));
+            }
+        }
+        let mut seen_axes = 0u8;
+        let mut seen_nodes = [false; 128];
+        for (i, a) in self.axes.iter().enumerate() {
+            let key = |f: &str| format!("axis[{i}] ({}).{f}", a.name);
+            if seen_axes & (1 << a.name.index()) != 0 {
+                return Err(self.invalid(key("name"), "axis configured twice"));
+            }
+            seen_axes |= 1 << a.name.index();
+            if !(1..=127).contains(&a.node) {
+                return Err(self.invalid(
+                    key("node"),
+                    format!("{} is not a CANopen node ID (1..127)", a.node),
+                ));
+            }
+            if seen_nodes[a.node as usize] {
+                return Err(self.invalid(key("node"), format!("node {} used by two axes", a.node)));
+            }
+            seen_nodes[a.node as usize] = true;
+            if !(a.increments_per_unit.is_finite() && a.increments_per_unit > 0.0) {
+                return Err(self.invalid(key("increments_per_unit"), "must be > 0"));
+            }
+            if !(a.min.is_finite() && a.max.is_finite() && a.min < a.max) {
+                return Err(self.invalid(
+                    key("min"),
+                    format!("limits {}..{} are not an interval", a.min, a.max),
+                ));
+            }
+            // The drive position is an i32 of increments.
+            let reach = a.min.abs().max(a.max.abs()) * a.increments_per_unit;
+            if reach > i32::MAX as f64 {
+                return Err(self.invalid(
+                    key("increments_per_unit"),
+                    "limits overflow the drive's 32-bit position",
+                ));
+            }
+            if !(a.max_feed.is_finite() && a.max_feed > 0.0) {
+                return Err(self.invalid(key("max_feed"), "must be > 0"));
+            }
+            if !(a.max_acceleration.is_finite() && a.max_acceleration > 0.0) {
+                return Err(self.invalid(key("max_acceleration"), "must be > 0"));
+            }
+            if a.hirth < 0.0 || (a.hirth > 0.0 && !a.name.is_rotary()) {
+                return Err(self.invalid(
+                    key("hirth"),
+                    "a Hirth grid is >= 0 and only for rotary axes",
+                ));
+            }
+        }
+        let b = &self.bus;
+        if !(10_000..=1_000_000).contains(&b.bitrate) {
+            return Err(self.invalid(
+                "bus.bitrate",
+                format!(
+                    "{} is not a CAN bit rate (10 kbit/s .. 1 Mbit/s)",
+                    b.bitrate
+                ),
+            ));
+        }
+        if !(250..=100_000).contains(&b.sync_period_us) {
+            return Err(self.invalid("bus.sync_period_us", "must be 250..100000"));
+        }
+        if b.heartbeat_producer_ms == 0 || b.heartbeat_timeout_ms <= b.heartbeat_producer_ms {
+            return Err(self.invalid(
+                "bus.heartbeat_timeout_ms",
+                "must be longer than heartbeat_producer_ms, which must be > 0",
+            ));
+        }
+        if !(b.max_load_percent > 0.0 && b.max_load_percent <= 100.0) {
+            return Err(self.invalid("bus.max_load_percent", "must be in (0, 100]"));
+        }
+        let k = &self.kinematics;
+        for (side, list) in [("table", &k.table), ("head", &k.head)] {
+            for ax in list {
+                if !ax.is_rotary() {
+                    return Err(self.invalid(
+                        format!("kinematics.{side}"),
+                        format!("{ax} is not a rotary axis"),
+                    ));
+                }
+                if self.axis(*ax).is_none() {
+                    return Err(self.invalid(
+                        format!("kinematics.{side}"),
+                        format!("{ax} has no [[axis]] entry"),
+                    ));
+                }
+                if !k.pivot.contains_key(ax) {
+                    return Err(self.invalid("kinematics.pivot", format!("no pivot for {ax}")));
+                }
+            }
+        }
+        for a in &self.axes {
+            if a.name.is_rotary() && !k.table.contains(&a.name) && !k.head.contains(&a.name) {
+                return Err(self.invalid(
+                    "kinematics",
+                    format!(
+                        "rotary axis {} is in neither the table nor the head chain",
+                        a.name
+                    ),
+                ));
+            }
+        }
+        for (i, p) in self.probes.iter().enumerate() {
+            let key = |f: &str| format!("probe[{i}] ({}).{f}", p.name);
+            for (f, v, min) in [
+                ("radius", p.radius, 0.0),
+                ("fmax", p.fmax, 0.0),
+                ("f", p.f, 0.0),
+                ("dist", p.dist, 0.0),
+            ] {
+                if !(v.is_finite() && v > min) {
+                    return Err(self.invalid(key(f), "must be > 0"));
+                }
+            }
+            for (f, v) in [("set_up", p.set_up), ("mb", p.mb)] {
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(self.invalid(key(f), "must be >= 0"));
+                }
+            }
+        }
+        if !(self.cycles.max_dev_cal_ball > 0.0) {
+            return Err(self.invalid("cycles.maxDevCalBall", "must be > 0"));
+        }
+        if !(self.cycles.max_modification > 0.0) {
+            return Err(self.invalid("cycles.maxModification", "must be > 0"));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MINI: &str = r#"
+name = "mini"
+[[axis]]
+name = "X"
+node = 1
+increments_per_unit = 10000.0
+min = -100.0
+max = 100.0
+max_feed = 5000.0
+max_acceleration = 1000.0
+[[axis]]
+name = "Y"
+node = 2
+increments_per_unit = 10000.0
+min = -100.0
+max = 100.0
+max_feed = 5000.0
+max_acceleration = 1000.0
+[[axis]]
+name = "Z"
+node = 3
+increments_per_unit = 10000.0
+min = -100.0
+max = 100.0
+max_feed = 5000.0
+max_acceleration = 1000.0
+"#;
+
+    #[test]
+    fn parses_minimal() {
+        let c = MachineConfig::parse(MINI, Path::new("mini.toml")).unwrap();
+        assert_eq!(c.axis_mask(), 0b111);
+        assert_eq!(c.bus.sync_period_us, 2000);
+    }
+
+    #[test]
+    fn unknown_key_is_named() {
+        let e = MachineConfig::parse(
+            &MINI.replace(
+                "max_feed = 5000.0\nmax_acceleration = 1000.0\n[[axis]]\nname = \"Y\"",
+                "max_fed = 1.0\n[[axis]]\nname = \"Y\"",
+            ),
+            Path::new("m.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("m.toml") && e.contains("max_fed"), "{e}");
+    }
+
+    #[test]
+    fn duplicate_node_is_refused() {
+        let e = MachineConfig::parse(&MINI.replace("node = 2", "node = 1"), Path::new("m.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("axis[1] (Y).node") && e.contains("node 1 used by two axes"),
+            "{e}"
+        );
+    }
+}

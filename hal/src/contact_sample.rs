@@ -1,0 +1,68 @@
+//! The sample every latched contact becomes on its way to the estimator process.
+//! `#[repr(C)]` and self-contained so iceoryx2 can move it through shared memory.
+
+use crate::axis::{AxisPositions, MAX_AXES};
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+
+/// `flags` bit: positions come from the drives' hardware latch (always set by the
+/// CANopen backend; a backend that could only poll would leave it clear).
+pub const FLAG_HW_LATCH: u32 = 1 << 0;
+/// `flags` bit: this sample ends a run (the estimator closes the run's set).
+pub const FLAG_END_OF_RUN: u32 = 1 << 1;
+
+#[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
+#[type_name("probebridge::ContactSample/1")]
+#[repr(C)]
+pub struct ContactSample {
+    /// Increments by one per sample published by one bridge.
+    pub sequence: u64,
+    /// Groups samples of one measuring run (one program run, one `probe` call).
+    pub run_id: u64,
+    /// Trigger instant, ns, monotonic clock of the bridge (virtual in simulation).
+    pub trigger_ns: u64,
+    /// When the bridge's real-time loop received the latch, ns, same clock.
+    pub receive_ns: u64,
+    /// Latched positions: X, Y, Z in mm (stylus ball centre), A, B, C in deg.
+    pub positions: [f64; MAX_AXES],
+    /// Probing direction, unit vector in machine X/Y/Z.
+    pub direction: [f64; 3],
+    /// Probing feed, mm/min.
+    pub feed: f64,
+    /// Which entries of `positions` are valid (bit i = axis i).
+    pub axis_mask: u32,
+    pub flags: u32,
+}
+
+impl ContactSample {
+    pub const fn zeroed() -> Self {
+        Self {
+            sequence: 0,
+            run_id: 0,
+            trigger_ns: 0,
+            receive_ns: 0,
+            positions: [0.0; MAX_AXES],
+            direction: [0.0; 3],
+            feed: 0.0,
+            axis_mask: 0,
+            flags: 0,
+        }
+    }
+
+    pub fn axis_positions(&self) -> AxisPositions {
+        AxisPositions::from_raw(self.positions, self.axis_mask as u8)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layout_is_fixed() {
+        // 4 u64 + 6 f64 + 3 f64 + 1 f64 + 2 u32, no padding: the size is part of the
+        // IPC contract between bridge and estimator.
+        assert_eq!(core::mem::size_of::<ContactSample>(), 4 * 8 + 10 * 8 + 8);
+        assert_eq!(core::mem::align_of::<ContactSample>(), 8);
+    }
+}

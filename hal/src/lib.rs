@@ -1,0 +1,22 @@
+//! probebridge-hal: what the measuring cycles need from a machine, and the fieldbus
+//! side that provides it.
+//!
+//! - [`machine`]: the [`Machine`] trait the cycles call (blocking axis moves and
+//!   probing moves that stop on the hardware latch), its error kinds.
+//! - [`contact_sample`]: the `#[repr(C)]` sample every latched contact becomes.
+//! - [`can`]: CAN frames and transports (SocketCAN, in-process bus).
+//! - [`canopen`], [`cia402`]: the CANopen master and CiA 402 drive profile as code
+//!   that does no I/O (frames in, frames out).
+//! - [`config`]: the machine description (axes, bus mapping, kinematics, probe table).
+
+pub mod axis;
+pub mod can;
+pub mod canopen;
+pub mod cia402;
+pub mod config;
+pub mod contact_sample;
+pub mod machine;
+
+pub use axis::{Axis, AxisPositions};
+pub use contact_sample::ContactSample;
+pub use machine::{Contact, ErrorKind, Machine, MachineError, ProbeMove};

@@ -1,0 +1,173 @@
+//! The machine as the measuring cycles see it: blocking moves, probing moves that stop
+//! on the probe's hardware latch, and errors with a kind (shaped like embedded-hal).
+
+use crate::axis::AxisPositions;
+
+/// What went wrong, in terms a cycle can react to. Backends map their own failures
+/// onto these kinds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum ErrorKind {
+    /// The probe did not trigger within the allowed distance.
+    NotTriggered,
+    /// The probe was already deflected when the probing move was to start.
+    AlreadyDeflected,
+    /// A drive reported a fault (EMCY or fault bit in the statusword).
+    DriveFault,
+    /// A node stopped sending its heartbeat, or never came up.
+    NodeLost,
+    /// The bus or a device did not answer in time.
+    Timeout,
+    /// A move would leave an axis's software limits; nothing moved.
+    SoftwareLimit,
+    /// The transport failed (socket error, bus off, queue overrun).
+    Bus,
+    /// The request itself is invalid (unknown axis, zero direction, bad feed).
+    InvalidRequest,
+    /// Anything else.
+    Other,
+}
+
+impl ErrorKind {
+    pub const fn describe(self) -> &'static str {
+        match self {
+            ErrorKind::NotTriggered => "probe did not trigger",
+            ErrorKind::AlreadyDeflected => "probe already deflected at start",
+            ErrorKind::DriveFault => "drive fault",
+            ErrorKind::NodeLost => "node lost",
+            ErrorKind::Timeout => "timeout",
+            ErrorKind::SoftwareLimit => "software limit",
+            ErrorKind::Bus => "bus error",
+            ErrorKind::InvalidRequest => "invalid request",
+            ErrorKind::Other => "error",
+        }
+    }
+}
+
+/// Errors of a [`Machine`] implementation.
+pub trait Error: core::fmt::Debug + core::fmt::Display {
+    fn kind(&self) -> ErrorKind;
+}
+
+/// A general-purpose machine error carrying the kind, the node and device error code
+/// where known, and a message for the operator.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct MachineError {
+    pub kind: ErrorKind,
+    /// CANopen node ID (or Modbus unit) the error came from, if any.
+    pub node: Option<u8>,
+    /// Device error code (CiA 402 0x603F / EMCY error code), if any.
+    pub code: Option<u16>,
+    pub message: String,
+}
+
+impl MachineError {
+    pub fn new(kind: ErrorKind, message: impl Into<String>) -> Self {
+        Self {
+            kind,
+            node: None,
+            code: None,
+            message: message.into(),
+        }
+    }
+
+    pub fn with_node(mut self, node: u8) -> Self {
+        self.node = Some(node);
+        self
+    }
+
+    pub fn with_code(mut self, code: u16) -> Self {
+        self.code = Some(code);
+        self
+    }
+}
+
+impl core::fmt::Display for MachineError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "{}", self.kind.describe())?;
+        if let Some(n) = self.node {
+            write!(f, " (node {n}")?;
+            if let Some(c) = self.code {
+                write!(f, ", error code 0x{c:04X}")?;
+            }
+            f.write_str(")")?;
+        } else if let Some(c) = self.code {
+            write!(f, " (error code 0x{c:04X})")?;
+        }
+        if !self.message.is_empty() {
+            write!(f, ": {}", self.message)?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for MachineError {}
+
+impl Error for MachineError {
+    fn kind(&self) -> ErrorKind {
+        self.kind
+    }
+}
+
+/// A probing move: from the current position along `direction` (unit vector in machine
+/// X/Y/Z) at `feed` mm/min, at most `max_distance` mm.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProbeMove {
+    pub direction: [f64; 3],
+    pub feed: f64,
+    pub max_distance: f64,
+}
+
+/// A probe contact: the positions of all axes latched by the drives at the instant the
+/// probe triggered (the stylus ball centre for X/Y/Z), not a polled position.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Contact {
+    pub positions: AxisPositions,
+    /// Trigger instant, ns on the bridge's monotonic clock (virtual in simulation).
+    pub trigger_ns: u64,
+    /// Sequence number of the [`crate::ContactSample`] published for this contact.
+    pub sequence: u64,
+    /// The probing direction (unit vector).
+    pub direction: [f64; 3],
+}
+
+/// A machine that cycles can measure with. All calls block until the motion is done.
+///
+/// Contract every implementation keeps (and the conformance suite checks):
+/// - software limits are checked before any motion; a refused move moves nothing;
+/// - `probe` checks the probe is not deflected before moving, stops the axes on the
+///   latch and returns the latched positions; the axes are left stopped where the stop
+///   ended (beyond the contact by the braking distance); retracting is the caller's job;
+/// - on any error the axes are stopped.
+pub trait Machine {
+    type Error: Error;
+
+    /// Axes this machine has (mask over [`crate::Axis::index`]).
+    fn axes(&self) -> u8;
+
+    /// Current actual positions of all axes.
+    fn positions(&mut self) -> Result<AxisPositions, Self::Error>;
+
+    /// Straight-line move in machine coordinates; all axes arrive together. Axes not in
+    /// `target` keep their position. `feed` in mm/min (deg/min for rotary-only moves).
+    fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), Self::Error>;
+
+    /// Probing move from the current position; see [`ProbeMove`].
+    fn probe(&mut self, mv: &ProbeMove) -> Result<Contact, Self::Error>;
+}
+
+impl<M: Machine + ?Sized> Machine for &mut M {
+    type Error = M::Error;
+    fn axes(&self) -> u8 {
+        (**self).axes()
+    }
+    fn positions(&mut self) -> Result<AxisPositions, Self::Error> {
+        (**self).positions()
+    }
+    fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), Self::Error> {
+        (**self).move_to(target, feed)
+    }
+    fn probe(&mut self, mv: &ProbeMove) -> Result<Contact, Self::Error> {
+        (**self).probe(mv)
+    }
+}
