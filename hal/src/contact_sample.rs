@@ -54,6 +54,34 @@ impl ContactSample {
     }
 }
 
+/// Where the real-time loop hands each contact, in the same cycle as the latch. Called
+/// from the real-time thread: implementations must not block and should not allocate
+/// (the iceoryx2 publisher in the bridge loans, writes, sends).
+pub trait SampleSink: Send {
+    /// Publishes one sample. A failure is reported back to the loop, which counts it
+    /// and goes on: a lost IPC sample must never stop the machine mid-move.
+    fn publish(&mut self, sample: &ContactSample) -> Result<(), SinkError>;
+}
+
+/// A sample could not be handed on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SinkError;
+
+/// Discards samples (a bridge with no estimator attached).
+pub struct NullSink;
+
+impl SampleSink for NullSink {
+    fn publish(&mut self, _sample: &ContactSample) -> Result<(), SinkError> {
+        Ok(())
+    }
+}
+
+impl<S: SampleSink + ?Sized> SampleSink for Box<S> {
+    fn publish(&mut self, sample: &ContactSample) -> Result<(), SinkError> {
+        (**self).publish(sample)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

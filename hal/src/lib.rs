@@ -18,5 +18,5 @@ pub mod contact_sample;
 pub mod machine;
 
 pub use axis::{Axis, AxisPositions};
-pub use contact_sample::ContactSample;
+pub use contact_sample::{ContactSample, NullSink, SampleSink, SinkError};
 pub use machine::{Contact, ErrorKind, Machine, MachineError, ProbeMove};
