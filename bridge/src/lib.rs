@@ -1,1 +1,10 @@
-//! placeholder
+//! probebridge: the gateway between HEIDENHAIN-style touch-probe measuring cycles and
+//! fieldbus drives. This library holds what the `probebridge` binary is made of, so the
+//! integration tests can drive the same code.
+
+pub mod commands;
+pub mod configs;
+pub mod estimator;
+pub mod ipc;
+pub mod output;
+pub mod session;

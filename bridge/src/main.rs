@@ -1,1 +1,128 @@
-fn main() {}
+//! The `probebridge` command line.
+
+use clap::{Args, Parser, Subcommand};
+use probebridge::commands::{self, parse_vec3};
+use probebridge::session::MachineOptions;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "probebridge",
+    version,
+    about = "Touch-probe measuring cycles (TNC 451/450/431/444) for fieldbus-driven machines"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Args, Clone)]
+struct MachineArgs {
+    /// Simulation scenario (TOML); default: configs/scenarios/demo-sphere.toml.
+    #[arg(long)]
+    scenario: Option<PathBuf>,
+    /// SocketCAN interface (can0, vcan0); without it the built-in simulator runs on an
+    /// in-process bus.
+    #[arg(long)]
+    can: Option<String>,
+    /// Pace the built-in simulator in real time instead of a virtual clock.
+    #[arg(long)]
+    realtime: bool,
+    /// iceoryx2 service prefix for contacts and estimator requests.
+    #[arg(long, default_value = "probebridge")]
+    service: String,
+}
+
+impl MachineArgs {
+    fn options(&self) -> MachineOptions {
+        MachineOptions {
+            scenario: self.scenario.clone(),
+            can: self.can.clone(),
+            realtime: self.realtime,
+            service: self.service.clone(),
+        }
+    }
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Move to a start point, probe along a direction, print the latched contact.
+    Probe {
+        #[command(flatten)]
+        machine: MachineArgs,
+        /// Start point X,Y,Z (mm, machine coordinates).
+        #[arg(long, allow_hyphen_values = true)]
+        start: String,
+        /// Probing direction DX,DY,DZ (normalised).
+        #[arg(long, allow_hyphen_values = true)]
+        dir: String,
+        /// Longest probing path, mm.
+        #[arg(long)]
+        dist: f64,
+        /// Probing feed, mm/min.
+        #[arg(long)]
+        feed: f64,
+        /// Also write the contact as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
+    /// The simulated machine with a calibration sphere: probe it, fit it in the
+    /// estimator process.
+    Demo {
+        #[command(flatten)]
+        machine: MachineArgs,
+    },
+    /// Run the simulated drives of a scenario alone on a SocketCAN interface.
+    Sim {
+        #[arg(long)]
+        scenario: Option<PathBuf>,
+        #[arg(long)]
+        can: String,
+    },
+    /// The estimator process: receives contacts over iceoryx2, fits, answers requests.
+    Estimator {
+        #[arg(long, default_value = "probebridge")]
+        service: String,
+        /// One line per received contact.
+        #[arg(long)]
+        verbose: bool,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    // iceoryx2 logs its defaults at warning level; keep the operator's terminal for
+    // what matters unless IOX2_LOG_LEVEL asks for more.
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+    let result = match cli.command {
+        Cmd::Probe {
+            machine,
+            start,
+            dir,
+            dist,
+            feed,
+            json,
+        } => parse_vec3("--start", &start).and_then(|start| {
+            let dir = parse_vec3("--dir", &dir)?;
+            commands::probe::run(&commands::probe::ProbeArgs {
+                machine: machine.options(),
+                start,
+                dir,
+                dist,
+                feed,
+                json,
+            })
+        }),
+        Cmd::Demo { machine } => commands::demo::run(&machine.options()),
+        Cmd::Sim { scenario, can } => commands::sim::run(scenario, &can),
+        Cmd::Estimator { service, verbose } => commands::estimator::run(&service, verbose),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("probebridge: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -372,10 +372,10 @@ impl MachineConfig {
                 }
             }
         }
-        if !(self.cycles.max_dev_cal_ball > 0.0) {
+        if self.cycles.max_dev_cal_ball.is_nan() || self.cycles.max_dev_cal_ball <= 0.0 {
             return Err(self.invalid("cycles.maxDevCalBall", "must be > 0"));
         }
-        if !(self.cycles.max_modification > 0.0) {
+        if self.cycles.max_modification.is_nan() || self.cycles.max_modification <= 0.0 {
             return Err(self.invalid("cycles.maxModification", "must be > 0"));
         }
         Ok(())

@@ -13,9 +13,12 @@ pub mod axis;
 pub mod can;
 pub mod canopen;
 pub mod cia402;
+pub mod clock;
 pub mod config;
 pub mod contact_sample;
 pub mod machine;
+pub mod master;
+pub mod motion;
 
 pub use axis::{Axis, AxisPositions};
 pub use contact_sample::{ContactSample, NullSink, SampleSink, SinkError};

@@ -1,6 +1,7 @@
 //! CAN frames and transports. The CANopen code above works on [`CanFrame`] values and
 //! never touches a socket; a transport only moves frames.
 
+pub mod candump;
 mod frame;
 pub mod inproc;
 pub mod socketcan;

@@ -29,8 +29,8 @@ impl SocketCanTransport {
 
     fn io_error(&self, what: &str, e: std::io::Error) -> TransportError {
         let kind = match e.raw_os_error() {
-            Some(libc_enobufs) if libc_enobufs == 105 => TransportErrorKind::Overrun,
-            Some(enetdown) if enetdown == 100 => TransportErrorKind::BusOff,
+            Some(libc::ENOBUFS) => TransportErrorKind::Overrun,
+            Some(libc::ENETDOWN) => TransportErrorKind::BusOff,
             _ => TransportErrorKind::Io,
         };
         TransportError::new(kind, format!("{what} on {}: {e}", self.iface))

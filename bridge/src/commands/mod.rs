@@ -1,0 +1,28 @@
+//! One module per `probebridge` subcommand.
+
+pub mod demo;
+pub mod estimator;
+pub mod probe;
+pub mod sim;
+
+/// Parses "X,Y,Z" into three numbers, naming the option on error.
+pub fn parse_vec3(option: &str, s: &str) -> Result<[f64; 3], String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != 3 {
+        return Err(format!("{option} {s:?}: expected three numbers X,Y,Z"));
+    }
+    let mut v = [0.0; 3];
+    for (i, p) in parts.iter().enumerate() {
+        v[i] = p
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| format!("{option} {s:?}: {p:?} is not a number"))?;
+    }
+    Ok(v)
+}
+
+/// Unique iceoryx2 service prefix for a process that did not get one.
+pub fn default_service() -> String {
+    "probebridge".to_string()
+}

@@ -1,0 +1,65 @@
+//! `probebridge probe`: one probing move, reported with the latched positions of all
+//! axes.
+
+use crate::session::{MachineOptions, Session};
+use hal::{AxisPositions, Machine, ProbeMove};
+use std::path::PathBuf;
+
+pub struct ProbeArgs {
+    pub machine: MachineOptions,
+    pub start: [f64; 3],
+    pub dir: [f64; 3],
+    pub dist: f64,
+    pub feed: f64,
+    pub json: Option<PathBuf>,
+}
+
+pub fn run(args: &ProbeArgs) -> Result<(), String> {
+    let n = (args.dir[0].powi(2) + args.dir[1].powi(2) + args.dir[2].powi(2)).sqrt();
+    if !(n > 1e-9) {
+        return Err("--dir: the probing direction must not be zero".into());
+    }
+    if !(args.dist > 0.0) {
+        return Err(format!("--dist {}: must be > 0", args.dist));
+    }
+    if !(args.feed > 0.0) {
+        return Err(format!("--feed {}: must be > 0", args.feed));
+    }
+    let mut s = Session::open(&args.machine).map_err(|e| e.to_string())?;
+    for note in &s.startup.notes {
+        eprintln!("note: {note}");
+    }
+    let rapid = s.config.probes.first().map_or(3000.0, |p| p.fmax);
+    let start = AxisPositions::linear(args.start);
+    s.machine
+        .move_to(&start, rapid)
+        .map_err(|e| format!("moving to the start: {e}"))?;
+    let dir = [args.dir[0] / n, args.dir[1] / n, args.dir[2] / n];
+    let contact = s
+        .machine
+        .probe(&ProbeMove {
+            direction: dir,
+            feed: args.feed,
+            max_distance: args.dist,
+        })
+        .map_err(|e| format!("probing: {e}"))?;
+    // Back off to the start so the stylus is free again.
+    s.machine
+        .move_to(&start, rapid)
+        .map_err(|e| format!("retracting: {e}"))?;
+    println!("contact (stylus ball centre, machine coordinates, latched by the drives):");
+    for (axis, v) in contact.positions.iter() {
+        let unit = if axis.is_rotary() { "deg" } else { "mm" };
+        println!("  {axis} {v:+14.6} {unit}");
+    }
+    println!("  trigger at {} ns", contact.trigger_ns);
+    if let Some(path) = &args.json {
+        let mut c = serde_json::Map::new();
+        for (axis, v) in contact.positions.iter() {
+            c.insert(axis.name().into(), serde_json::json!(v));
+        }
+        let doc = serde_json::json!({ "contact": c, "trigger_ns": contact.trigger_ns });
+        crate::output::write_json(path, &doc)?;
+    }
+    Ok(())
+}

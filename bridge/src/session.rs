@@ -1,0 +1,114 @@
+//! Opening "the machine" for a command: the built-in simulator on the in-process bus,
+//! or real drives (or `probebridge sim` in another process) on a SocketCAN interface.
+
+use crate::configs;
+use crate::ipc::ForwardingSink;
+use hal::can::inproc::InprocBus;
+use hal::can::socketcan::SocketCanTransport;
+use hal::can::CanTransport;
+use hal::config::MachineConfig;
+use hal::master::{CanMachine, MasterOptions, Pacing, StartupReport};
+use hal::MachineError;
+use sim::machine::{SimMachine, SimRunner};
+use sim::scenario::Scenario;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// How to reach the machine.
+#[derive(Clone, Debug, Default)]
+pub struct MachineOptions {
+    /// Simulation scenario (default: the demo scenario). With `can`, it only names the
+    /// machine configuration and the probe table radius.
+    pub scenario: Option<PathBuf>,
+    /// SocketCAN interface; `None` = built-in simulator on the in-process bus.
+    pub can: Option<String>,
+    /// Pace the built-in simulator in real time instead of a virtual clock.
+    pub realtime: bool,
+    /// iceoryx2 service prefix for contact samples.
+    pub service: String,
+}
+
+pub struct Session {
+    pub machine: CanMachine,
+    pub config: MachineConfig,
+    pub scenario: Scenario,
+    pub startup: StartupReport,
+    pub sim: Option<SimRunner>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum SessionError {
+    #[error("{0}")]
+    Scenario(String),
+    #[error(transparent)]
+    Machine(#[from] MachineError),
+    #[error("iceoryx2: {0}")]
+    Ipc(String),
+}
+
+pub fn load_scenario(path: Option<&Path>) -> Result<Scenario, SessionError> {
+    let path = path.map_or_else(configs::default_scenario, Path::to_path_buf);
+    Scenario::load(&path, Some(&configs::machines_dir()))
+        .map_err(|e| SessionError::Scenario(e.to_string()))
+}
+
+/// The machine configuration as the bridge uses it with a scenario: on the simulator
+/// the probe table's R is the scenario's (a perfectly calibrated probe unless the
+/// scenario says otherwise).
+pub fn machine_config(scenario: &Scenario) -> MachineConfig {
+    let mut cfg = scenario.machine.clone();
+    for p in &mut cfg.probes {
+        p.radius = scenario.probe_table_radius();
+    }
+    cfg
+}
+
+impl Session {
+    pub fn open(opts: &MachineOptions) -> Result<Self, SessionError> {
+        let scenario = load_scenario(opts.scenario.as_deref())?;
+        let config = machine_config(&scenario);
+        let sink =
+            ForwardingSink::spawn(&opts.service).map_err(|e| SessionError::Ipc(e.to_string()))?;
+        let run_id = hal::clock::monotonic_ns();
+        let (transport, sim, pacing): (Box<dyn CanTransport>, Option<SimRunner>, Pacing) =
+            match &opts.can {
+                Some(iface) => {
+                    let t = SocketCanTransport::open(iface)
+                        .map_err(|e| MachineError::new(hal::ErrorKind::Bus, e.to_string()))?;
+                    (Box::new(t), None, Pacing::RealTime)
+                }
+                None => {
+                    let bus = InprocBus::new();
+                    let sim = SimRunner::spawn(SimMachine::new(&scenario), bus.endpoint());
+                    let pacing = if opts.realtime {
+                        Pacing::RealTime
+                    } else {
+                        Pacing::Lockstep {
+                            answer_timeout: Duration::from_millis(200),
+                        }
+                    };
+                    (Box::new(bus.endpoint()), Some(sim), pacing)
+                }
+            };
+        let options = MasterOptions {
+            pacing,
+            run_id,
+            ..MasterOptions::default()
+        };
+        let (machine, startup) = CanMachine::start(&config, transport, sink, options)?;
+        Ok(Self {
+            machine,
+            config,
+            scenario,
+            startup,
+            sim,
+        })
+    }
+}
+
+impl Drop for Session {
+    fn drop(&mut self) {
+        // Disable the drives before the simulator goes away.
+        self.machine.shutdown();
+    }
+}

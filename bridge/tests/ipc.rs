@@ -1,0 +1,571 @@
+//! iceoryx2 IPC between the bridge and the estimator: contact samples, requests, the
+//! estimator process, stale-resource cleanup.
+//!
+//! Every test uses its own service prefix, so tests run in parallel (and next to other
+//! test processes) without seeing each other. Waiting is always on an event or a reply
+//! with a deadline, never a fixed sleep.
+//!
+//! Some tests re-run this test binary as a child process (the `child_entry` test,
+//! steered by the `PB_IPC_CHILD` environment variable) to get a second process: an
+//! estimator process, or a process that dies holding iceoryx2 resources.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::io::{BufRead, BufReader};
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use hal::contact_sample::{FLAG_END_OF_RUN, FLAG_HW_LATCH};
+use hal::{ContactSample, SampleSink};
+use probebridge::estimator::{run_estimator, run_estimator_with, EstimatorOptions};
+use probebridge::ipc::{
+    remove_stale_resources, ContactPublisher, ContactSubscriber, EstimatorChild, EstimatorClient,
+    EstimatorRequest, ForwardingSink, IpcError, ReplyStatus, ServiceNames, CONTACT_BUFFER,
+};
+
+const T: Duration = Duration::from_secs(10);
+
+// ---------------------------------------------------------------------------------------
+// Counting allocator (per thread, so parallel tests do not disturb the count).
+
+struct Counting;
+
+thread_local! {
+    static ALLOCS: Cell<u64> = const { Cell::new(0) };
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn allocs() -> u64 {
+    ALLOCS.with(|c| c.get())
+}
+
+// ---------------------------------------------------------------------------------------
+// Helpers
+
+fn unique_prefix(test: &str) -> String {
+    static COUNTER: AtomicUsize = AtomicUsize::new(0);
+    format!(
+        "pbtest/{test}/{}/{}",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    )
+}
+
+fn sample(sequence: u64, run_id: u64, xyz: [f64; 3]) -> ContactSample {
+    let mut s = ContactSample::zeroed();
+    s.sequence = sequence;
+    s.run_id = run_id;
+    s.trigger_ns = 1_000_000 * sequence + 17;
+    s.receive_ns = s.trigger_ns + 250_000;
+    s.positions = [xyz[0], xyz[1], xyz[2], 0.5 * sequence as f64, -1.25, 90.0];
+    s.direction = [0.0, 0.0, -1.0];
+    s.feed = 150.0 + sequence as f64;
+    s.axis_mask = 0b11_1111;
+    s.flags = FLAG_HW_LATCH;
+    s
+}
+
+/// `n` points spread over the upper half of a sphere (as a 451 cap would be, wider).
+fn sphere_points(centre: [f64; 3], radius: f64, n: usize) -> Vec<[f64; 3]> {
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    (0..n)
+        .map(|i| {
+            let z = 1.0 - (i as f64 + 0.5) / n as f64; // 1 .. 0: upper hemisphere
+            let r = (1.0 - z * z).sqrt();
+            let phi = golden * i as f64;
+            [
+                centre[0] + radius * r * phi.cos(),
+                centre[1] + radius * r * phi.sin(),
+                centre[2] + radius * z,
+            ]
+        })
+        .collect()
+}
+
+/// The estimator in a thread of this process; stopped and joined on drop.
+struct EstimatorThread {
+    stop: Arc<AtomicBool>,
+    handle: Option<JoinHandle<String>>,
+}
+
+impl EstimatorThread {
+    fn start(prefix: &str, verbose: bool) -> Self {
+        let stop = Arc::new(AtomicBool::new(false));
+        let prefix = prefix.to_string();
+        let flag = stop.clone();
+        let handle = std::thread::spawn(move || {
+            let mut log = Vec::new();
+            let options = EstimatorOptions {
+                verbose,
+                handle_signals: false,
+            };
+            let result = run_estimator_with(&prefix, &options, &flag, &mut log);
+            let mut log = String::from_utf8(log).unwrap();
+            if let Err(e) = result {
+                log.push_str(&format!("ESTIMATOR ERROR: {e}\n"));
+            }
+            log
+        });
+        Self {
+            stop,
+            handle: Some(handle),
+        }
+    }
+
+    fn stop(mut self) -> String {
+        self.stop.store(true, Ordering::Relaxed);
+        self.handle.take().unwrap().join().unwrap()
+    }
+}
+
+impl Drop for EstimatorThread {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Contacts
+
+#[test]
+fn a_thousand_samples_arrive_complete_and_in_order() {
+    let prefix = unique_prefix("thousand");
+    let subscriber = ContactSubscriber::new(&prefix).unwrap();
+    let mut publisher = ContactPublisher::new(&prefix).unwrap();
+
+    let sent: Vec<ContactSample> = (0..1000u64)
+        .map(|i| {
+            sample(
+                i + 1,
+                1 + i / 100,
+                [i as f64 * 0.001, -(i as f64), 1e6 / (i + 1) as f64],
+            )
+        })
+        .collect();
+    // All of them before the first receive: the subscriber buffer must hold a burst.
+    assert!(sent.len() <= CONTACT_BUFFER);
+    for s in &sent {
+        SampleSink::publish(&mut publisher, s).unwrap();
+    }
+    let stats = publisher.stats();
+    assert_eq!(stats.published, 1000);
+    assert_eq!(stats.failed, 0);
+    assert_eq!(stats.unreceived, 0);
+
+    for (i, want) in sent.iter().enumerate() {
+        let got = subscriber
+            .receive_timeout(T)
+            .unwrap()
+            .unwrap_or_else(|| panic!("sample {i} did not arrive"));
+        assert_eq!(&got, want, "sample {i}");
+    }
+    assert_eq!(subscriber.try_receive().unwrap(), None);
+}
+
+#[test]
+fn the_event_wakes_a_waiting_subscriber() {
+    let prefix = unique_prefix("wake");
+    let subscriber = ContactSubscriber::new(&prefix).unwrap();
+    let mut publisher = ContactPublisher::new(&prefix).unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    let waiter = std::thread::spawn(move || {
+        tx.send(()).unwrap();
+        // Without the event this would sleep for the whole minute.
+        let t0 = Instant::now();
+        let got = subscriber.receive_timeout(Duration::from_secs(60)).unwrap();
+        (got, t0.elapsed())
+    });
+    rx.recv().unwrap();
+    let s = sample(1, 1, [1.0, 2.0, 3.0]);
+    publisher.publish(&s).unwrap();
+    let (got, waited) = waiter.join().unwrap();
+    assert_eq!(got, Some(s));
+    assert!(
+        waited < Duration::from_secs(30),
+        "woke only after {waited:?}"
+    );
+}
+
+/// What publish allocates, per sample, after construction (see `ContactPublisher`): the
+/// one `Arc` iceoryx2 0.10 creates in `loan_uninit`, nothing in `send`/`notify`. If this
+/// fails with a higher count, something on the hot path started allocating; if iceoryx2
+/// drops its per-loan `Arc`, tighten it to zero.
+#[test]
+fn publish_allocates_at_most_once_per_sample() {
+    let prefix = unique_prefix("alloc");
+    let subscriber = ContactSubscriber::new(&prefix).unwrap();
+    let mut publisher = ContactPublisher::new(&prefix).unwrap();
+    publisher.update_connections().unwrap();
+    // Warm up: first send after connections, thread-locals of the logger and clock.
+    for i in 0..10 {
+        publisher.publish(&sample(i, 1, [0.0; 3])).unwrap();
+    }
+    while subscriber.try_receive().unwrap().is_some() {}
+
+    const N: u64 = 200;
+    let s = sample(100, 1, [1.0, 2.0, 3.0]);
+    let before = allocs();
+    for _ in 0..N {
+        publisher.publish(&s).unwrap();
+        // Keep the subscriber buffer from filling (receive happens on this thread too,
+        // so count it separately).
+        let a = allocs();
+        assert!(subscriber.try_receive().unwrap().is_some());
+        let b = allocs();
+        ALLOCS.with(|c| c.set(c.get() - (b - a)));
+    }
+    let per_publish = (allocs() - before) as f64 / N as f64;
+    eprintln!("allocations per publish: {per_publish}");
+    assert!(
+        per_publish <= 1.0,
+        "publish allocates {per_publish} times per sample"
+    );
+}
+
+/// The sink for the real-time thread: no allocation in `publish` at all, and every
+/// sample still arrives, in order.
+#[test]
+fn forwarding_sink_publish_allocates_nothing() {
+    let prefix = unique_prefix("forward");
+    let subscriber = ContactSubscriber::new(&prefix).unwrap();
+    let mut sink = ForwardingSink::spawn(&prefix).unwrap();
+    sink.publish(&sample(0, 1, [0.0; 3])).unwrap(); // warm-up
+    assert_eq!(subscriber.receive_timeout(T).unwrap().unwrap().sequence, 0);
+
+    const N: u64 = 500;
+    let before = allocs();
+    for i in 1..=N {
+        sink.publish(&sample(i, 1, [i as f64, 0.0, 0.0])).unwrap();
+    }
+    let during = allocs() - before;
+    for i in 1..=N {
+        let got = subscriber.receive_timeout(T).unwrap().unwrap();
+        assert_eq!(got, sample(i, 1, [i as f64, 0.0, 0.0]));
+    }
+    assert_eq!(
+        during, 0,
+        "ForwardingSink::publish allocated {during} times"
+    );
+    let stats = sink.finish();
+    assert_eq!((stats.published, stats.failed), (N + 1, 0));
+}
+
+// ---------------------------------------------------------------------------------------
+// Estimator in a thread
+
+#[test]
+fn the_estimator_fits_a_sphere_and_answers_over_ipc() {
+    let prefix = unique_prefix("fit");
+    let estimator = EstimatorThread::start(&prefix, true);
+    let client = EstimatorClient::connect(&prefix, T).unwrap();
+    let mut publisher = ContactPublisher::new(&prefix).unwrap();
+    publisher.update_connections().unwrap();
+
+    let centre = [120.5, -40.25, 310.0];
+    let radius = 12.5 + 1.5; // sphere + stylus ball
+    let points = sphere_points(centre, radius, 25);
+    let run = 4511;
+    for (i, p) in points.iter().enumerate() {
+        let mut s = sample(i as u64 + 1, run, *p);
+        if i + 1 == points.len() {
+            s.flags |= FLAG_END_OF_RUN;
+        }
+        publisher.publish(&s).unwrap();
+    }
+    // Another run on a different sphere must not mix in.
+    for (i, p) in sphere_points([0.0; 3], 5.0, 8).iter().enumerate() {
+        publisher
+            .publish(&sample(100 + i as u64, run + 1, *p))
+            .unwrap();
+    }
+    assert_eq!(publisher.stats().unreceived, 0);
+
+    let r = client.fit_sphere(run, T).unwrap();
+    assert!(r.ok, "{r:?}");
+    assert_eq!(r.error, ReplyStatus::Ok);
+    assert_eq!(r.run_id, run);
+    assert_eq!(r.n_points, 25);
+    for (got, want) in r.centre.iter().zip(centre) {
+        assert!((got - want).abs() < 1e-9, "{r:?}");
+    }
+    assert!((r.radius - radius).abs() < 1e-9, "{r:?}");
+    assert!(r.rms < 1e-9 && r.max_residual < 1e-9, "{r:?}");
+
+    let r2 = client.fit_sphere(run + 1, T).unwrap();
+    assert!(r2.ok && (r2.radius - 5.0).abs() < 1e-9, "{r2:?}");
+
+    // Forget drops the run; afterwards it is unknown.
+    assert_eq!(client.forget(run, T).unwrap(), (ReplyStatus::Ok, 25));
+    let r = client.fit_sphere(run, T).unwrap();
+    assert_eq!((r.ok, r.error), (false, ReplyStatus::UnknownRun));
+
+    drop(publisher);
+    drop(client);
+    let log = estimator.stop();
+    assert!(!log.contains("ESTIMATOR ERROR"), "{log}");
+    assert!(
+        log.contains("contact #1 run 4511"),
+        "verbose sample line missing:\n{log}"
+    );
+    assert!(log.contains("run 4511 ended with 25 samples"), "{log}");
+    assert!(log.contains("estimator: stopped"), "{log}");
+}
+
+#[test]
+fn unknown_runs_and_bad_requests_get_error_replies_not_hangs() {
+    let prefix = unique_prefix("unknown");
+    let _estimator = EstimatorThread::start(&prefix, false);
+    let client = EstimatorClient::connect(&prefix, T).unwrap();
+
+    let t0 = Instant::now();
+    let r = client.fit_sphere(987_654, T).unwrap();
+    assert!(!r.ok);
+    assert_eq!(r.error, ReplyStatus::UnknownRun);
+    assert_eq!(r.run_id, 987_654);
+    assert!(t0.elapsed() < T / 2, "took {:?}", t0.elapsed());
+
+    assert_eq!(
+        client.forget(987_654, T).unwrap(),
+        (ReplyStatus::UnknownRun, 0)
+    );
+
+    // Too few points is an answer too.
+    let mut publisher = ContactPublisher::new(&prefix).unwrap();
+    for i in 0..3 {
+        publisher
+            .publish(&sample(i + 1, 5, [i as f64, 0.0, 0.0]))
+            .unwrap();
+    }
+    let r = client.fit_sphere(5, T).unwrap();
+    assert_eq!(
+        (r.ok, r.error, r.n_points),
+        (false, ReplyStatus::TooFewPoints, 3)
+    );
+
+    // A request kind from a newer bridge.
+    let mut future = EstimatorRequest::ping();
+    future.kind = 999;
+    let reply = client.request(future, T).unwrap();
+    assert_eq!(reply.reply_status(), ReplyStatus::UnknownRequest);
+
+    assert!(client.ping(T).unwrap() < T);
+}
+
+#[test]
+fn without_an_estimator_requests_fail_fast() {
+    let prefix = unique_prefix("none");
+    let t0 = Instant::now();
+    match EstimatorClient::connect(&prefix, Duration::from_millis(200)) {
+        Err(IpcError::Timeout { .. }) => {}
+        other => panic!("expected a timeout, got {other:?}"),
+    }
+    assert!(t0.elapsed() < Duration::from_secs(5));
+    let client = EstimatorClient::open(&prefix).unwrap();
+    match client.fit_sphere(1, T) {
+        Err(IpcError::NoEstimator(p)) => assert_eq!(p, prefix),
+        other => panic!("expected NoEstimator, got {other:?}"),
+    }
+}
+
+#[test]
+fn an_estimator_that_stops_does_not_leave_the_client_hanging() {
+    let prefix = unique_prefix("stopped");
+    let estimator = EstimatorThread::start(&prefix, false);
+    let client = EstimatorClient::connect(&prefix, T).unwrap();
+    let log = estimator.stop();
+    assert!(log.contains("estimator: stopped"), "{log}");
+    let t0 = Instant::now();
+    match client.ping(Duration::from_secs(2)) {
+        Err(IpcError::NoEstimator(_)) | Err(IpcError::Timeout { .. }) => {}
+        other => panic!("expected an error, got {other:?}"),
+    }
+    assert!(t0.elapsed() < Duration::from_secs(5));
+}
+
+#[test]
+fn a_second_estimator_on_the_same_prefix_is_refused() {
+    let prefix = unique_prefix("second");
+    let _first = EstimatorThread::start(&prefix, false);
+    let _client = EstimatorClient::connect(&prefix, T).unwrap();
+    let stop = AtomicBool::new(false);
+    let mut log = Vec::new();
+    let err = run_estimator(&prefix, &stop, &mut log).unwrap_err();
+    assert!(
+        err.to_string().contains("another estimator"),
+        "unexpected error: {err}"
+    );
+}
+
+#[test]
+fn service_names_hang_off_the_prefix() {
+    let n = ServiceNames::new("pb/x/").unwrap();
+    assert_eq!(n.contacts, "pb/x/contacts");
+    assert_eq!(n.contacts_event, "pb/x/contacts/event");
+    assert_eq!(n.requests, "pb/x/requests");
+    assert_eq!(n.results_event, "pb/x/results/event");
+    assert!(ServiceNames::new("").is_err());
+}
+
+// ---------------------------------------------------------------------------------------
+// Child processes and stale resources
+
+const CHILD_ENV: &str = "PB_IPC_CHILD";
+
+/// Not a test of its own: the body of child processes the other tests start. Without
+/// `PB_IPC_CHILD` it does nothing.
+#[test]
+fn child_entry() {
+    let Ok(role) = std::env::var(CHILD_ENV) else {
+        return;
+    };
+    let (what, prefix) = role.split_once(':').expect("role:prefix");
+    match what {
+        "estimator" => {
+            let stop = AtomicBool::new(false);
+            run_estimator(prefix, &stop, std::io::stderr()).unwrap();
+        }
+        "publisher" => {
+            let _publisher = ContactPublisher::new(prefix).unwrap();
+            let _subscriber = ContactSubscriber::new(prefix).unwrap();
+            println!("PB_READY");
+            // Hold the resources until killed.
+            loop {
+                std::thread::park();
+            }
+        }
+        other => panic!("unknown child role {other}"),
+    }
+}
+
+fn child_command(role: &str, prefix: &str) -> Command {
+    let mut c = Command::new(std::env::current_exe().unwrap());
+    c.args(["child_entry", "--exact", "--nocapture", "--test-threads=1"])
+        .env(CHILD_ENV, format!("{role}:{prefix}"));
+    c
+}
+
+#[test]
+fn stale_cleanup_succeeds_when_nothing_is_stale() {
+    let report = remove_stale_resources(Duration::from_secs(1)).unwrap();
+    assert_eq!(
+        report.cleaned + report.failed.len(),
+        report.dead_nodes,
+        "{report:?}"
+    );
+    // Whatever was stale is gone now; a second pass has nothing to fail on.
+    let again = remove_stale_resources(Duration::from_secs(1)).unwrap();
+    assert!(again.failed.is_empty(), "{again:?}");
+}
+
+#[test]
+fn stale_resources_of_a_killed_process_are_removed() {
+    let prefix = unique_prefix("stale");
+    let mut child = child_command("publisher", &prefix)
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stdout = child.stdout.take().unwrap();
+    let mut ready = false;
+    for line in BufReader::new(stdout).lines() {
+        if line.unwrap().contains("PB_READY") {
+            ready = true;
+            break;
+        }
+    }
+    assert!(ready, "child never became ready");
+    // The child's subscriber receives.
+    let mut publisher = ContactPublisher::new(&prefix).unwrap();
+    assert_eq!(publisher.send(&sample(1, 1, [0.0; 3])).unwrap(), 1);
+    let pid = child.id();
+    child.kill().unwrap(); // SIGKILL: no destructor runs
+    child.wait().unwrap();
+    // (Without a cleanup the dead subscriber stays registered and keeps "receiving".)
+
+    // Other tests' estimators clean up at start too, so the count may be theirs: check
+    // the outcome, not who did it.
+    let report = remove_stale_resources(Duration::from_secs(2)).unwrap();
+    assert!(report.failed.is_empty(), "{report:?}");
+    assert_eq!(dead_nodes_of(pid), 0, "{report:?}");
+    // The killed subscriber is gone from the service: a publisher sees nobody.
+    assert_eq!(publisher.send(&sample(2, 1, [0.0; 3])).unwrap(), 0);
+}
+
+fn dead_nodes_of(pid: u32) -> usize {
+    use iceoryx2::node::NodeView;
+    use iceoryx2::prelude::*;
+    let mut n = 0;
+    Node::<probebridge::ipc::Svc>::list(Config::global_config(), |state| {
+        if let NodeState::Dead(view) = state {
+            if view
+                .details()
+                .as_ref()
+                .is_some_and(|d| d.process_id().value() as u32 == pid)
+            {
+                n += 1;
+            }
+        }
+        CallbackProgression::Continue
+    })
+    .unwrap();
+    n
+}
+
+#[test]
+fn an_estimator_child_process_answers_and_exits_on_drop() {
+    let prefix = unique_prefix("child");
+    let child =
+        EstimatorChild::spawn_command(child_command("estimator", &prefix), &prefix, T).unwrap();
+    let pid = child.id();
+
+    let mut publisher = ContactPublisher::new(&prefix).unwrap();
+    let centre = [-5.0, 7.0, 100.0];
+    for (i, p) in sphere_points(centre, 20.0, 12).iter().enumerate() {
+        publisher.publish(&sample(i as u64 + 1, 77, *p)).unwrap();
+    }
+    let r = child.client().fit_sphere(77, T).unwrap();
+    assert!(r.ok, "{r:?}");
+    assert!((r.radius - 20.0).abs() < 1e-9, "{r:?}");
+    assert!((r.centre[2] - 100.0).abs() < 1e-9, "{r:?}");
+
+    drop(child);
+    // The child was reaped by drop: its /proc entry is gone.
+    assert!(
+        !std::path::Path::new(&format!("/proc/{pid}")).exists(),
+        "estimator child {pid} still exists"
+    );
+}
+
+#[test]
+fn an_estimator_child_that_cannot_start_is_reported() {
+    let prefix = unique_prefix("nochild");
+    let mut c = Command::new("/bin/false");
+    c.arg("estimator");
+    let t0 = Instant::now();
+    match EstimatorChild::spawn_command(c, &prefix, T) {
+        Err(IpcError::Process(msg)) => assert!(msg.contains("exited"), "{msg}"),
+        other => panic!("expected a process error, got {other:?}"),
+    }
+    assert!(t0.elapsed() < T / 2);
+}

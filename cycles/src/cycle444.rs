@@ -1,0 +1,226 @@
+//! Cycle 444 PROBING 3D: one point of a free-form surface, probed against its surface
+//! normal, compared with the nominal point along that normal (QS400 tolerance, Q309
+//! reaction, Q183 status).
+
+use crate::error::CycleError;
+use crate::positioning::Positioner;
+use crate::program::{CycleCall, Diagnostic, LengthUnit, Param, ProbeAxis, Value};
+use crate::runner::ProgressEvent;
+use crate::tolerance::{Tolerance, WorkpieceStatus};
+use hal::Machine;
+use nalgebra::Vector3;
+use std::collections::BTreeMap;
+
+/// Validated parameters; coordinates as (main, minor, tool axis), mm.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Probing3dParams {
+    /// Q263, Q264, Q294.
+    pub nominal: [f64; 3],
+    /// Q581, Q582, Q583 normalised (points away from the material).
+    pub normal: [f64; 3],
+    /// Q320.
+    pub clearance: f64,
+    /// Q260 (tool-axis coordinate).
+    pub safe_height: f64,
+    /// QS400 as written.
+    pub tolerance_text: String,
+    /// QS400 parsed, in mm; `None` = no tolerance.
+    pub tolerance: Option<Tolerance>,
+    /// Q309: 0 never stop, 1 stop when out of tolerance, 2 stop when undersize.
+    pub reaction: u8,
+}
+
+pub(crate) fn number(params: &BTreeMap<String, Param>, name: &str) -> Result<(f64, usize), String> {
+    match params.get(name) {
+        Some(Param {
+            value: Value::Number(v),
+            line,
+            ..
+        }) => Ok((*v, *line)),
+        _ => Err(format!("{name}: no numeric value")),
+    }
+}
+
+impl Probing3dParams {
+    /// Checks what the table cannot: the normal is not zero, QS400 follows the grammar.
+    pub fn from_params(
+        params: &BTreeMap<String, Param>,
+        unit: LengthUnit,
+    ) -> Result<Self, Vec<Diagnostic>> {
+        let mut problems = Vec::new();
+        let mut get = |name: &str| match number(params, name) {
+            Ok((v, _)) => v,
+            Err(message) => {
+                problems.push(Diagnostic { line: 0, message });
+                0.0
+            }
+        };
+        let nominal = [get("Q263"), get("Q264"), get("Q294")];
+        let written = Vector3::new(get("Q581"), get("Q582"), get("Q583"));
+        let clearance = get("Q320");
+        let safe_height = get("Q260");
+        let reaction = get("Q309") as u8;
+        let normal_line = params.get("Q581").map_or(0, |p| p.line);
+        if written.norm() == 0.0 {
+            problems.push(Diagnostic {
+                line: normal_line,
+                message: "Q581/Q582/Q583: the surface normal is the zero vector; it needs a direction".into(),
+            });
+        }
+        let (text, text_line) = match params.get("QS400") {
+            Some(Param {
+                value: Value::Text(t),
+                line,
+                ..
+            }) => (t.clone(), *line),
+            _ => (String::new(), 0),
+        };
+        let tolerance = match Tolerance::parse(&text) {
+            Ok(t) => t.map(|t| match unit {
+                LengthUnit::Mm => t,
+                LengthUnit::Inch => t.scaled(25.4),
+            }),
+            Err(e) => {
+                problems.push(Diagnostic {
+                    line: text_line,
+                    message: e.to_string(),
+                });
+                None
+            }
+        };
+        if !problems.is_empty() {
+            return Err(problems);
+        }
+        let n = written.normalize();
+        Ok(Probing3dParams {
+            nominal,
+            normal: [n.x, n.y, n.z],
+            clearance,
+            safe_height,
+            tolerance_text: text,
+            tolerance,
+            reaction,
+        })
+    }
+}
+
+/// What the protocol shows of one probed point; vectors as (main, minor, tool).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Probing3dRecord {
+    pub block: u32,
+    pub line: usize,
+    pub probe: String,
+    pub axis: ProbeAxis,
+    /// Probing direction scaled to the configured probing path.
+    pub direction: [f64; 3],
+    pub path_length: f64,
+    pub nominal: [f64; 3],
+    /// Unit surface normal.
+    pub normal: [f64; 3],
+    pub actual: [f64; 3],
+    /// Q161..Q163.
+    pub deviation: [f64; 3],
+    /// Q164.
+    pub deviation_3d: f64,
+    pub tolerance: Option<Tolerance>,
+    pub status: WorkpieceStatus,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Probing3dOutcome {
+    pub q: BTreeMap<String, f64>,
+    pub record: Probing3dRecord,
+    /// Q309 asks to stop the program, with this message.
+    pub stop: Option<String>,
+}
+
+/// Q309 decision. 1: out of tolerance (rework or scrap). 2: the actual point lies below
+/// the nominal along the normal (Q164 < 0), as the seed words it, whatever the
+/// tolerance; never for material left.
+pub fn stop_message(reaction: u8, status: WorkpieceStatus, deviation_3d: f64) -> Option<String> {
+    match reaction {
+        1 if matches!(status, WorkpieceStatus::Rework | WorkpieceStatus::Scrap) => Some(format!(
+            "out of tolerance ({status}): Q164 = {deviation_3d:+.4} mm; Q309=1 stops the program"
+        )),
+        2 if deviation_3d < 0.0 => Some(format!(
+            "undersize: Q164 = {deviation_3d:+.4} mm below the nominal point; Q309=2 stops the program"
+        )),
+        _ => None,
+    }
+}
+
+pub fn run<M: Machine>(
+    call: &CycleCall,
+    p: &Probing3dParams,
+    machine: &mut M,
+    progress: &mut dyn FnMut(ProgressEvent),
+) -> Result<Probing3dOutcome, CycleError> {
+    let probe = &call.tool.probe;
+    let axis = call.tool.axis;
+    let n_cycle = Vector3::from(p.normal);
+    let n = Vector3::from(axis.to_machine(p.normal));
+    let nominal = Vector3::from(axis.to_machine(p.nominal));
+    let approach = probe.radius + probe.set_up + p.clearance;
+    let start = nominal + n * approach;
+    let max_distance = approach + probe.dist;
+    let direction = -n;
+
+    let mut pos = Positioner {
+        machine,
+        axis,
+        fmax: probe.fmax,
+        block: call.block,
+        progress,
+    };
+    pos.safe_height(p.safe_height)?;
+    pos.over(start.into())?;
+    pos.to("moving to the pre-position", start.into())?;
+    let contact = pos.probe(
+        "probing the point",
+        direction.into(),
+        probe.f,
+        max_distance,
+    )?;
+    let centre = Vector3::from(contact.positions.xyz());
+    // Retract from the contact by MB against the probing direction, then clear.
+    pos.to("retracting", (centre + n * probe.mb).into())?;
+    pos.safe_height(p.safe_height)?;
+
+    let actual_m = centre - n * probe.radius;
+    let actual = Vector3::from(axis.to_cycle(actual_m.into()));
+    let nominal_c = Vector3::from(p.nominal);
+    let deviation = actual - nominal_c;
+    let deviation_3d = deviation.dot(&n_cycle);
+    let status = WorkpieceStatus::of(p.tolerance.as_ref(), deviation_3d);
+
+    let mut q = BTreeMap::new();
+    for (i, name) in ["Q151", "Q152", "Q153"].into_iter().enumerate() {
+        q.insert(name.to_string(), actual[i]);
+    }
+    for (i, name) in ["Q161", "Q162", "Q163"].into_iter().enumerate() {
+        q.insert(name.to_string(), deviation[i]);
+    }
+    q.insert("Q164".into(), deviation_3d);
+    q.insert("Q183".into(), status.q183());
+
+    let record = Probing3dRecord {
+        block: call.block,
+        line: call.line,
+        probe: probe.name.clone(),
+        axis,
+        direction: (-n_cycle * max_distance).into(),
+        path_length: max_distance,
+        nominal: p.nominal,
+        normal: p.normal,
+        actual: actual.into(),
+        deviation: deviation.into(),
+        deviation_3d,
+        tolerance: p.tolerance,
+        status,
+    };
+    Ok(Probing3dOutcome {
+        q,
+        stop: stop_message(p.reaction, status, deviation_3d),
+        record,
+    })
+}

@@ -1,0 +1,945 @@
+//! Reads NC programs as the TNC stores them (`.h`, conversational) and ISO blocks:
+//! groups lines into blocks (`~` continues a block, `;` starts a comment), recognises
+//! BEGIN/END PGM, TOOL CALL and the measuring cycles, and validates every cycle
+//! parameter against its table. All problems of a program are collected, each with
+//! its line, so `check` shows them at once.
+
+use crate::params::{self, CycleTable, Default as ParamDefault, Kind, ParamSpec};
+use crate::program::{
+    Block, CycleCall, CycleKind, Diagnostic, LengthUnit, Origin, Param, ProbeAxis, Program,
+    ProgramErrors, Statement, ToolCall, Value,
+};
+use crate::{cycle431, cycle444};
+use hal::config::MachineConfig;
+use std::collections::BTreeMap;
+
+/// Parses and validates `text`; `Err` holds every problem found.
+pub fn parse_program(text: &str, cfg: &MachineConfig) -> Result<Program, ProgramErrors> {
+    let (program, diagnostics) = analyse(text, cfg);
+    if diagnostics.is_empty() {
+        Ok(program)
+    } else {
+        Err(ProgramErrors(diagnostics))
+    }
+}
+
+/// Every problem of `text`, sorted by line; empty when the program is valid.
+pub fn check_program(text: &str, cfg: &MachineConfig) -> Vec<Diagnostic> {
+    analyse(text, cfg).1
+}
+
+/// One physical line, split.
+#[derive(Clone, Copy, Debug)]
+struct Line<'a> {
+    no: usize,
+    number: Option<u32>,
+    /// Text before the comment, block number and `~` removed, trimmed.
+    code: &'a str,
+    comment: Option<&'a str>,
+    /// Ends with `~`: the block goes on.
+    cont: bool,
+}
+
+impl Line<'_> {
+    fn is_blank(&self) -> bool {
+        self.code.is_empty() && self.comment.is_none() && !self.cont && self.number.is_none()
+    }
+}
+
+fn split_line(no: usize, raw: &str) -> Line<'_> {
+    let mut t = raw.trim();
+    let cont = t.ends_with('~');
+    if cont {
+        t = t[..t.len() - 1].trim_end();
+    }
+    // `;` inside a QS string is text, not a comment.
+    let mut in_quotes = false;
+    let mut cut = None;
+    for (i, c) in t.char_indices() {
+        match c {
+            '"' => in_quotes = !in_quotes,
+            ';' if !in_quotes => {
+                cut = Some(i);
+                break;
+            }
+            _ => {}
+        }
+    }
+    let (code, comment) = match cut {
+        Some(i) => (t[..i].trim(), Some(t[i + 1..].trim())),
+        None => (t, None),
+    };
+    let (number, code) = split_block_number(code);
+    // ISO blocks end with `*`; a line that starts with `*` is a structure comment.
+    let code = match code.strip_suffix('*') {
+        Some(c) if !code.starts_with('*') => c.trim_end(),
+        _ => code,
+    };
+    Line {
+        no,
+        number,
+        code,
+        comment,
+        cont,
+    }
+}
+
+/// `11 TCH PROBE ...` / `N110 G444 ...`: the leading block number, if any.
+fn split_block_number(code: &str) -> (Option<u32>, &str) {
+    let digits_from = usize::from(code.starts_with(['N', 'n']));
+    let rest = &code[digits_from..];
+    let end = rest.find(|c: char| !c.is_ascii_digit()).unwrap_or(rest.len());
+    if end == 0 {
+        return (None, code);
+    }
+    let after = &rest[end..];
+    if !(after.is_empty() || after.starts_with(char::is_whitespace)) {
+        return (None, code);
+    }
+    // "N" alone followed by digits and space is a block number; a bare "12" too.
+    match rest[..end].parse() {
+        Ok(n) => (Some(n), after.trim_start()),
+        Err(_) => (None, code),
+    }
+}
+
+/// `Q263=...` / `QS400=...` at the start of the code: a cycle parameter line.
+fn is_param_line(code: &str) -> bool {
+    let b = code.as_bytes();
+    if b.first().map(u8::to_ascii_uppercase) != Some(b'Q') {
+        return false;
+    }
+    let mut i = 1;
+    if b.get(1).map(u8::to_ascii_uppercase) == Some(b'S') {
+        i = 2;
+    }
+    let start = i;
+    while b.get(i).is_some_and(u8::is_ascii_digit) {
+        i += 1;
+    }
+    i > start && code[i..].trim_start().starts_with('=')
+}
+
+#[derive(Clone, Copy, Debug)]
+struct ParamLine<'a> {
+    no: usize,
+    code: &'a str,
+    comment: Option<&'a str>,
+}
+
+#[derive(Debug)]
+struct RawBlock<'a> {
+    head: Line<'a>,
+    body: Vec<ParamLine<'a>>,
+    /// The last line read ended with `~`.
+    open: bool,
+    last_line: usize,
+    /// The last line's comment (for the seed layout where the comment with its `~`
+    /// stands on its own line after the value).
+    last_has_comment: bool,
+    is_cycle: bool,
+}
+
+/// Groups lines into blocks; reports continuation errors.
+fn group<'a>(text: &'a str, diags: &mut Vec<Diagnostic>) -> Vec<RawBlock<'a>> {
+    let mut blocks: Vec<RawBlock> = Vec::new();
+    for (i, raw) in text.lines().enumerate() {
+        let line = split_line(i + 1, raw);
+        if line.is_blank() {
+            continue;
+        }
+        if let Some(cur) = blocks.last_mut() {
+            let comment_only = line.code.is_empty() && line.number.is_none();
+            if cur.open && starts_block(&line) {
+                // Continuation lines never carry a block number or a block keyword.
+                diags.push(Diagnostic {
+                    line: cur.last_line,
+                    message: format!(
+                        "the line ends with \"~\" but line {} starts a new block",
+                        line.no
+                    ),
+                });
+                cur.open = false;
+            } else if cur.open || (comment_only && cur.is_cycle && !cur.last_has_comment) {
+                if comment_only {
+                    // A comment (and maybe the `~`) belonging to the line before.
+                    if let Some(last) = cur.body.last_mut() {
+                        last.comment = line.comment;
+                    }
+                    cur.last_has_comment = true;
+                } else {
+                    cur.body.push(ParamLine {
+                        no: line.no,
+                        code: line.code,
+                        comment: line.comment,
+                    });
+                    cur.last_has_comment = line.comment.is_some();
+                }
+                cur.open = line.cont;
+                cur.last_line = line.no;
+                continue;
+            }
+            if line.number.is_none() && is_param_line(line.code) && cur.is_cycle {
+                let name = line.code.split('=').next().unwrap_or("").trim();
+                diags.push(Diagnostic {
+                    line: cur.last_line,
+                    message: format!(
+                        "missing continuation \"~\": the block ends here but line {} continues it with {name}",
+                        line.no
+                    ),
+                });
+                // Keep the parameter in its block so that it is not also reported
+                // missing.
+                cur.body.push(ParamLine {
+                    no: line.no,
+                    code: line.code,
+                    comment: line.comment,
+                });
+                cur.open = line.cont;
+                cur.last_line = line.no;
+                cur.last_has_comment = line.comment.is_some();
+                continue;
+            }
+        }
+        if line.number.is_none() && is_param_line(line.code) {
+            diags.push(Diagnostic {
+                line: line.no,
+                message: "parameter line outside a cycle block (expected a TCH PROBE or G4xx block before it, its lines ending with \"~\")".into(),
+            });
+            continue;
+        }
+        let is_cycle = is_cycle_head(line.code);
+        blocks.push(RawBlock {
+            head: line,
+            body: Vec::new(),
+            open: line.cont,
+            last_line: line.no,
+            last_has_comment: line.comment.is_some(),
+            is_cycle,
+        });
+    }
+    if let Some(last) = blocks.last() {
+        if last.open {
+            diags.push(Diagnostic {
+                line: last.last_line,
+                message: "the block continues with \"~\" but the program ends".into(),
+            });
+        }
+    }
+    blocks
+}
+
+/// A line that can only be the start of a block.
+fn starts_block(line: &Line) -> bool {
+    let w = upper_words(line.code);
+    let first_two = (w.first().map(String::as_str), w.get(1).map(String::as_str));
+    line.number.is_some()
+        || is_cycle_head(line.code)
+        || matches!(
+            first_two,
+            (Some("TOOL"), Some("CALL")) | (Some("BEGIN" | "END"), Some("PGM"))
+        )
+}
+
+fn upper_words(code: &str) -> Vec<String> {
+    code.split_whitespace().map(str::to_ascii_uppercase).collect()
+}
+
+fn is_cycle_head(code: &str) -> bool {
+    let w = upper_words(code);
+    (w.len() >= 2 && w[0] == "TCH" && w[1] == "PROBE") || iso_cycle_number(code).is_some()
+}
+
+/// `G444 ...` -> 444 for G codes in the touch-probe ranges (400..499, 1400..1499).
+fn iso_cycle_number(code: &str) -> Option<u16> {
+    let first = code.split_whitespace().next()?;
+    let digits = first.strip_prefix(['G', 'g'])?;
+    let n: u16 = digits.parse().ok()?;
+    (digits.len() >= 3 && ((400..=499).contains(&n) || (1400..=1499).contains(&n))).then_some(n)
+}
+
+struct State {
+    unit: LengthUnit,
+    name: Option<String>,
+    begin_seen: bool,
+    end_line: Option<usize>,
+    tool: Option<ToolCall>,
+}
+
+fn analyse(text: &str, cfg: &MachineConfig) -> (Program, Vec<Diagnostic>) {
+    let mut diags = Vec::new();
+    let raw_blocks = group(text, &mut diags);
+    let mut st = State {
+        unit: LengthUnit::Mm,
+        name: None,
+        begin_seen: false,
+        end_line: None,
+        tool: None,
+    };
+    let mut blocks = Vec::new();
+    for (index, rb) in raw_blocks.iter().enumerate() {
+        let line = rb.head.no;
+        if let Some(end) = st.end_line {
+            diags.push(Diagnostic {
+                line,
+                message: format!("block after END PGM (line {end})"),
+            });
+            continue;
+        }
+        let statement = statement(rb, index, &mut st, cfg, &mut diags);
+        blocks.push(Block {
+            line,
+            number: rb.head.number,
+            statement,
+        });
+    }
+    if st.begin_seen && st.end_line.is_none() {
+        diags.push(Diagnostic {
+            line: text.lines().count().max(1),
+            message: format!(
+                "END PGM {} missing at the end of the program",
+                st.name.as_deref().unwrap_or("")
+            ),
+        });
+    }
+    diags.sort_by_key(|d| d.line);
+    let program = Program {
+        name: st.name,
+        unit: st.unit,
+        path: None,
+        blocks,
+    };
+    (program, diags)
+}
+
+fn err(diags: &mut Vec<Diagnostic>, line: usize, message: impl Into<String>) {
+    diags.push(Diagnostic {
+        line,
+        message: message.into(),
+    });
+}
+
+fn statement(
+    rb: &RawBlock,
+    index: usize,
+    st: &mut State,
+    cfg: &MachineConfig,
+    diags: &mut Vec<Diagnostic>,
+) -> Statement {
+    let code = rb.head.code;
+    let line = rb.head.no;
+    let words = upper_words(code);
+    let w = |i: usize| words.get(i).map(String::as_str);
+    let other = || Statement::Other(code.to_string());
+
+    match (w(0), w(1)) {
+        (Some("BEGIN"), Some("PGM")) => {
+            let Some((name, unit)) = pgm_name_unit(&words[2..], line, diags) else {
+                return other();
+            };
+            if index != 0 {
+                err(diags, line, "BEGIN PGM must be the first block");
+            }
+            st.begin_seen = true;
+            st.name = Some(name.clone());
+            st.unit = unit;
+            Statement::BeginPgm { name, unit }
+        }
+        (Some("END"), Some("PGM")) => {
+            let Some((name, unit)) = pgm_name_unit(&words[2..], line, diags) else {
+                return other();
+            };
+            check_end(st, &name, unit, line, diags);
+            st.end_line = Some(line);
+            Statement::EndPgm { name, unit }
+        }
+        (Some("TOOL"), Some("CALL")) => {
+            let rest = code.trim_start()[4..].trim_start()[4..].trim_start();
+            tool_call(rest, false, line, st, cfg, diags).map_or_else(other, Statement::ToolCall)
+        }
+        (Some("TCH"), Some("PROBE")) => {
+            let number = w(2).unwrap_or("");
+            let title = code
+                .split_whitespace()
+                .skip(3)
+                .collect::<Vec<_>>()
+                .join(" ");
+            match number.parse::<u16>().ok().and_then(params::table) {
+                Some(table) => cycle(rb, table, title, None, st, cfg, diags),
+                None => {
+                    err(
+                        diags,
+                        line,
+                        format!(
+                            "TCH PROBE {number}: unknown cycle number {number} (supported: {})",
+                            params::known_cycles()
+                        ),
+                    );
+                    other()
+                }
+            }
+        }
+        _ => {
+            if let Some(rest) = code.strip_prefix('%') {
+                return iso_pgm(rest, index, line, st, diags).unwrap_or_else(other);
+            }
+            if let Some(n) = iso_cycle_number(code) {
+                return match params::table(n) {
+                    Some(table) => {
+                        let inline = code.split_once(char::is_whitespace).map(|(_, r)| r.trim());
+                        cycle(rb, table, table.name.to_string(), inline, st, cfg, diags)
+                    }
+                    None => {
+                        err(
+                            diags,
+                            line,
+                            format!(
+                                "G{n}: unknown cycle number {n} (supported: {})",
+                                params::known_cycles()
+                            ),
+                        );
+                        other()
+                    }
+                };
+            }
+            if let Some(rest) = iso_tool_call(code) {
+                return tool_call(rest, true, line, st, cfg, diags)
+                    .map_or_else(other, Statement::ToolCall);
+            }
+            other()
+        }
+    }
+}
+
+fn pgm_name_unit(
+    words: &[String],
+    line: usize,
+    diags: &mut Vec<Diagnostic>,
+) -> Option<(String, LengthUnit)> {
+    let unit = match words.get(1).map(String::as_str) {
+        Some("MM") => LengthUnit::Mm,
+        Some("INCH") => LengthUnit::Inch,
+        _ => {
+            err(diags, line, "expected PGM NAME MM or PGM NAME INCH");
+            return None;
+        }
+    };
+    Some((words[0].clone(), unit))
+}
+
+fn check_end(st: &State, name: &str, unit: LengthUnit, line: usize, diags: &mut Vec<Diagnostic>) {
+    if !st.begin_seen {
+        err(diags, line, "END PGM without BEGIN PGM");
+    } else if st.name.as_deref() != Some(name) || st.unit != unit {
+        err(
+            diags,
+            line,
+            format!(
+                "END PGM {name} {} does not match BEGIN PGM {} {}",
+                unit_word(unit),
+                st.name.as_deref().unwrap_or(""),
+                unit_word(st.unit)
+            ),
+        );
+    }
+}
+
+fn unit_word(u: LengthUnit) -> &'static str {
+    match u {
+        LengthUnit::Mm => "MM",
+        LengthUnit::Inch => "INCH",
+    }
+}
+
+/// ISO program start `%NAME G71` (mm) / `G70` (inch), and its end line.
+fn iso_pgm(
+    rest: &str,
+    index: usize,
+    line: usize,
+    st: &mut State,
+    diags: &mut Vec<Diagnostic>,
+) -> Option<Statement> {
+    let words = upper_words(rest);
+    let unit = match words.get(1).map(String::as_str) {
+        Some("G71") => LengthUnit::Mm,
+        Some("G70") => LengthUnit::Inch,
+        _ => {
+            err(diags, line, "expected %NAME G71 (mm) or %NAME G70 (inch)");
+            return None;
+        }
+    };
+    let name = words[0].clone();
+    if index == 0 {
+        st.begin_seen = true;
+        st.name = Some(name.clone());
+        st.unit = unit;
+        Some(Statement::BeginPgm { name, unit })
+    } else {
+        check_end(st, &name, unit, line, diags);
+        st.end_line = Some(line);
+        Some(Statement::EndPgm { name, unit })
+    }
+}
+
+/// ISO tool call: `T1 G17`, `T"NAME" G17`, `T "NAME" G17`; returns what follows `T`.
+fn iso_tool_call(code: &str) -> Option<&str> {
+    let rest = code.strip_prefix(['T', 't'])?;
+    let r = rest.trim_start();
+    (r.starts_with('"') || r.starts_with(|c: char| c.is_ascii_digit())).then_some(r)
+}
+
+/// `"NAME" Z ...` / `1 Z ...` (conversational) or `"NAME" G17` / `1 G17` (ISO).
+fn tool_call(
+    rest: &str,
+    iso: bool,
+    line: usize,
+    st: &mut State,
+    cfg: &MachineConfig,
+    diags: &mut Vec<Diagnostic>,
+) -> Option<ToolCall> {
+    let (tool, after) = if let Some(q) = rest.strip_prefix('"') {
+        let Some(end) = q.find('"') else {
+            err(diags, line, "TOOL CALL: unterminated tool name (expected TOOL CALL \"NAME\" Z)");
+            return None;
+        };
+        (ToolRef::Name(q[..end].to_string()), &q[end + 1..])
+    } else {
+        let end = rest.find(char::is_whitespace).unwrap_or(rest.len());
+        let token = &rest[..end];
+        // Tool number with optional index (`5.1`): the index picks nothing here.
+        match token.split('.').next().unwrap_or("").parse::<usize>() {
+            Ok(n) => (ToolRef::Number(n), &rest[end..]),
+            Err(_) => {
+                err(
+                    diags,
+                    line,
+                    format!("TOOL CALL {token}: expected a tool name in quotes or a tool number"),
+                );
+                return None;
+            }
+        }
+    };
+    let axis_word = after.split_whitespace().next();
+    let previous = st.tool.as_ref().map_or(ProbeAxis::Z, |t| t.axis);
+    let axis = if iso {
+        match axis_word.map(str::to_ascii_uppercase).as_deref() {
+            Some("G17") => ProbeAxis::Z,
+            Some("G18") => ProbeAxis::Y,
+            Some("G19") => ProbeAxis::X,
+            _ => previous,
+        }
+    } else {
+        match axis_word {
+            Some(a) if a.len() == 1 && a.chars().all(|c| c.is_ascii_alphabetic()) => {
+                match ProbeAxis::from_name(a) {
+                    Some(ax) => ax,
+                    None => {
+                        err(
+                            diags,
+                            line,
+                            format!("TOOL CALL: probe axis {a}: expected Z, X or Y"),
+                        );
+                        return None;
+                    }
+                }
+            }
+            // Without an axis the TNC keeps the previous one.
+            _ => previous,
+        }
+    };
+    let known = || {
+        cfg.probes
+            .iter()
+            .map(|p| format!("\"{}\"", p.name))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let probe = match &tool {
+        ToolRef::Name(name) => cfg.probe(name).cloned().or_else(|| {
+            err(
+                diags,
+                line,
+                format!(
+                    "TOOL CALL \"{name}\": no probe of that name in the probe table (known: {})",
+                    known()
+                ),
+            );
+            None
+        })?,
+        // Tool numbers index the probe table's rows (its NO column), from 1.
+        ToolRef::Number(n) => match n.checked_sub(1).and_then(|i| cfg.probes.get(i)) {
+            Some(p) => p.clone(),
+            None => {
+                err(
+                    diags,
+                    line,
+                    format!(
+                        "TOOL CALL {n}: the probe table has {} row(s) (known: {})",
+                        cfg.probes.len(),
+                        known()
+                    ),
+                );
+                return None;
+            }
+        },
+    };
+    let call = ToolCall { line, probe, axis };
+    st.tool = Some(call.clone());
+    Some(call)
+}
+
+enum ToolRef {
+    Name(String),
+    Number(usize),
+}
+
+/// One `Qnnn=value` as written.
+struct Assignment<'a> {
+    name: String,
+    raw: &'a str,
+    line: usize,
+    comment: Option<&'a str>,
+}
+
+/// Splits `Q263=+0 Q264=+0 QS400="1-1"` into assignments; the line's comment goes to
+/// its last assignment.
+fn assignments<'a>(pl: &ParamLine<'a>, diags: &mut Vec<Diagnostic>) -> Vec<Assignment<'a>> {
+    let mut out = Vec::new();
+    let mut s = pl.code.trim_start();
+    while !s.is_empty() {
+        let name_end = s.find(|c: char| c == '=' || c.is_whitespace()).unwrap_or(s.len());
+        let name = s[..name_end].to_ascii_uppercase();
+        let valid_name = name.strip_prefix("QS").or_else(|| name.strip_prefix('Q')).is_some_and(
+            |d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()),
+        );
+        let after = s[name_end..].trim_start();
+        let Some(value_part) = after.strip_prefix('=').filter(|_| valid_name) else {
+            let shown = s.split_whitespace().next().unwrap_or(s);
+            err(
+                diags,
+                pl.no,
+                format!("{shown}: expected Qnnn=value or QSnnn=\"text\""),
+            );
+            return out;
+        };
+        let v = value_part.trim_start();
+        let (raw, rest) = if let Some(q) = v.strip_prefix('"') {
+            match q.find('"') {
+                Some(end) => (&v[..end + 2], &v[end + 2..]),
+                None => {
+                    err(
+                        diags,
+                        pl.no,
+                        format!("{name}={v}: unterminated string (expected {name}=\"text\")"),
+                    );
+                    return out;
+                }
+            }
+        } else {
+            let end = v.find(char::is_whitespace).unwrap_or(v.len());
+            (&v[..end], &v[end..])
+        };
+        out.push(Assignment {
+            name,
+            raw,
+            line: pl.no,
+            comment: None,
+        });
+        s = rest.trim_start();
+    }
+    if let Some(last) = out.last_mut() {
+        last.comment = pl.comment.filter(|c| !c.is_empty());
+    }
+    out
+}
+
+/// A signed decimal as the TNC writes it (`+12.5`, `-0.1`, `5`, `.5`), exponent allowed.
+pub(crate) fn parse_decimal(s: &str) -> Option<f64> {
+    let b = s.as_bytes();
+    let mut i = usize::from(matches!(b.first(), Some(b'+' | b'-')));
+    let int_start = i;
+    while b.get(i).is_some_and(u8::is_ascii_digit) {
+        i += 1;
+    }
+    let mut digits = i - int_start;
+    if b.get(i) == Some(&b'.') {
+        i += 1;
+        let frac_start = i;
+        while b.get(i).is_some_and(u8::is_ascii_digit) {
+            i += 1;
+        }
+        digits += i - frac_start;
+    }
+    if digits == 0 {
+        return None;
+    }
+    if matches!(b.get(i), Some(b'e' | b'E')) {
+        i += 1;
+        if matches!(b.get(i), Some(b'+' | b'-')) {
+            i += 1;
+        }
+        let exp_start = i;
+        while b.get(i).is_some_and(u8::is_ascii_digit) {
+            i += 1;
+        }
+        if i == exp_start {
+            return None;
+        }
+    }
+    if i != b.len() {
+        return None;
+    }
+    s.parse().ok().filter(|v: &f64| v.is_finite())
+}
+
+fn cycle(
+    rb: &RawBlock,
+    table: &'static CycleTable,
+    title: String,
+    inline: Option<&str>,
+    st: &State,
+    cfg: &MachineConfig,
+    diags: &mut Vec<Diagnostic>,
+) -> Statement {
+    let line = rb.head.no;
+    let before = diags.len();
+    let mut lines: Vec<ParamLine> = Vec::new();
+    if let Some(code) = inline.filter(|c| !c.is_empty()) {
+        lines.push(ParamLine {
+            no: line,
+            code,
+            comment: rb.head.comment,
+        });
+    }
+    lines.extend(rb.body.iter().copied());
+
+    let mut params: BTreeMap<String, Param> = BTreeMap::new();
+    for pl in &lines {
+        for a in assignments(pl, diags) {
+            let Some(spec) = table.param(&a.name) else {
+                err(
+                    diags,
+                    a.line,
+                    format!(
+                        "{}={}: unknown parameter for {table} (allowed: {})",
+                        a.name,
+                        a.raw,
+                        table.names().join(" ")
+                    ),
+                );
+                continue;
+            };
+            if let Some(first) = params.get(&a.name) {
+                err(
+                    diags,
+                    a.line,
+                    format!("{}={}: given twice (first on line {})", a.name, a.raw, first.line),
+                );
+                continue;
+            }
+            if let Some(value) = resolve(spec, &a, st.unit, cfg, diags) {
+                params.insert(a.name.clone(), value);
+            }
+        }
+    }
+    let mut missing = Vec::new();
+    for spec in table.params {
+        if params.contains_key(spec.name) {
+            continue;
+        }
+        let value = match spec.default {
+            ParamDefault::Required => {
+                missing.push(spec);
+                continue;
+            }
+            ParamDefault::Number(v) => Value::Number(v),
+            ParamDefault::Text(s) => Value::Text(s.to_string()),
+        };
+        params.insert(
+            spec.name.to_string(),
+            Param {
+                value,
+                origin: Origin::Default,
+                line,
+            },
+        );
+    }
+    if !missing.is_empty() {
+        let hint = if rb.open {
+            String::new()
+        } else {
+            format!(" (the block ends at line {}; is a \"~\" missing there?)", rb.last_line)
+        };
+        for spec in missing {
+            err(
+                diags,
+                line,
+                format!(
+                    "{table}: missing required parameter {} ({}){hint}",
+                    spec.name, spec.title
+                ),
+            );
+        }
+    }
+    let Some(tool) = st.tool.clone() else {
+        err(
+            diags,
+            line,
+            format!("{table}: no TOOL CALL of a touch probe before this cycle"),
+        );
+        return Statement::Other(rb.head.code.to_string());
+    };
+    if diags.len() > before {
+        return Statement::Other(rb.head.code.to_string());
+    }
+    let kind = match table.number {
+        431 => cycle431::PlaneParams::from_params(&params, st.unit).map(CycleKind::MeasurePlane),
+        444 => cycle444::Probing3dParams::from_params(&params, st.unit).map(CycleKind::Probing3d),
+        451 => Ok(CycleKind::MeasureKinematics),
+        _ => Ok(CycleKind::SaveKinematics),
+    };
+    match kind {
+        Ok(kind) => Statement::Cycle(Box::new(CycleCall {
+            cycle: table.number,
+            title,
+            line,
+            block: rb.head.number.unwrap_or(line as u32),
+            params,
+            tool,
+            kind,
+        })),
+        Err(problems) => {
+            diags.extend(problems);
+            Statement::Other(rb.head.code.to_string())
+        }
+    }
+}
+
+fn resolve(
+    spec: &ParamSpec,
+    a: &Assignment,
+    unit: LengthUnit,
+    cfg: &MachineConfig,
+    diags: &mut Vec<Diagnostic>,
+) -> Option<Param> {
+    let shown = format!("{}={}", a.name, a.raw);
+    let title = a.comment.unwrap_or(spec.title);
+    let fail = |diags: &mut Vec<Diagnostic>, what: String| {
+        err(diags, a.line, format!("{shown}: {what}"));
+        None
+    };
+    let param = |value, origin| Param {
+        value,
+        origin,
+        line: a.line,
+    };
+    match spec.kind {
+        Kind::Text { max_len } => {
+            let Some(text) = a.raw.strip_prefix('"').and_then(|r| r.strip_suffix('"')) else {
+                return fail(diags, format!("{title}: expected a string in quotes, {}=\"...\"", a.name));
+            };
+            let len = text.chars().count();
+            if len > max_len {
+                return fail(
+                    diags,
+                    format!("{title}: string of {len} characters is too long (at most {max_len})"),
+                );
+            }
+            Some(param(Value::Text(text.to_string()), Origin::Written))
+        }
+        Kind::Number {
+            min,
+            max,
+            integer,
+            unit: quantity,
+        } => {
+            let word = a.raw.to_ascii_uppercase();
+            let k = spec.keywords;
+            match word.as_str() {
+                "PREDEF" | "FMAX" | "FAUTO" => {
+                    let allowed = match word.as_str() {
+                        "PREDEF" => k.predef,
+                        "FMAX" => k.fmax,
+                        _ => k.fauto,
+                    };
+                    if !allowed {
+                        return fail(
+                            diags,
+                            format!("{title} does not take {word} (allowed {})", spec.allowed()),
+                        );
+                    }
+                    match word.as_str() {
+                        "FMAX" => Some(param(Value::Fmax, Origin::Written)),
+                        "FAUTO" => Some(param(Value::Fauto, Origin::Written)),
+                        _ => {
+                            // PREDEF values come from the machine configuration, in mm.
+                            let Some(&v) = cfg.cycles.predef.get(spec.name) else {
+                                return fail(
+                                    diags,
+                                    format!(
+                                        "{title}: PREDEF but the machine configuration has no {} in [cycles.predef]",
+                                        spec.name
+                                    ),
+                                );
+                            };
+                            if !(min..=max).contains(&v) {
+                                return fail(
+                                    diags,
+                                    format!("{title}: PREDEF value {v} out of range {min}..{max}"),
+                                );
+                            }
+                            Some(param(Value::Number(v), Origin::Predef))
+                        }
+                    }
+                }
+                _ => {
+                    if a.raw.starts_with('"') {
+                        return fail(diags, format!("{title}: expected a number, not a string (allowed {})", spec.allowed()));
+                    }
+                    let Some(v) = parse_decimal(a.raw) else {
+                        return fail(
+                            diags,
+                            format!(
+                                "{title}: malformed number (expected a signed decimal such as +12.5; allowed {})",
+                                spec.allowed()
+                            ),
+                        );
+                    };
+                    if !(min..=max).contains(&v) || (integer && v.fract() != 0.0) {
+                        return fail(diags, format!("{title} out of range {}", spec.allowed()));
+                    }
+                    let v = match unit {
+                        LengthUnit::Mm => v,
+                        LengthUnit::Inch => v * quantity.inch_factor(),
+                    };
+                    Some(param(Value::Number(v), Origin::Written))
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn decimals() {
+        for (s, v) in [("+0", 0.0), ("-12.5", -12.5), ("5", 5.0), (".5", 0.5), ("+1e6", 1e6), ("3.", 3.0)] {
+            assert_eq!(parse_decimal(s), Some(v), "{s}");
+        }
+        for s in ["", "+", "1.2.3", "abc", "1e", "inf", "NaN", "+-1", "1,5", "Q1"] {
+            assert_eq!(parse_decimal(s), None, "{s}");
+        }
+    }
+
+    #[test]
+    fn line_split() {
+        let l = split_line(3, "  12 TCH PROBE 444 ANTASTEN 3D ~");
+        assert_eq!((l.number, l.code, l.cont), (Some(12), "TCH PROBE 444 ANTASTEN 3D", true));
+        let l = split_line(4, "QS400=\"a;b\" ;TOLERANZ ~");
+        assert_eq!((l.code, l.comment, l.cont), ("QS400=\"a;b\"", Some("TOLERANZ"), true));
+        let l = split_line(5, "N20 G444 Q263=+0 *");
+        assert_eq!((l.number, l.code), (Some(20), "G444 Q263=+0"));
+    }
+}

@@ -1,0 +1,88 @@
+//! Cycle results as the CLI prints and saves them:
+//! `{"cycles": [{"block": 13, "cycle": 444, "q": {"Q151": 0.0}, "qs": {}, "status": "ok",
+//! "message": null}]}`.
+
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Status {
+    Ok,
+    Error,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CycleResult {
+    /// NC block number (the line when the block has none).
+    pub block: u32,
+    pub cycle: u16,
+    /// Result Q parameters, mm and degrees.
+    pub q: BTreeMap<String, f64>,
+    pub qs: BTreeMap<String, String>,
+    pub status: Status,
+    /// Why it failed, or why the program stopped after it (Q309, no confirmation).
+    pub message: Option<String>,
+}
+
+impl CycleResult {
+    pub fn error(block: u32, cycle: u16, message: impl Into<String>) -> Self {
+        CycleResult {
+            block,
+            cycle,
+            q: BTreeMap::new(),
+            qs: BTreeMap::new(),
+            status: Status::Error,
+            message: Some(message.into()),
+        }
+    }
+}
+
+/// All cycles that ran, in order; `stopped` says why the program ended early.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ProgramReport {
+    pub cycles: Vec<CycleResult>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stopped: Option<String>,
+    /// Protocol files written.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub protocols: Vec<PathBuf>,
+}
+
+impl ProgramReport {
+    /// The program ran to its end and every cycle is ok.
+    pub fn completed(&self) -> bool {
+        self.stopped.is_none() && self.cycles.iter().all(|c| c.status == Status::Ok)
+    }
+
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).expect("a report of strings and finite numbers serialises")
+    }
+
+    /// One `Qnnn = value` line per result, grouped by block (the text form).
+    pub fn to_text(&self) -> String {
+        let mut out = String::new();
+        for c in &self.cycles {
+            let status = match c.status {
+                Status::Ok => "ok",
+                Status::Error => "error",
+            };
+            out.push_str(&format!("block {} cycle {}: {status}", c.block, c.cycle));
+            if let Some(m) = &c.message {
+                out.push_str(&format!(" ({m})"));
+            }
+            out.push('\n');
+            for (k, v) in &c.q {
+                out.push_str(&format!("  {k} = {v:+.4}\n"));
+            }
+            for (k, v) in &c.qs {
+                out.push_str(&format!("  {k} = \"{v}\"\n"));
+            }
+        }
+        if let Some(s) = &self.stopped {
+            out.push_str(&format!("program stopped: {s}\n"));
+        }
+        out
+    }
+}

@@ -1,0 +1,199 @@
+//! Runs the measuring cycles of a validated program in order over a [`Machine`]. A cycle
+//! error, a Q309 stop or a refused confirmation ends the program; later cycles do not
+//! run.
+
+use crate::cycle431::PlaneRecord;
+use crate::cycle444::Probing3dRecord;
+use crate::error::CycleError;
+use crate::program::{CycleCall, CycleKind, Program};
+use crate::protocol;
+use crate::results::{CycleResult, ProgramReport, Status};
+use crate::{cycle431, cycle444};
+use hal::config::MachineConfig;
+use hal::{Axis, AxisPositions, Machine};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+/// What the runner reports while it works (for a console or a UI).
+#[derive(Clone, Debug, PartialEq)]
+pub enum ProgressEvent {
+    CycleStarted { block: u32, cycle: u16, line: usize },
+    Move { block: u32, target: AxisPositions, feed: f64 },
+    Probe { block: u32, direction: [f64; 3], max_distance: f64 },
+    /// Latched stylus ball centre, machine XYZ.
+    Contact { block: u32, centre: [f64; 3] },
+    Note { block: u32, text: String },
+    Protocol { block: u32, path: PathBuf },
+    CycleFinished { block: u32, cycle: u16, status: Status },
+}
+
+pub struct RunOptions<'a> {
+    /// Where protocols are written (the TNC writes them next to the program).
+    pub out_dir: PathBuf,
+    /// Shows a text (the 431 protocol with Q281=2) and returns whether to go on.
+    pub confirm: &'a mut dyn FnMut(&str) -> bool,
+    pub progress: &'a mut dyn FnMut(ProgressEvent),
+}
+
+/// Checks, before anything moves, what only the machine and its configuration can
+/// tell: the probe of each cycle is still in the probe table, the machine has X, Y, Z,
+/// and this build can run the cycle.
+fn preflight(call: &CycleCall, machine_axes: u8, cfg: &MachineConfig) -> Result<(), String> {
+    match call.kind {
+        CycleKind::MeasurePlane(_) | CycleKind::Probing3d(_) => {}
+        CycleKind::MeasureKinematics | CycleKind::SaveKinematics => {
+            return Err(format!(
+                "cycle {} is validated but cannot run in this build (no kinematics model); nothing moved",
+                call.cycle
+            ));
+        }
+    }
+    if cfg.probe(&call.tool.probe.name).is_none() {
+        return Err(format!(
+            "probe \"{}\" (TOOL CALL line {}) is not in the probe table of machine {}",
+            call.tool.probe.name, call.tool.line, cfg.name
+        ));
+    }
+    for a in Axis::LINEAR {
+        if machine_axes & (1 << a.index()) == 0 {
+            return Err(format!("the machine has no {a} axis"));
+        }
+    }
+    Ok(())
+}
+
+pub fn run_program<M: Machine>(
+    program: &Program,
+    machine: &mut M,
+    cfg: &MachineConfig,
+    opts: &mut RunOptions,
+) -> ProgramReport {
+    let mut report = ProgramReport::default();
+    let axes = machine.axes();
+    for call in program.cycles() {
+        if let Err(message) = preflight(call, axes, cfg) {
+            report.stopped = Some(format!("block {}: {message}", call.block));
+            report
+                .cycles
+                .push(CycleResult::error(call.block, call.cycle, message));
+            return report;
+        }
+    }
+    let program_path = program.path.as_deref();
+    let mut points: Vec<Probing3dRecord> = Vec::new();
+    for call in program.cycles() {
+        (opts.progress)(ProgressEvent::CycleStarted {
+            block: call.block,
+            cycle: call.cycle,
+            line: call.line,
+        });
+        let outcome = run_cycle(call, machine, opts, program_path, &mut points, &mut report);
+        let result = match outcome {
+            Ok((q, stop)) => {
+                if let Some(m) = &stop {
+                    report.stopped = Some(format!("block {}: {m}", call.block));
+                }
+                CycleResult {
+                    block: call.block,
+                    cycle: call.cycle,
+                    q,
+                    qs: BTreeMap::new(),
+                    status: Status::Ok,
+                    message: stop,
+                }
+            }
+            Err(e) => {
+                let message = e.to_string();
+                report.stopped = Some(format!(
+                    "block {}: cycle {} failed: {message}",
+                    call.block, call.cycle
+                ));
+                CycleResult::error(call.block, call.cycle, message)
+            }
+        };
+        (opts.progress)(ProgressEvent::CycleFinished {
+            block: call.block,
+            cycle: call.cycle,
+            status: result.status,
+        });
+        report.cycles.push(result);
+        if report.stopped.is_some() {
+            break;
+        }
+    }
+    report
+}
+
+type Outcome = Result<(BTreeMap<String, f64>, Option<String>), CycleError>;
+
+fn run_cycle<M: Machine>(
+    call: &CycleCall,
+    machine: &mut M,
+    opts: &mut RunOptions,
+    program_path: Option<&std::path::Path>,
+    points: &mut Vec<Probing3dRecord>,
+    report: &mut ProgramReport,
+) -> Outcome {
+    match &call.kind {
+        CycleKind::MeasurePlane(p) => {
+            let out = cycle431::run(call, p, machine, opts.progress)?;
+            let stop = plane_protocol(call, p.protocol, &out.record, opts, program_path, report)?;
+            Ok((out.q, stop))
+        }
+        CycleKind::Probing3d(p) => {
+            let out = cycle444::run(call, p, machine, opts.progress)?;
+            points.push(out.record);
+            // Rewritten after every point so it is complete even if a later cycle fails.
+            let path = protocol::write_probing3d_protocol(&opts.out_dir, points, program_path)
+                .map_err(|e| CycleError::Protocol {
+                    path: opts.out_dir.join(protocol::PROBING_3D_PROTOCOL).display().to_string(),
+                    message: e.to_string(),
+                })?;
+            note_protocol(call, path, opts, report);
+            Ok((out.q, out.stop))
+        }
+        CycleKind::MeasureKinematics | CycleKind::SaveKinematics => Err(CycleError::Plan(format!(
+            "cycle {} cannot run in this build",
+            call.cycle
+        ))),
+    }
+}
+
+fn note_protocol(call: &CycleCall, path: PathBuf, opts: &mut RunOptions, report: &mut ProgramReport) {
+    (opts.progress)(ProgressEvent::Protocol {
+        block: call.block,
+        path: path.clone(),
+    });
+    if !report.protocols.contains(&path) {
+        report.protocols.push(path);
+    }
+}
+
+/// Q281: 1 writes TCHPR431.TXT; 2 shows it and goes on only when confirmed.
+fn plane_protocol(
+    call: &CycleCall,
+    mode: u8,
+    record: &PlaneRecord,
+    opts: &mut RunOptions,
+    program_path: Option<&std::path::Path>,
+    report: &mut ProgramReport,
+) -> Result<Option<String>, CycleError> {
+    match mode {
+        1 => {
+            let path = protocol::write_plane_protocol(&opts.out_dir, record, program_path)
+                .map_err(|e| CycleError::Protocol {
+                    path: opts.out_dir.join(protocol::PLANE_PROTOCOL).display().to_string(),
+                    message: e.to_string(),
+                })?;
+            note_protocol(call, path, opts, report);
+            Ok(None)
+        }
+        2 => {
+            let text = protocol::plane_protocol_text(record, program_path, &protocol::timestamp_utc());
+            Ok((!(opts.confirm)(&text)).then(|| {
+                "the cycle 431 protocol was not confirmed (Q281=2); program stopped".to_string()
+            }))
+        }
+        _ => Ok(None),
+    }
+}

@@ -1,0 +1,113 @@
+//! What the blocking `Machine` side asks of the real-time loop, and what it answers.
+//! All `Copy`: passed through bounded channels without allocating in the loop.
+
+use crate::axis::MAX_AXES;
+use crate::contact_sample::ContactSample;
+use crate::machine::{ErrorKind, MachineError};
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Command {
+    /// Straight line to `target` (axes outside `mask` keep their position).
+    MoveTo {
+        target: [f64; MAX_AXES],
+        mask: u8,
+        feed: f64,
+    },
+    /// Probing move from the current position.
+    Probe {
+        direction: [f64; 3],
+        feed: f64,
+        max_distance: f64,
+        run_id: u64,
+    },
+    /// Current actual positions.
+    Positions,
+    /// Stop the loop (axes held, drives disabled).
+    Shutdown,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Reply {
+    /// Drives are in Operation enabled and the loop takes commands.
+    Ready {
+        positions: [f64; MAX_AXES],
+    },
+    /// Motion finished; actual positions.
+    Done {
+        positions: [f64; MAX_AXES],
+    },
+    Contact(ContactSample),
+    Error(RtError),
+}
+
+/// Why a command failed, without allocating; turned into a [`MachineError`] on the
+/// caller's side.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RtError {
+    pub kind: ErrorKind,
+    pub node: Option<u8>,
+    pub code: Option<u16>,
+    pub detail: Detail,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Detail {
+    NotTriggered { distance: f64 },
+    Deflected,
+    Emcy,
+    FaultBit,
+    HeartbeatLost { silent_ms: f64 },
+    NotInPosition { axis: u8, error: f64 },
+    NotEnabled { state: u16 },
+    ArmTimeout,
+    Transport,
+    Busy,
+    Stopped,
+}
+
+impl RtError {
+    pub fn new(kind: ErrorKind, detail: Detail) -> Self {
+        Self {
+            kind,
+            node: None,
+            code: None,
+            detail,
+        }
+    }
+
+    pub fn node(mut self, node: u8) -> Self {
+        self.node = Some(node);
+        self
+    }
+}
+
+impl From<RtError> for MachineError {
+    fn from(e: RtError) -> Self {
+        let message = match e.detail {
+            Detail::NotTriggered { distance } => {
+                format!("no contact within {distance:.3} mm; axes stopped at the end of the path")
+            }
+            Detail::Deflected => "the probe signal is high before the move; nothing moved".into(),
+            Detail::Emcy => "emergency message received; all axes stopped".into(),
+            Detail::FaultBit => "statusword reports Fault; all axes stopped".into(),
+            Detail::HeartbeatLost { silent_ms } => {
+                format!("no heartbeat for {silent_ms:.0} ms; all axes stopped")
+            }
+            Detail::NotInPosition { axis, error } => format!(
+                "axis {} did not reach its position (error {error:.4}); axes stopped",
+                crate::Axis::from_index(axis as usize).map_or("?", |a| a.name())
+            ),
+            Detail::NotEnabled { state } => {
+                format!("drive did not reach Operation enabled (statusword 0x{state:04X})")
+            }
+            Detail::ArmTimeout => "touch probe did not report armed in time; nothing moved".into(),
+            Detail::Transport => "CAN transport failed; all axes stopped".into(),
+            Detail::Busy => "a command is already running".into(),
+            Detail::Stopped => "the real-time loop has stopped".into(),
+        };
+        let mut m = MachineError::new(e.kind, message);
+        m.node = e.node;
+        m.code = e.code;
+        m
+    }
+}

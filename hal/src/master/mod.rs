@@ -1,0 +1,413 @@
+//! The CANopen master as a [`Machine`]: start-up over SDO, then the real-time loop in
+//! its own thread, talked to through bounded channels (no locks shared with the loop).
+
+pub mod command;
+pub mod process_data;
+pub mod rt_loop;
+pub mod startup;
+
+use crate::axis::{AxisPositions, MAX_AXES};
+use crate::can::CanTransport;
+use crate::config::MachineConfig;
+use crate::contact_sample::SampleSink;
+use crate::machine::{Contact, ErrorKind, Machine, MachineError, ProbeMove};
+use command::{Command, Detail, Reply, RtError};
+pub use process_data::BusLoad;
+pub use rt_loop::{LoopConfig, LoopStats, Pacing, RtLoop};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+/// What start-up found and got.
+#[derive(Clone, Debug)]
+pub struct StartupReport {
+    pub bus_load: BusLoad,
+    /// The loop thread runs under SCHED_FIFO.
+    pub realtime_priority: bool,
+    /// The process's memory is locked (no page faults in the loop).
+    pub memory_locked: bool,
+    pub notes: Vec<String>,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct MasterOptions {
+    pub pacing: Pacing,
+    /// SCHED_FIFO priority to ask for (1..99); 0 = do not ask.
+    pub rt_priority: i32,
+    /// Identifies the samples of this session's contacts.
+    pub run_id: u64,
+    /// Longest wall-clock wait for one command (beyond the loop's own timeouts).
+    pub command_timeout: Duration,
+}
+
+impl Default for MasterOptions {
+    fn default() -> Self {
+        Self {
+            pacing: Pacing::RealTime,
+            rt_priority: 80,
+            run_id: 1,
+            command_timeout: Duration::from_secs(600),
+        }
+    }
+}
+
+/// A machine whose axes are CiA 402 drives on a CAN bus.
+pub struct CanMachine {
+    commands: SyncSender<Command>,
+    replies: Receiver<Reply>,
+    thread: Option<JoinHandle<()>>,
+    running: Arc<AtomicBool>,
+    stats: Arc<Mutex<LoopStats>>,
+    config: MachineConfig,
+    options: MasterOptions,
+    run_id: u64,
+    position: AxisPositions,
+}
+
+fn apply_rt_settings(priority: i32) -> (bool, bool) {
+    let mut fifo = false;
+    if priority > 0 {
+        let param = libc::sched_param {
+            sched_priority: priority,
+        };
+        // SAFETY: plain syscall on the calling thread with a parameter we own.
+        fifo = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } == 0;
+    }
+    // SAFETY: plain syscall; failure (no CAP_IPC_LOCK / rlimit) is reported, not fatal.
+    let locked = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) } == 0;
+    (fifo, locked)
+}
+
+impl CanMachine {
+    /// Boots and configures the drives of `cfg` on `transport`, starts the real-time
+    /// loop and waits until every drive is in Operation enabled. Refuses a
+    /// configuration whose cyclic traffic would load the bus beyond
+    /// `bus.max_load_percent`, before sending anything.
+    pub fn start<T, S>(
+        cfg: &MachineConfig,
+        mut transport: T,
+        sink: S,
+        options: MasterOptions,
+    ) -> Result<(Self, StartupReport), MachineError>
+    where
+        T: CanTransport + 'static,
+        S: SampleSink + 'static,
+    {
+        let bus_load = BusLoad::of(cfg);
+        if bus_load.percent > cfg.bus.max_load_percent {
+            return Err(MachineError::new(
+                ErrorKind::InvalidRequest,
+                format!(
+                    "{}: {bus_load}; the limit is {:.0} %: lengthen bus.sync_period_us or raise the bit rate",
+                    cfg.path.display(),
+                    cfg.bus.max_load_percent
+                ),
+            ));
+        }
+        startup::boot(&mut transport, cfg)?;
+        startup::configure(&mut transport, cfg)?;
+
+        let loop_cfg = LoopConfig::from_machine(cfg, options.pacing);
+        let (cmd_tx, cmd_rx) = sync_channel::<Command>(1);
+        let (reply_tx, reply_rx) = sync_channel::<Reply>(1);
+        let running = Arc::new(AtomicBool::new(true));
+        let stats = Arc::new(Mutex::new(LoopStats::default()));
+        let (rt_tx, rt_rx) = sync_channel::<(bool, bool)>(1);
+        let machine_cfg = cfg.clone();
+        let thread = {
+            let running = running.clone();
+            let stats = stats.clone();
+            let realtime = matches!(options.pacing, Pacing::RealTime);
+            let priority = if realtime { options.rt_priority } else { 0 };
+            std::thread::Builder::new()
+                .name("probebridge-rt".into())
+                .spawn(move || {
+                    let got = if realtime {
+                        apply_rt_settings(priority)
+                    } else {
+                        (false, false)
+                    };
+                    let _ = rt_tx.send(got);
+                    let mut rt = RtLoop::new(&machine_cfg, loop_cfg, transport, sink);
+                    run_thread(&mut rt, &cmd_rx, &reply_tx, &running, &stats);
+                })
+                .map_err(|e| {
+                    MachineError::new(
+                        ErrorKind::Other,
+                        format!("cannot start the real-time thread: {e}"),
+                    )
+                })?
+        };
+        let (realtime_priority, memory_locked) = rt_rx.recv().unwrap_or((false, false));
+        let mut notes = Vec::new();
+        if matches!(options.pacing, Pacing::RealTime) {
+            if !realtime_priority {
+                notes.push(format!(
+                    "real-time loop runs without SCHED_FIFO (priority {} not permitted: run as root or grant CAP_SYS_NICE)",
+                    options.rt_priority
+                ));
+            }
+            if !memory_locked {
+                notes.push("memory not locked (mlockall not permitted: grant CAP_IPC_LOCK or raise RLIMIT_MEMLOCK)".into());
+            }
+        }
+        let mut m = CanMachine {
+            commands: cmd_tx,
+            replies: reply_rx,
+            thread: Some(thread),
+            running,
+            stats,
+            config: cfg.clone(),
+            options,
+            run_id: options.run_id,
+            position: AxisPositions::new(),
+        };
+        match m.wait_reply(Duration::from_secs(10))? {
+            Reply::Ready { positions } => m.position = m.to_positions(&positions),
+            Reply::Error(e) => return Err(e.into()),
+            other => {
+                return Err(MachineError::new(
+                    ErrorKind::Other,
+                    format!("unexpected answer from the real-time loop at start-up: {other:?}"),
+                ))
+            }
+        }
+        Ok((
+            m,
+            StartupReport {
+                bus_load,
+                realtime_priority,
+                memory_locked,
+                notes,
+            },
+        ))
+    }
+
+    pub fn config(&self) -> &MachineConfig {
+        &self.config
+    }
+
+    /// Counters of the real-time loop (updated once per cycle).
+    pub fn stats(&self) -> LoopStats {
+        *self.stats.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Samples of following probing moves carry this run ID.
+    pub fn set_run_id(&mut self, run_id: u64) {
+        self.run_id = run_id;
+    }
+
+    fn to_positions(&self, raw: &[f64; MAX_AXES]) -> AxisPositions {
+        AxisPositions::from_raw(*raw, self.config.axis_mask())
+    }
+
+    fn wait_reply(&mut self, timeout: Duration) -> Result<Reply, MachineError> {
+        match self.replies.recv_timeout(timeout) {
+            Ok(r) => Ok(r),
+            Err(RecvTimeoutError::Timeout) => Err(MachineError::new(
+                ErrorKind::Timeout,
+                format!(
+                    "the real-time loop did not answer within {} s",
+                    timeout.as_secs()
+                ),
+            )),
+            Err(RecvTimeoutError::Disconnected) => {
+                Err(RtError::new(ErrorKind::Bus, Detail::Stopped).into())
+            }
+        }
+    }
+
+    fn command(&mut self, cmd: Command) -> Result<Reply, MachineError> {
+        self.commands
+            .send(cmd)
+            .map_err(|_| MachineError::from(RtError::new(ErrorKind::Bus, Detail::Stopped)))?;
+        match self.wait_reply(self.options.command_timeout)? {
+            Reply::Error(e) => Err(e.into()),
+            r => Ok(r),
+        }
+    }
+
+    fn check_limits(&self, target: &AxisPositions, what: &str) -> Result<(), MachineError> {
+        for (axis, v) in target.iter() {
+            let Some(a) = self.config.axis(axis) else {
+                return Err(MachineError::new(
+                    ErrorKind::InvalidRequest,
+                    format!("{what}: this machine has no {axis} axis"),
+                ));
+            };
+            if !v.is_finite() || v < a.min || v > a.max {
+                return Err(MachineError::new(
+                    ErrorKind::SoftwareLimit,
+                    format!(
+                        "{what}: {axis}{v:+.4} is outside the software limits {:+.4} .. {:+.4}; nothing moved",
+                        a.min, a.max
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Stops the loop and disables the drives.
+    pub fn shutdown(&mut self) {
+        if let Some(t) = self.thread.take() {
+            let _ = self.commands.send(Command::Shutdown);
+            self.running.store(false, Ordering::Release);
+            let _ = t.join();
+        }
+    }
+}
+
+impl Drop for CanMachine {
+    fn drop(&mut self) {
+        self.shutdown();
+    }
+}
+
+fn run_thread<T: CanTransport, S: SampleSink>(
+    rt: &mut RtLoop<T, S>,
+    commands: &Receiver<Command>,
+    replies: &SyncSender<Reply>,
+    running: &AtomicBool,
+    stats: &Mutex<LoopStats>,
+) {
+    // The startup Ready/Error goes out like any reply.
+    let mut shutdown_cycles = 0;
+    let lockstep = matches!(rt.pacing(), Pacing::Lockstep { .. });
+    loop {
+        if lockstep && !rt.is_busy() && !rt.is_shut_down() {
+            // On a virtual clock nothing happens between commands: wait for one
+            // instead of spinning the simulation.
+            match commands.recv_timeout(Duration::from_millis(100)) {
+                Ok(cmd) => rt.submit(cmd),
+                Err(RecvTimeoutError::Timeout) if running.load(Ordering::Acquire) => continue,
+                Err(_) => rt.submit(Command::Shutdown),
+            }
+        } else if let Ok(cmd) = commands.try_recv() {
+            rt.submit(cmd);
+        }
+        if let Err(e) = rt.cycle() {
+            let _ = replies.try_send(Reply::Error(RtError::new(
+                ErrorKind::Bus,
+                Detail::Transport,
+            )));
+            eprintln!("probebridge: real-time loop stopped: {e}");
+            return;
+        }
+        if let Some(r) = rt.take_reply() {
+            let _ = replies.try_send(r);
+        }
+        if let Ok(mut s) = stats.try_lock() {
+            *s = rt.stats();
+        }
+        if rt.is_shut_down() || !running.load(Ordering::Acquire) {
+            // A few cycles so the drives see the shutdown controlword.
+            shutdown_cycles += 1;
+            if shutdown_cycles > 3 {
+                return;
+            }
+        }
+    }
+}
+
+impl Machine for CanMachine {
+    type Error = MachineError;
+
+    fn axes(&self) -> u8 {
+        self.config.axis_mask()
+    }
+
+    fn positions(&mut self) -> Result<AxisPositions, MachineError> {
+        match self.command(Command::Positions)? {
+            Reply::Done { positions } => Ok(self.to_positions(&positions)),
+            other => Err(MachineError::new(
+                ErrorKind::Other,
+                format!("unexpected answer {other:?}"),
+            )),
+        }
+    }
+
+    fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), MachineError> {
+        if !(feed.is_finite() && feed > 0.0) {
+            return Err(MachineError::new(
+                ErrorKind::InvalidRequest,
+                format!("feed {feed} must be > 0"),
+            ));
+        }
+        self.check_limits(target, "move")?;
+        match self.command(Command::MoveTo {
+            target: target.raw(),
+            mask: target.mask(),
+            feed,
+        })? {
+            Reply::Done { positions } => {
+                self.position = self.to_positions(&positions);
+                Ok(())
+            }
+            other => Err(MachineError::new(
+                ErrorKind::Other,
+                format!("unexpected answer {other:?}"),
+            )),
+        }
+    }
+
+    fn probe(&mut self, mv: &ProbeMove) -> Result<Contact, MachineError> {
+        let d = mv.direction;
+        let norm = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        if !(norm.is_finite() && norm > 1e-9) {
+            return Err(MachineError::new(
+                ErrorKind::InvalidRequest,
+                "probing direction is zero",
+            ));
+        }
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        if !positive(mv.feed) || !positive(mv.max_distance)
+        {
+            return Err(MachineError::new(
+                ErrorKind::InvalidRequest,
+                format!(
+                    "probing feed {} and distance {} must be > 0",
+                    mv.feed, mv.max_distance
+                ),
+            ));
+        }
+        let dir = [d[0] / norm, d[1] / norm, d[2] / norm];
+        // The path end plus the braking distance at the probing feed must be inside
+        // the limits: the stop after a late contact runs on past the path.
+        let here = self.positions()?;
+        let mut brake = 0.0f64;
+        for (i, a) in crate::Axis::LINEAR.iter().enumerate() {
+            if let Some(ac) = self.config.axis(*a) {
+                let v = mv.feed / 60.0 * dir[i].abs();
+                brake = brake.max(v * v / (2.0 * ac.max_acceleration));
+            }
+        }
+        let mut end = here;
+        for (i, a) in crate::Axis::LINEAR.iter().enumerate() {
+            end.set(
+                *a,
+                here.get(*a).unwrap_or(0.0) + dir[i] * (mv.max_distance + brake),
+            );
+        }
+        self.check_limits(&end, "probing move")?;
+        match self.command(Command::Probe {
+            direction: dir,
+            feed: mv.feed,
+            max_distance: mv.max_distance,
+            run_id: self.run_id,
+        })? {
+            Reply::Contact(s) => Ok(Contact {
+                positions: s.axis_positions(),
+                trigger_ns: s.trigger_ns,
+                sequence: s.sequence,
+                direction: dir,
+            }),
+            other => Err(MachineError::new(
+                ErrorKind::Other,
+                format!("unexpected answer {other:?}"),
+            )),
+        }
+    }
+}

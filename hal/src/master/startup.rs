@@ -1,0 +1,214 @@
+//! Bringing the drives up before the real-time loop runs: NMT reset, boot-up of every
+//! configured node, the configuration written over SDO (cycle period, heartbeat,
+//! cyclic synchronous position mode, the PDO layout of [`super::process_data`]), then
+//! NMT start. Blocking, with a timeout on every answer; any refusal is an error naming
+//! the node, the object and the drive's SDO abort code.
+
+use super::process_data::{self, *};
+use crate::can::{CanFrame, CanTransport};
+use crate::canopen::cob_id::{self, CobKind};
+use crate::canopen::nmt::{self, NmtCommand};
+use crate::canopen::object;
+use crate::canopen::pdo::{configuration_writes, PdoDirection};
+use crate::canopen::sdo::{SdoClient, SdoClientEvent, SdoOutcome};
+use crate::cia402::mode::ModeOfOperation;
+use crate::config::{AxisConfig, MachineConfig};
+use crate::machine::{ErrorKind, MachineError};
+use std::time::{Duration, Instant};
+
+/// How long drives get to answer the NMT reset with their boot-up message.
+pub const BOOT_TIMEOUT: Duration = Duration::from_secs(3);
+
+fn transport_error(e: crate::can::TransportError) -> MachineError {
+    MachineError::new(ErrorKind::Bus, e.to_string())
+}
+
+/// Resets communication on all nodes and waits for the boot-up of every configured
+/// drive.
+pub fn boot<T: CanTransport>(t: &mut T, cfg: &MachineConfig) -> Result<(), MachineError> {
+    t.transmit(&nmt::encode(NmtCommand::ResetCommunication, 0))
+        .map_err(transport_error)?;
+    let mut booted = [false; 128];
+    let deadline = Instant::now() + BOOT_TIMEOUT;
+    while cfg.axes.iter().any(|a| !booted[a.node as usize]) {
+        let now = Instant::now();
+        if now >= deadline {
+            let missing: Vec<String> = cfg
+                .axes
+                .iter()
+                .filter(|a| !booted[a.node as usize])
+                .map(|a| format!("node {} ({})", a.node, a.name))
+                .collect();
+            return Err(MachineError::new(
+                ErrorKind::NodeLost,
+                format!(
+                    "no boot-up within {} s from {}: check the bus wiring, bit rate and node IDs",
+                    BOOT_TIMEOUT.as_secs(),
+                    missing.join(", ")
+                ),
+            ));
+        }
+        if let Some(f) = t.receive(deadline - now).map_err(transport_error)? {
+            if let CobKind::Heartbeat { node } = cob_id::classify(f.cob_id()) {
+                if f.data() == [0] {
+                    booted[node as usize] = true;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// One SDO download, waiting for the answer.
+pub fn sdo_download<T: CanTransport>(
+    t: &mut T,
+    axis: &AxisConfig,
+    index: u16,
+    sub: u8,
+    data: &[u8],
+    timeout: Duration,
+) -> Result<(), MachineError> {
+    let mut client = SdoClient::new(axis.node);
+    let first = client.download(index, sub, data).map_err(|e| {
+        MachineError::new(
+            ErrorKind::Other,
+            format!("SDO 0x{index:04X}:{sub:02X}: {e}"),
+        )
+        .with_node(axis.node)
+    })?;
+    match sdo_exchange(t, &mut client, first, axis, index, sub, timeout)? {
+        SdoOutcome::Downloaded => Ok(()),
+        SdoOutcome::Uploaded(_) => Ok(()),
+        SdoOutcome::Aborted(code) => Err(MachineError::new(
+            ErrorKind::DriveFault,
+            format!(
+                "axis {}: writing 0x{index:04X}:{sub:02X} = {:02X?} refused with SDO abort 0x{:08X} ({code})",
+                axis.name, data, code.0
+            ),
+        )
+        .with_node(axis.node)),
+    }
+}
+
+/// One SDO upload, waiting for the answer.
+pub fn sdo_upload<T: CanTransport>(
+    t: &mut T,
+    axis: &AxisConfig,
+    index: u16,
+    sub: u8,
+    timeout: Duration,
+) -> Result<Vec<u8>, MachineError> {
+    let mut client = SdoClient::new(axis.node);
+    let first = client.upload(index, sub).map_err(|e| {
+        MachineError::new(
+            ErrorKind::Other,
+            format!("SDO 0x{index:04X}:{sub:02X}: {e}"),
+        )
+        .with_node(axis.node)
+    })?;
+    match sdo_exchange(t, &mut client, first, axis, index, sub, timeout)? {
+        SdoOutcome::Uploaded(v) => Ok(v.to_vec()),
+        SdoOutcome::Downloaded => Ok(Vec::new()),
+        SdoOutcome::Aborted(code) => Err(MachineError::new(
+            ErrorKind::DriveFault,
+            format!(
+                "axis {}: reading 0x{index:04X}:{sub:02X} refused with SDO abort 0x{:08X} ({code})",
+                axis.name, code.0
+            ),
+        )
+        .with_node(axis.node)),
+    }
+}
+
+fn sdo_exchange<T: CanTransport>(
+    t: &mut T,
+    client: &mut SdoClient,
+    first: CanFrame,
+    axis: &AxisConfig,
+    index: u16,
+    sub: u8,
+    timeout: Duration,
+) -> Result<SdoOutcome, MachineError> {
+    t.transmit(&first).map_err(transport_error)?;
+    let mut deadline = Instant::now() + timeout;
+    loop {
+        let now = Instant::now();
+        if now >= deadline {
+            if let Some(abort) = client.abort(crate::canopen::sdo::SdoAbortCode::TIMEOUT) {
+                let _ = t.transmit(&abort);
+            }
+            return Err(MachineError::new(
+                ErrorKind::Timeout,
+                format!(
+                    "axis {}: no SDO answer for 0x{index:04X}:{sub:02X} within {} ms",
+                    axis.name,
+                    timeout.as_millis()
+                ),
+            )
+            .with_node(axis.node));
+        }
+        let Some(f) = t.receive(deadline - now).map_err(transport_error)? else {
+            continue;
+        };
+        match client.on_frame(&f) {
+            SdoClientEvent::Ignored => {}
+            SdoClientEvent::Transmit(next) => {
+                t.transmit(&next).map_err(transport_error)?;
+                deadline = Instant::now() + timeout;
+            }
+            SdoClientEvent::Done(outcome) => return Ok(outcome),
+            SdoClientEvent::Aborting { frame, code } => {
+                t.transmit(&frame).map_err(transport_error)?;
+                return Ok(SdoOutcome::Aborted(code));
+            }
+        }
+    }
+}
+
+/// Writes the configuration of every drive (see module doc).
+pub fn configure<T: CanTransport>(t: &mut T, cfg: &MachineConfig) -> Result<(), MachineError> {
+    let timeout = Duration::from_millis(cfg.bus.sdo_timeout_ms as u64);
+    for axis in &cfg.axes {
+        let n = axis.node;
+        sdo_download(
+            t,
+            axis,
+            object::COMMUNICATION_CYCLE_PERIOD,
+            0,
+            &cfg.bus.sync_period_us.to_le_bytes(),
+            timeout,
+        )?;
+        sdo_download(
+            t,
+            axis,
+            object::PRODUCER_HEARTBEAT_TIME,
+            0,
+            &cfg.bus.heartbeat_producer_ms.to_le_bytes(),
+            timeout,
+        )?;
+        sdo_download(
+            t,
+            axis,
+            object::MODES_OF_OPERATION,
+            0,
+            &[ModeOfOperation::CyclicSynchronousPosition as i8 as u8],
+            timeout,
+        )?;
+        let pdos = [
+            (PdoDirection::Rpdo, 1u8, &RPDO1[..], RPDO1_TRANSMISSION),
+            (PdoDirection::Rpdo, 2, &RPDO2[..], RPDO2_TRANSMISSION),
+            (PdoDirection::Tpdo, 1, &TPDO1[..], TPDO1_TRANSMISSION),
+            (PdoDirection::Tpdo, 2, &TPDO2[..], TPDO2_TRANSMISSION),
+        ];
+        for (dir, num, entries, transmission) in pdos {
+            let mapping = process_data::mapping(entries);
+            for w in configuration_writes(dir, num, n, &mapping, transmission) {
+                let bytes = w.value.to_le_bytes();
+                sdo_download(t, axis, w.index, w.sub, &bytes[..w.size as usize], timeout)?;
+            }
+        }
+    }
+    t.transmit(&nmt::encode(NmtCommand::Start, 0))
+        .map_err(transport_error)?;
+    Ok(())
+}

@@ -1,0 +1,236 @@
+//! The simulated machine on a CAN bus: every axis's drive, stepped together on each
+//! SYNC through the physics of [`crate::world::World`], so all drives latch on the same
+//! probe signal at the same instant. Time is SYNC count times the cycle period the
+//! master configured (0x1006): the simulation runs on whatever clock the master runs,
+//! virtual or real.
+
+use crate::drive::SimDrive;
+use crate::scenario::{FaultKind, Scenario};
+use crate::world::World;
+use hal::axis::AxisPositions;
+use hal::can::{CanFrame, CanTransport, TransportError};
+use hal::canopen::cob_id::{self, CobKind};
+use hal::config::MachineConfig;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+/// Penetration of the stylus into material beyond which the simulated probe's
+/// overtravel is used up: every drive faults (a real probe would break).
+pub const PROBE_OVERTRAVEL_MM: f64 = 5.0;
+/// EMCY code the drives send on a probe collision (manufacturer specific).
+pub const EMCY_PROBE_COLLISION: u16 = 0xFF01;
+
+struct AxisDrive {
+    drive: SimDrive,
+    axis: hal::Axis,
+    scale: f64,
+}
+
+struct PlannedFault {
+    node: u8,
+    kind: FaultKind,
+    at_us: u64,
+    code: u16,
+    done: bool,
+}
+
+/// All drives of one machine plus its physics.
+pub struct SimMachine {
+    drives: Vec<AxisDrive>,
+    world: World,
+    time_us: u64,
+    faults: Vec<PlannedFault>,
+    syncs: u64,
+}
+
+impl SimMachine {
+    /// Drives of `scenario.machine` at the home position: Z 50 mm below its upper
+    /// limit (clear of the table), every other axis at 0.
+    pub fn new(scenario: &Scenario) -> Self {
+        Self::with_positions(scenario, &Self::home(&scenario.machine))
+    }
+
+    pub fn home(cfg: &MachineConfig) -> AxisPositions {
+        let mut p = AxisPositions::new();
+        if let Some(z) = cfg.axis(hal::Axis::Z) {
+            p.set(hal::Axis::Z, (z.max - 50.0).max(z.min));
+        }
+        p
+    }
+
+    /// Drives start at `start` (axes not given: 0).
+    pub fn with_positions(scenario: &Scenario, start: &AxisPositions) -> Self {
+        let cfg: &MachineConfig = &scenario.machine;
+        let drives = cfg
+            .axes
+            .iter()
+            .map(|a| {
+                let pos = start.get(a.name).unwrap_or(0.0);
+                AxisDrive {
+                    drive: SimDrive::new(a.node, (pos * a.increments_per_unit).round() as i32),
+                    axis: a.name,
+                    scale: a.increments_per_unit,
+                }
+            })
+            .collect();
+        let faults = scenario
+            .faults
+            .iter()
+            .map(|f| PlannedFault {
+                node: f.node,
+                kind: f.kind,
+                at_us: (f.after_ms * 1000.0) as u64,
+                code: f.code.unwrap_or(0x5000),
+                done: false,
+            })
+            .collect();
+        Self {
+            drives,
+            world: World::new(scenario),
+            time_us: 0,
+            faults,
+            syncs: 0,
+        }
+    }
+
+    /// Simulated time since the first SYNC, µs.
+    pub fn time_us(&self) -> u64 {
+        self.time_us
+    }
+
+    pub fn syncs(&self) -> u64 {
+        self.syncs
+    }
+
+    /// Encoder positions of all axes.
+    pub fn positions(&self) -> AxisPositions {
+        let mut p = AxisPositions::new();
+        for d in &self.drives {
+            p.set(d.axis, d.drive.actual_inc() as f64 / d.scale);
+        }
+        p
+    }
+
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// Handles one frame from the bus; answers through `tx`.
+    pub fn on_frame(&mut self, f: &CanFrame, tx: &mut dyn FnMut(&CanFrame)) {
+        if let CobKind::Sync = cob_id::classify(f.cob_id()) {
+            self.on_sync(tx);
+            return;
+        }
+        for d in &mut self.drives {
+            d.drive.on_frame(f, tx);
+        }
+    }
+
+    fn on_sync(&mut self, tx: &mut dyn FnMut(&CanFrame)) {
+        self.syncs += 1;
+        let period_us = self
+            .drives
+            .first()
+            .map_or(2000, |d| d.drive.cycle_period_us()) as u64;
+        self.time_us += period_us;
+        for f in self
+            .faults
+            .iter_mut()
+            .filter(|f| !f.done && self.time_us >= f.at_us)
+        {
+            f.done = true;
+            if let Some(d) = self.drives.iter_mut().find(|d| d.drive.node() == f.node) {
+                match f.kind {
+                    FaultKind::Emcy => d.drive.raise_fault(f.code),
+                    FaultKind::Silent => d.drive.silent = true,
+                }
+            }
+        }
+        let mut from = AxisPositions::new();
+        let mut to = AxisPositions::new();
+        for d in &mut self.drives {
+            d.drive.begin_step();
+            from.set(d.axis, d.drive.actual_inc() as f64 / d.scale);
+            to.set(d.axis, d.drive.next_position_inc() as f64 / d.scale);
+        }
+        let latch = self.world.step(&from, &to);
+        let level = self.world.deflected(&to);
+        let collision = self.world.penetration(&to) > PROBE_OVERTRAVEL_MM;
+        for d in &mut self.drives {
+            let target = d.drive.next_position_inc();
+            d.drive.end_step(target, latch, level);
+            if collision {
+                d.drive.raise_fault(EMCY_PROBE_COLLISION);
+            }
+        }
+        for d in &mut self.drives {
+            d.drive.answer_sync(tx);
+        }
+    }
+}
+
+/// A simulated machine running on a bus in its own thread until stopped.
+pub struct SimRunner {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<Result<SimMachine, TransportError>>>,
+}
+
+impl SimRunner {
+    /// Serves `machine` on `transport`: every frame is handled as it arrives.
+    pub fn spawn<T: CanTransport + 'static>(mut machine: SimMachine, mut transport: T) -> Self {
+        let stop = Arc::new(AtomicBool::new(false));
+        let stop2 = stop.clone();
+        let thread = std::thread::Builder::new()
+            .name("probebridge-sim".into())
+            .spawn(move || {
+                let mut out: Vec<CanFrame> = Vec::with_capacity(64);
+                while !stop2.load(Ordering::Acquire) {
+                    let Some(f) = transport.receive(Duration::from_millis(50))? else {
+                        continue;
+                    };
+                    machine.on_frame(&f, &mut |r| out.push(*r));
+                    for r in out.drain(..) {
+                        transport.transmit(&r)?;
+                    }
+                }
+                Ok(machine)
+            })
+            .expect("spawn simulation thread");
+        Self {
+            stop,
+            thread: Some(thread),
+        }
+    }
+
+    /// Runs until the transport fails (or the process ends).
+    pub fn wait(mut self) -> Result<SimMachine, TransportError> {
+        self.join()
+    }
+
+    fn join(&mut self) -> Result<SimMachine, TransportError> {
+        match self.thread.take().map(|t| t.join()) {
+            Some(Ok(r)) => r,
+            _ => Err(TransportError::new(
+                hal::can::TransportErrorKind::Closed,
+                "simulation thread panicked",
+            )),
+        }
+    }
+
+    /// Stops the simulation and returns the machine (for inspection in tests).
+    pub fn stop(mut self) -> Result<SimMachine, TransportError> {
+        self.stop.store(true, Ordering::Release);
+        self.join()
+    }
+}
+
+impl Drop for SimRunner {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
