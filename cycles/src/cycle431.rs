@@ -103,7 +103,11 @@ pub fn run<M: Machine>(
         .points
         .map(|pt| Vector3::from(axis.to_machine(pt)) + up * approach);
     // Planned before anything moves: every start point must lie below the safe height.
-    if let Some((i, s)) = starts.iter().enumerate().find(|(_, s)| s[t] > p.safe_height) {
+    if let Some((i, s)) = starts
+        .iter()
+        .enumerate()
+        .find(|(_, s)| s[t] > p.safe_height)
+    {
         return Err(CycleError::Plan(format!(
             "Q260={} is below the start of point {} ({:.4} = nominal + R + SET_UP + Q320); nothing moved",
             p.safe_height,
@@ -123,8 +127,8 @@ pub fn run<M: Machine>(
         progress,
     };
     let mut measured = p.points;
+    pos.safe_height(p.safe_height)?;
     for (i, start) in starts.iter().enumerate() {
-        pos.safe_height(p.safe_height)?;
         pos.over((*start).into())?;
         pos.to(&format!("approaching point {}", i + 1), (*start).into())?;
         let contact = pos.probe(
@@ -133,16 +137,14 @@ pub fn run<M: Machine>(
             probe.f,
             approach + probe.dist,
         )?;
-        // Contact point = ball centre shifted by R along the probing direction.
+        // Ball centre shifted by R along the probing direction (no 3D radius
+        // compensation: on a tilted plane this is a constant offset of all three
+        // points, which leaves the angles exact).
         measured[i][2] = contact.positions.xyz()[t] - probe.radius;
         pos.safe_height(p.safe_height)?;
     }
-    let angles = plane_angles(
-        measured[0].into(),
-        measured[1].into(),
-        measured[2].into(),
-    )
-    .map_err(|e| CycleError::Geometry(e.to_string()))?;
+    let angles = plane_angles(measured[0].into(), measured[1].into(), measured[2].into())
+        .map_err(|e| CycleError::Geometry(e.to_string()))?;
 
     let mut q = BTreeMap::new();
     q.insert("Q158".to_string(), angles.proj_a);

@@ -64,7 +64,9 @@ impl Probing3dParams {
         if written.norm() == 0.0 {
             problems.push(Diagnostic {
                 line: normal_line,
-                message: "Q581/Q582/Q583: the surface normal is the zero vector; it needs a direction".into(),
+                message:
+                    "Q581/Q582/Q583: the surface normal is the zero vector; it needs a direction"
+                        .into(),
             });
         }
         let (text, text_line) = match params.get("QS400") {
@@ -175,12 +177,7 @@ pub fn run<M: Machine>(
     pos.safe_height(p.safe_height)?;
     pos.over(start.into())?;
     pos.to("moving to the pre-position", start.into())?;
-    let contact = pos.probe(
-        "probing the point",
-        direction.into(),
-        probe.f,
-        max_distance,
-    )?;
+    let contact = pos.probe("probing the point", direction.into(), probe.f, max_distance)?;
     let centre = Vector3::from(contact.positions.xyz());
     // Retract from the contact by MB against the probing direction, then clear.
     pos.to("retracting", (centre + n * probe.mb).into())?;

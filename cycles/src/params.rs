@@ -182,7 +182,12 @@ const fn num(
     }
 }
 
-const fn int(name: &'static str, title: &'static str, (min, max): (f64, f64), default: Default) -> ParamSpec {
+const fn int(
+    name: &'static str,
+    title: &'static str,
+    (min, max): (f64, f64),
+    default: Default,
+) -> ParamSpec {
     ParamSpec {
         name,
         title,
@@ -234,7 +239,14 @@ pub static CYCLE_431: CycleTable = CycleTable {
 };
 
 const fn normal(name: &'static str, title: &'static str) -> ParamSpec {
-    num(name, title, (-10.0, 10.0), Unit::None, NONE, Default::Required)
+    num(
+        name,
+        title,
+        (-10.0, 10.0),
+        Unit::None,
+        NONE,
+        Default::Required,
+    )
 }
 
 pub static CYCLE_444: CycleTable = CycleTable {
@@ -301,16 +313,36 @@ pub static CYCLE_451: CycleTable = CycleTable {
         angle("Q411", "START ANGLE A AXIS", (-ANGLE, ANGLE)),
         angle("Q412", "END ANGLE A AXIS", (-ANGLE, ANGLE)),
         angle("Q413", "INCID. ANGLE A AXIS", (-ANGLE, ANGLE)),
-        int("Q414", "MEAS. POINTS A AXIS", (0.0, 12.0), Default::Number(0.0)),
+        int(
+            "Q414",
+            "MEAS. POINTS A AXIS",
+            (0.0, 12.0),
+            Default::Number(0.0),
+        ),
         angle("Q415", "START ANGLE B AXIS", (-ANGLE, ANGLE)),
         angle("Q416", "END ANGLE B AXIS", (-ANGLE, ANGLE)),
         angle("Q417", "INCID. ANGLE B AXIS", (-359.999, 360.0)),
-        int("Q418", "MEAS. POINTS B AXIS", (0.0, 12.0), Default::Number(0.0)),
+        int(
+            "Q418",
+            "MEAS. POINTS B AXIS",
+            (0.0, 12.0),
+            Default::Number(0.0),
+        ),
         angle("Q419", "START ANGLE C AXIS", (-ANGLE, ANGLE)),
         angle("Q420", "END ANGLE C AXIS", (-ANGLE, ANGLE)),
         angle("Q421", "INCID. ANGLE C AXIS", (-ANGLE, ANGLE)),
-        int("Q422", "MEAS. POINTS C AXIS", (0.0, 12.0), Default::Number(0.0)),
-        int("Q423", "NO. OF PROBE POINTS", (3.0, 8.0), Default::Number(4.0)),
+        int(
+            "Q422",
+            "MEAS. POINTS C AXIS",
+            (0.0, 12.0),
+            Default::Number(0.0),
+        ),
+        int(
+            "Q423",
+            "NO. OF PROBE POINTS",
+            (3.0, 8.0),
+            Default::Number(4.0),
+        ),
         int("Q431", "PRESET", (0.0, 3.0), Default::Number(0.0)),
         angle("Q432", "BACKLASH, ANG. RANGE", (-3.0, 3.0)),
     ],
@@ -321,7 +353,12 @@ pub static CYCLE_450: CycleTable = CycleTable {
     name: "SAVE KINEMATICS",
     params: &[
         int("Q410", "MODE", (0.0, 3.0), Default::Required),
-        int("Q409", "MEMORY DESIGNATION", (0.0, 99_999_999.0), Default::Required),
+        int(
+            "Q409",
+            "MEMORY DESIGNATION",
+            (0.0, 99_999_999.0),
+            Default::Required,
+        ),
     ],
 };
 

@@ -88,7 +88,9 @@ fn split_line(no: usize, raw: &str) -> Line<'_> {
 fn split_block_number(code: &str) -> (Option<u32>, &str) {
     let digits_from = usize::from(code.starts_with(['N', 'n']));
     let rest = &code[digits_from..];
-    let end = rest.find(|c: char| !c.is_ascii_digit()).unwrap_or(rest.len());
+    let end = rest
+        .find(|c: char| !c.is_ascii_digit())
+        .unwrap_or(rest.len());
     if end == 0 {
         return (None, code);
     }
@@ -242,7 +244,9 @@ fn starts_block(line: &Line) -> bool {
 }
 
 fn upper_words(code: &str) -> Vec<String> {
-    code.split_whitespace().map(str::to_ascii_uppercase).collect()
+    code.split_whitespace()
+        .map(str::to_ascii_uppercase)
+        .collect()
 }
 
 fn is_cycle_head(code: &str) -> bool {
@@ -334,7 +338,7 @@ fn statement(
 
     match (w(0), w(1)) {
         (Some("BEGIN"), Some("PGM")) => {
-            let Some((name, unit)) = pgm_name_unit(&words[2..], line, diags) else {
+            let Some((name, unit)) = pgm_name_unit(code, line, diags) else {
                 return other();
             };
             if index != 0 {
@@ -346,7 +350,7 @@ fn statement(
             Statement::BeginPgm { name, unit }
         }
         (Some("END"), Some("PGM")) => {
-            let Some((name, unit)) = pgm_name_unit(&words[2..], line, diags) else {
+            let Some((name, unit)) = pgm_name_unit(code, line, diags) else {
                 return other();
             };
             check_end(st, &name, unit, line, diags);
@@ -411,12 +415,15 @@ fn statement(
     }
 }
 
+/// `NAME MM|INCH` after `BEGIN PGM` / `END PGM`; the name keeps its case.
 fn pgm_name_unit(
-    words: &[String],
+    code: &str,
     line: usize,
     diags: &mut Vec<Diagnostic>,
 ) -> Option<(String, LengthUnit)> {
-    let unit = match words.get(1).map(String::as_str) {
+    let words: Vec<&str> = code.split_whitespace().skip(2).collect();
+    let name = words.first().copied().unwrap_or("");
+    let unit = match words.get(1).map(|w| w.to_ascii_uppercase()).as_deref() {
         Some("MM") => LengthUnit::Mm,
         Some("INCH") => LengthUnit::Inch,
         _ => {
@@ -424,7 +431,7 @@ fn pgm_name_unit(
             return None;
         }
     };
-    Some((words[0].clone(), unit))
+    Some((name.to_string(), unit))
 }
 
 fn check_end(st: &State, name: &str, unit: LengthUnit, line: usize, diags: &mut Vec<Diagnostic>) {
@@ -499,7 +506,11 @@ fn tool_call(
 ) -> Option<ToolCall> {
     let (tool, after) = if let Some(q) = rest.strip_prefix('"') {
         let Some(end) = q.find('"') else {
-            err(diags, line, "TOOL CALL: unterminated tool name (expected TOOL CALL \"NAME\" Z)");
+            err(
+                diags,
+                line,
+                "TOOL CALL: unterminated tool name (expected TOOL CALL \"NAME\" Z)",
+            );
             return None;
         };
         (ToolRef::Name(q[..end].to_string()), &q[end + 1..])
@@ -603,17 +614,27 @@ struct Assignment<'a> {
 
 /// Splits `Q263=+0 Q264=+0 QS400="1-1"` into assignments; the line's comment goes to
 /// its last assignment.
-fn assignments<'a>(pl: &ParamLine<'a>, diags: &mut Vec<Diagnostic>) -> Vec<Assignment<'a>> {
+fn assignments<'a>(
+    pl: &ParamLine<'a>,
+    broken: &mut Vec<String>,
+    diags: &mut Vec<Diagnostic>,
+) -> Vec<Assignment<'a>> {
     let mut out = Vec::new();
     let mut s = pl.code.trim_start();
     while !s.is_empty() {
-        let name_end = s.find(|c: char| c == '=' || c.is_whitespace()).unwrap_or(s.len());
+        let name_end = s
+            .find(|c: char| c == '=' || c.is_whitespace())
+            .unwrap_or(s.len());
         let name = s[..name_end].to_ascii_uppercase();
-        let valid_name = name.strip_prefix("QS").or_else(|| name.strip_prefix('Q')).is_some_and(
-            |d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()),
-        );
+        let valid_name = name
+            .strip_prefix("QS")
+            .or_else(|| name.strip_prefix('Q'))
+            .is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()));
         let after = s[name_end..].trim_start();
         let Some(value_part) = after.strip_prefix('=').filter(|_| valid_name) else {
+            if valid_name {
+                broken.push(name);
+            }
             let shown = s.split_whitespace().next().unwrap_or(s);
             err(
                 diags,
@@ -627,6 +648,7 @@ fn assignments<'a>(pl: &ParamLine<'a>, diags: &mut Vec<Diagnostic>) -> Vec<Assig
             match q.find('"') {
                 Some(end) => (&v[..end + 2], &v[end + 2..]),
                 None => {
+                    broken.push(name.clone());
                     err(
                         diags,
                         pl.no,
@@ -714,8 +736,10 @@ fn cycle(
     lines.extend(rb.body.iter().copied());
 
     let mut params: BTreeMap<String, Param> = BTreeMap::new();
+    // Written ones, valid or not: an invalid value is not also "missing".
+    let mut written: Vec<String> = Vec::new();
     for pl in &lines {
-        for a in assignments(pl, diags) {
+        for a in assignments(pl, &mut written, diags) {
             let Some(spec) = table.param(&a.name) else {
                 err(
                     diags,
@@ -733,10 +757,14 @@ fn cycle(
                 err(
                     diags,
                     a.line,
-                    format!("{}={}: given twice (first on line {})", a.name, a.raw, first.line),
+                    format!(
+                        "{}={}: given twice (first on line {})",
+                        a.name, a.raw, first.line
+                    ),
                 );
                 continue;
             }
+            written.push(a.name.clone());
             if let Some(value) = resolve(spec, &a, st.unit, cfg, diags) {
                 params.insert(a.name.clone(), value);
             }
@@ -744,7 +772,7 @@ fn cycle(
     }
     let mut missing = Vec::new();
     for spec in table.params {
-        if params.contains_key(spec.name) {
+        if params.contains_key(spec.name) || written.iter().any(|w| w == spec.name) {
             continue;
         }
         let value = match spec.default {
@@ -768,7 +796,10 @@ fn cycle(
         let hint = if rb.open {
             String::new()
         } else {
-            format!(" (the block ends at line {}; is a \"~\" missing there?)", rb.last_line)
+            format!(
+                " (the block ends at line {}; is a \"~\" missing there?)",
+                rb.last_line
+            )
         };
         for spec in missing {
             err(
@@ -836,7 +867,10 @@ fn resolve(
     match spec.kind {
         Kind::Text { max_len } => {
             let Some(text) = a.raw.strip_prefix('"').and_then(|r| r.strip_suffix('"')) else {
-                return fail(diags, format!("{title}: expected a string in quotes, {}=\"...\"", a.name));
+                return fail(
+                    diags,
+                    format!("{title}: expected a string in quotes, {}=\"...\"", a.name),
+                );
             };
             let len = text.chars().count();
             if len > max_len {
@@ -894,7 +928,13 @@ fn resolve(
                 }
                 _ => {
                     if a.raw.starts_with('"') {
-                        return fail(diags, format!("{title}: expected a number, not a string (allowed {})", spec.allowed()));
+                        return fail(
+                            diags,
+                            format!(
+                                "{title}: expected a number, not a string (allowed {})",
+                                spec.allowed()
+                            ),
+                        );
                     }
                     let Some(v) = parse_decimal(a.raw) else {
                         return fail(
@@ -925,10 +965,19 @@ mod tests {
 
     #[test]
     fn decimals() {
-        for (s, v) in [("+0", 0.0), ("-12.5", -12.5), ("5", 5.0), (".5", 0.5), ("+1e6", 1e6), ("3.", 3.0)] {
+        for (s, v) in [
+            ("+0", 0.0),
+            ("-12.5", -12.5),
+            ("5", 5.0),
+            (".5", 0.5),
+            ("+1e6", 1e6),
+            ("3.", 3.0),
+        ] {
             assert_eq!(parse_decimal(s), Some(v), "{s}");
         }
-        for s in ["", "+", "1.2.3", "abc", "1e", "inf", "NaN", "+-1", "1,5", "Q1"] {
+        for s in [
+            "", "+", "1.2.3", "abc", "1e", "inf", "NaN", "+-1", "1,5", "Q1",
+        ] {
             assert_eq!(parse_decimal(s), None, "{s}");
         }
     }
@@ -936,9 +985,15 @@ mod tests {
     #[test]
     fn line_split() {
         let l = split_line(3, "  12 TCH PROBE 444 ANTASTEN 3D ~");
-        assert_eq!((l.number, l.code, l.cont), (Some(12), "TCH PROBE 444 ANTASTEN 3D", true));
+        assert_eq!(
+            (l.number, l.code, l.cont),
+            (Some(12), "TCH PROBE 444 ANTASTEN 3D", true)
+        );
         let l = split_line(4, "QS400=\"a;b\" ;TOLERANZ ~");
-        assert_eq!((l.code, l.comment, l.cont), ("QS400=\"a;b\"", Some("TOLERANZ"), true));
+        assert_eq!(
+            (l.code, l.comment, l.cont),
+            ("QS400=\"a;b\"", Some("TOLERANZ"), true)
+        );
         let l = split_line(5, "N20 G444 Q263=+0 *");
         assert_eq!((l.number, l.code), (Some(20), "G444 Q263=+0"));
     }

@@ -162,8 +162,14 @@ impl CycleCall {
 
 #[derive(Clone, Debug, PartialEq)]
 pub enum Statement {
-    BeginPgm { name: String, unit: LengthUnit },
-    EndPgm { name: String, unit: LengthUnit },
+    BeginPgm {
+        name: String,
+        unit: LengthUnit,
+    },
+    EndPgm {
+        name: String,
+        unit: LengthUnit,
+    },
     ToolCall(ToolCall),
     Cycle(Box<CycleCall>),
     /// Any other NC block (moves, comments, FN, M functions, ...): not a measuring
@@ -262,5 +268,8 @@ pub enum ProgramError {
         source: std::io::Error,
     },
     #[error("{path}: {} error(s):\n{errors}", errors.0.len())]
-    Invalid { path: PathBuf, errors: ProgramErrors },
+    Invalid {
+        path: PathBuf,
+        errors: ProgramErrors,
+    },
 }

@@ -149,7 +149,7 @@ pub fn probing3d_protocol_html(
                 ""
             }
         );
-        for i in 0..3 {
+        for (i, name) in names.iter().enumerate() {
             let limits = match tol {
                 Some(t) => format!(
                     "<td>{:+.4}</td><td>{:+.4}</td><td{style}>{:+.4}</td>",
@@ -162,7 +162,7 @@ pub fn probing3d_protocol_html(
             let _ = writeln!(
                 s,
                 "<tr><th>{}</th><td>{:+.4}</td><td>{:+.4}</td>{limits}<td{style}>{:+.4}</td></tr>",
-                names[i], r.direction[i], r.nominal[i], r.actual[i]
+                name, r.direction[i], r.nominal[i], r.actual[i]
             );
         }
         let _ = writeln!(s, "</table>");
@@ -189,6 +189,9 @@ pub fn write_probing3d_protocol(
 ) -> std::io::Result<PathBuf> {
     let path = dir.join(PROBING_3D_PROTOCOL);
     std::fs::create_dir_all(dir)?;
-    std::fs::write(&path, probing3d_protocol_html(records, program, &timestamp_utc()))?;
+    std::fs::write(
+        &path,
+        probing3d_protocol_html(records, program, &timestamp_utc()),
+    )?;
     Ok(path)
 }

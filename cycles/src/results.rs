@@ -57,7 +57,8 @@ impl ProgramReport {
     }
 
     pub fn to_json(&self) -> String {
-        serde_json::to_string_pretty(self).expect("a report of strings and finite numbers serialises")
+        serde_json::to_string_pretty(self)
+            .expect("a report of strings and finite numbers serialises")
     }
 
     /// One `Qnnn = value` line per result, grouped by block (the text form).

@@ -17,14 +17,39 @@ use std::path::PathBuf;
 /// What the runner reports while it works (for a console or a UI).
 #[derive(Clone, Debug, PartialEq)]
 pub enum ProgressEvent {
-    CycleStarted { block: u32, cycle: u16, line: usize },
-    Move { block: u32, target: AxisPositions, feed: f64 },
-    Probe { block: u32, direction: [f64; 3], max_distance: f64 },
+    CycleStarted {
+        block: u32,
+        cycle: u16,
+        line: usize,
+    },
+    Move {
+        block: u32,
+        target: AxisPositions,
+        feed: f64,
+    },
+    Probe {
+        block: u32,
+        direction: [f64; 3],
+        max_distance: f64,
+    },
     /// Latched stylus ball centre, machine XYZ.
-    Contact { block: u32, centre: [f64; 3] },
-    Note { block: u32, text: String },
-    Protocol { block: u32, path: PathBuf },
-    CycleFinished { block: u32, cycle: u16, status: Status },
+    Contact {
+        block: u32,
+        centre: [f64; 3],
+    },
+    Note {
+        block: u32,
+        text: String,
+    },
+    Protocol {
+        block: u32,
+        path: PathBuf,
+    },
+    CycleFinished {
+        block: u32,
+        cycle: u16,
+        status: Status,
+    },
 }
 
 pub struct RunOptions<'a> {
@@ -146,7 +171,11 @@ fn run_cycle<M: Machine>(
             // Rewritten after every point so it is complete even if a later cycle fails.
             let path = protocol::write_probing3d_protocol(&opts.out_dir, points, program_path)
                 .map_err(|e| CycleError::Protocol {
-                    path: opts.out_dir.join(protocol::PROBING_3D_PROTOCOL).display().to_string(),
+                    path: opts
+                        .out_dir
+                        .join(protocol::PROBING_3D_PROTOCOL)
+                        .display()
+                        .to_string(),
                     message: e.to_string(),
                 })?;
             note_protocol(call, path, opts, report);
@@ -159,7 +188,12 @@ fn run_cycle<M: Machine>(
     }
 }
 
-fn note_protocol(call: &CycleCall, path: PathBuf, opts: &mut RunOptions, report: &mut ProgramReport) {
+fn note_protocol(
+    call: &CycleCall,
+    path: PathBuf,
+    opts: &mut RunOptions,
+    report: &mut ProgramReport,
+) {
     (opts.progress)(ProgressEvent::Protocol {
         block: call.block,
         path: path.clone(),
@@ -182,14 +216,19 @@ fn plane_protocol(
         1 => {
             let path = protocol::write_plane_protocol(&opts.out_dir, record, program_path)
                 .map_err(|e| CycleError::Protocol {
-                    path: opts.out_dir.join(protocol::PLANE_PROTOCOL).display().to_string(),
+                    path: opts
+                        .out_dir
+                        .join(protocol::PLANE_PROTOCOL)
+                        .display()
+                        .to_string(),
                     message: e.to_string(),
                 })?;
             note_protocol(call, path, opts, report);
             Ok(None)
         }
         2 => {
-            let text = protocol::plane_protocol_text(record, program_path, &protocol::timestamp_utc());
+            let text =
+                protocol::plane_protocol_text(record, program_path, &protocol::timestamp_utc());
             Ok((!(opts.confirm)(&text)).then(|| {
                 "the cycle 431 protocol was not confirmed (Q281=2); program stopped".to_string()
             }))

@@ -9,6 +9,9 @@
 use serde::Serialize;
 use std::fmt;
 
+/// mm; far below any probe's resolution, far above f64 rounding of machine coordinates.
+pub const ON_LIMIT: f64 = 1e-9;
+
 /// Limits along the surface normal relative to the nominal point, mm.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Tolerance {
@@ -65,11 +68,13 @@ impl Tolerance {
         }
     }
 
-    /// Status of a deviation along the normal (Q164).
+    /// Status of a deviation along the normal (Q164). Limits are inclusive; a
+    /// deviation within [`ON_LIMIT`] of a limit counts as on it, so that the rounding
+    /// of C - R*n does not turn a point on the limit into rework or scrap.
     pub fn status(&self, deviation: f64) -> WorkpieceStatus {
-        if deviation > self.upper {
+        if deviation > self.upper + ON_LIMIT {
             WorkpieceStatus::Rework
-        } else if deviation < self.lower {
+        } else if deviation < self.lower - ON_LIMIT {
             WorkpieceStatus::Scrap
         } else {
             WorkpieceStatus::Good

@@ -30,7 +30,10 @@ fn seed_001_450_and_451_check_mode() {
     assert_eq!(cycles[0].number("Q410"), Some(0.0));
     assert_eq!(cycles[0].number("Q409"), Some(5.0));
     let k = cycles[1];
-    assert_eq!((k.cycle, k.block, k.kind.clone()), (451, 13, CycleKind::MeasureKinematics));
+    assert_eq!(
+        (k.cycle, k.block, k.kind.clone()),
+        (451, 13, CycleKind::MeasureKinematics)
+    );
     let expect = [
         ("Q406", 0.0),
         ("Q407", 12.5),
@@ -77,7 +80,10 @@ fn seed_003_444_block_verbatim() {
     let text = format!("10 TOOL CALL \"TOUCH_PROBE\" Z\n{SEED_003}");
     let p = Program::parse(&text, &common::config()).unwrap();
     let c = p.cycles().next().unwrap();
-    assert_eq!((c.cycle, c.block, c.title.as_str()), (444, 11, "ANTASTEN 3D"));
+    assert_eq!(
+        (c.cycle, c.block, c.title.as_str()),
+        (444, 11, "ANTASTEN 3D")
+    );
     let CycleKind::Probing3d(q) = &c.kind else {
         panic!("not 444")
     };
@@ -113,7 +119,8 @@ fn rows_431() -> &'static str {
 #[test]
 fn truncated_examples_headers_are_recognised_and_complete_with_their_rows() {
     let cfg = common::config();
-    let cases: [(&str, &str, &[(u16, &str)]); 5] = [
+    type Case<'a> = (&'a str, &'a str, &'a [(u16, &'a str)]);
+    let cases: [Case; 5] = [
         (
             "000_450_451",
             include_str!("seeds/000_450_451_truncated.txt"),
@@ -173,13 +180,13 @@ fn truncated_examples_headers_are_recognised_and_complete_with_their_rows() {
             restored.push_str(&rows);
             restored.push('\n');
         }
-        let p = Program::parse(&restored, &cfg).unwrap_or_else(|e| panic!("{name}:\n{e}\n{restored}"));
+        let p =
+            Program::parse(&restored, &cfg).unwrap_or_else(|e| panic!("{name}:\n{e}\n{restored}"));
         let got: Vec<(u16, String)> = p.cycles().map(|c| (c.cycle, c.title.clone())).collect();
         let want: Vec<(u16, String)> = expected.iter().map(|(n, t)| (*n, t.to_string())).collect();
         assert_eq!(got, want, "{name}");
-        assert!(p
-            .blocks
-            .iter()
-            .any(|b| matches!(&b.statement, Statement::ToolCall(t) if t.probe.name == "TOUCH_PROBE")));
+        assert!(p.blocks.iter().any(
+            |b| matches!(&b.statement, Statement::ToolCall(t) if t.probe.name == "TOUCH_PROBE")
+        ));
     }
 }

@@ -21,12 +21,22 @@ impl Rng {
 }
 
 /// Points on a cap (polar angle up to `max_polar` deg), as cycle 451 probes a sphere.
-fn cap_points(c: Vector3<f64>, r: f64, n: usize, max_polar: f64, rng: &mut Rng) -> Vec<Vector3<f64>> {
+fn cap_points(
+    c: Vector3<f64>,
+    r: f64,
+    n: usize,
+    max_polar: f64,
+    rng: &mut Rng,
+) -> Vec<Vector3<f64>> {
     (0..n)
         .map(|_| {
             let theta = rng.uniform() * max_polar.to_radians();
             let phi = rng.uniform() * std::f64::consts::TAU;
-            c + r * Vector3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos())
+            c + r * Vector3::new(
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            )
         })
         .collect()
 }
@@ -76,9 +86,17 @@ fn noisy_points_fit_within_expectation() {
         }
         let fit = fit_sphere(&pts).unwrap();
         // 40 points on a half sphere: centre and radius to a few sigma / sqrt(n).
-        assert!((fit.centre - c).norm() < 5.0 * sigma, "{}", (fit.centre - c).norm());
+        assert!(
+            (fit.centre - c).norm() < 5.0 * sigma,
+            "{}",
+            (fit.centre - c).norm()
+        );
         assert!((fit.radius - r).abs() < 5.0 * sigma);
-        assert!(fit.rms > 0.5 * sigma && fit.rms < 1.5 * sigma, "rms {}", fit.rms);
+        assert!(
+            fit.rms > 0.5 * sigma && fit.rms < 1.5 * sigma,
+            "rms {}",
+            fit.rms
+        );
         assert!(fit.max_residual >= fit.rms);
     }
 }
@@ -90,12 +108,23 @@ fn errors_say_why() {
         fit_sphere(&[p(0.0, 0.0, 0.0), p(1.0, 0.0, 0.0), p(0.0, 1.0, 0.0)]),
         Err(FitError::TooFewPoints(3))
     );
-    let coplanar = [p(0.0, 0.0, 5.0), p(1.0, 0.0, 5.0), p(0.0, 1.0, 5.0), p(1.0, 1.0, 5.0), p(3.0, 2.0, 5.0)];
+    let coplanar = [
+        p(0.0, 0.0, 5.0),
+        p(1.0, 0.0, 5.0),
+        p(0.0, 1.0, 5.0),
+        p(1.0, 1.0, 5.0),
+        p(3.0, 2.0, 5.0),
+    ];
     let e = fit_sphere(&coplanar).unwrap_err();
     assert!(matches!(e, FitError::Degenerate(_)), "{e}");
     assert!(e.to_string().contains("coplanar"), "{e}");
     let same = [p(1.0, 1.0, 1.0); 5];
     assert!(matches!(fit_sphere(&same), Err(FitError::Degenerate(_))));
-    let nan = [p(0.0, 0.0, 0.0), p(1.0, 0.0, 0.0), p(0.0, 1.0, 0.0), p(0.0, 0.0, f64::NAN)];
+    let nan = [
+        p(0.0, 0.0, 0.0),
+        p(1.0, 0.0, 0.0),
+        p(0.0, 1.0, 0.0),
+        p(0.0, 0.0, f64::NAN),
+    ];
     assert_eq!(fit_sphere(&nan), Err(FitError::NotFinite(3)));
 }

@@ -34,7 +34,11 @@ pub struct Profile {
 fn path_limits(dir: &[f64; MAX_AXES], feed_per_s: f64, limits: &AxisLimits) -> (f64, f64) {
     let mut v = feed_per_s;
     let mut a = f64::INFINITY;
-    for ((u, vmax), amax) in dir.iter().zip(limits.max_velocity).zip(limits.max_acceleration) {
+    for ((u, vmax), amax) in dir
+        .iter()
+        .zip(limits.max_velocity)
+        .zip(limits.max_acceleration)
+    {
         let u = u.abs();
         if u > 1e-12 {
             v = v.min(vmax / u);

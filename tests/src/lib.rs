@@ -1,1 +1,39 @@
-//! placeholder
+//! Software-in-the-loop test support: the `Machine` conformance suite (written once,
+//! run against every backend), scenario helpers and a synchronous loopback bus.
+
+pub mod conformance;
+pub mod loopback;
+
+use sim::Scenario;
+use std::path::{Path, PathBuf};
+
+pub fn configs_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs")
+}
+
+/// A scenario written in the test, resolved against the shipped machines.
+pub fn scenario(text: &str) -> Scenario {
+    let path = configs_dir().join("scenarios/test-inline.toml");
+    Scenario::parse(text, &path, Some(&configs_dir().join("machines")))
+        .unwrap_or_else(|e| panic!("test scenario invalid: {e}"))
+}
+
+/// The probe table as the bridge sets it up for a scenario (R = the scenario's).
+pub fn machine_config(sc: &Scenario) -> hal::config::MachineConfig {
+    let mut cfg = sc.machine.clone();
+    for p in &mut cfg.probes {
+        p.radius = sc.probe_table_radius();
+    }
+    cfg
+}
+
+/// A unique name per test (and process) for iceoryx2 services.
+pub fn unique_service(test: &str) -> String {
+    use std::sync::atomic::{AtomicU32, Ordering};
+    static N: AtomicU32 = AtomicU32::new(0);
+    format!(
+        "pbtest-{test}-{}-{}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    )
+}

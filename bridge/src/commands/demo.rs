@@ -28,8 +28,8 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
         .scenario
         .spheres
         .first()
-        .ok_or_else(|| format!("{}: the demo needs a [[sphere]]", s.scenario.path.display()))?
-        .clone();
+        .copied()
+        .ok_or_else(|| format!("{}: the demo needs a [[sphere]]", s.scenario.path.display()))?;
     let probe = s
         .config
         .probes

@@ -16,13 +16,13 @@ pub struct ProbeArgs {
 
 pub fn run(args: &ProbeArgs) -> Result<(), String> {
     let n = (args.dir[0].powi(2) + args.dir[1].powi(2) + args.dir[2].powi(2)).sqrt();
-    if !(n > 1e-9) {
+    if n.is_nan() || n <= 1e-9 {
         return Err("--dir: the probing direction must not be zero".into());
     }
-    if !(args.dist > 0.0) {
+    if !args.dist.is_finite() || args.dist <= 0.0 {
         return Err(format!("--dist {}: must be > 0", args.dist));
     }
-    if !(args.feed > 0.0) {
+    if !args.feed.is_finite() || args.feed <= 0.0 {
         return Err(format!("--feed {}: must be > 0", args.feed));
     }
     let mut s = Session::open(&args.machine).map_err(|e| e.to_string())?;

@@ -15,6 +15,10 @@
 //! one function here ([`open_contact_service`] etc.) with the quality-of-service numbers
 //! below, so `open_or_create` sees the same settings from every process.
 //!
+//! The real-time loop gets either [`ContactPublisher`] (publishes in the loop's thread;
+//! one heap allocation per sample inside iceoryx2 0.10, see there) or [`ForwardingSink`]
+//! (no allocation in the loop's thread; a forwarder thread publishes).
+//!
 //! Everything uses [`Svc`] = `ipc_threadsafe::Service`: [`hal::SampleSink`] must be `Send`
 //! (the real-time loop owns it in its own thread), and the plain `ipc::Service` ports are
 //! `!Send` (`Rc` inside). Both flavours share the same shared-memory layout, so a process

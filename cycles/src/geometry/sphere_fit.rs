@@ -50,7 +50,12 @@ pub fn fit_sphere(points: &[Vector3<f64>]) -> Result<SphereFit, FitError> {
     // conditioned far from the origin.
     let n = points.len() as f64;
     let mean = points.iter().sum::<Vector3<f64>>() / n;
-    let scale = (points.iter().map(|p| (p - mean).norm_squared()).sum::<f64>() / n).sqrt();
+    let scale = (points
+        .iter()
+        .map(|p| (p - mean).norm_squared())
+        .sum::<f64>()
+        / n)
+        .sqrt();
     if scale == 0.0 {
         return Err(FitError::Degenerate("all points coincide"));
     }
@@ -120,7 +125,12 @@ fn algebraic_start(q: &[Vector3<f64>]) -> Result<(Vector3<f64>, f64), FitError> 
     Ok((c, r2.sqrt()))
 }
 
-fn finish(points: &[Vector3<f64>], centre: Vector3<f64>, radius: f64, iterations: usize) -> SphereFit {
+fn finish(
+    points: &[Vector3<f64>],
+    centre: Vector3<f64>,
+    radius: f64,
+    iterations: usize,
+) -> SphereFit {
     let residuals = points.iter().map(|p| (p - centre).norm() - radius);
     let (sum2, max) = residuals.fold((0.0, 0.0f64), |(s, m), e| (s + e * e, m.max(e.abs())));
     SphereFit {

@@ -64,11 +64,18 @@ pub fn config() -> MachineConfig {
 /// Surfaces; normals point out of the material.
 #[derive(Clone, Copy, Debug)]
 pub enum Surface {
-    Plane { point: Vector3<f64>, normal: Vector3<f64> },
+    Plane {
+        point: Vector3<f64>,
+        normal: Vector3<f64>,
+    },
     /// Solid sphere (material inside).
     Sphere { centre: Vector3<f64>, radius: f64 },
     /// Solid cylinder about an axis through `point` along `axis` (unit).
-    Cylinder { point: Vector3<f64>, axis: Vector3<f64>, radius: f64 },
+    Cylinder {
+        point: Vector3<f64>,
+        axis: Vector3<f64>,
+        radius: f64,
+    },
 }
 
 impl Surface {
@@ -77,7 +84,11 @@ impl Surface {
         match *self {
             Surface::Plane { point, normal } => (x - point).dot(&normal.normalize()),
             Surface::Sphere { centre, radius } => (x - centre).norm() - radius,
-            Surface::Cylinder { point, axis, radius } => {
+            Surface::Cylinder {
+                point,
+                axis,
+                radius,
+            } => {
                 let d = x - point;
                 (d - axis * d.dot(&axis)).norm() - radius
             }
@@ -93,7 +104,11 @@ impl Surface {
                 (dn < 0.0).then(|| ((point - o).dot(&n) + r) / dn)
             }
             Surface::Sphere { centre, radius } => quadratic_root(o - centre, d, radius + r),
-            Surface::Cylinder { point, axis, radius } => {
+            Surface::Cylinder {
+                point,
+                axis,
+                radius,
+            } => {
                 let p = o - point;
                 let pp = p - axis * p.dot(&axis);
                 let dp = d - axis * d.dot(&axis);
@@ -177,8 +192,15 @@ impl Machine for MockMachine {
         }
         let o = Vector3::from(self.pos);
         let d = Vector3::from(mv.direction).normalize();
-        if self.surfaces.iter().any(|s| s.distance(o) < self.ball_radius) {
-            return Err(MachineError::new(ErrorKind::AlreadyDeflected, "ball in contact"));
+        if self
+            .surfaces
+            .iter()
+            .any(|s| s.distance(o) < self.ball_radius)
+        {
+            return Err(MachineError::new(
+                ErrorKind::AlreadyDeflected,
+                "ball in contact",
+            ));
         }
         let hit = self
             .surfaces
@@ -243,9 +265,15 @@ pub fn run(
     (report, shown)
 }
 
-/// A fresh folder under the target dir's temp area.
+/// A fresh folder under the system temp folder.
 pub fn temp_dir(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("probebridge-cycles-{}-{name}", std::process::id()));
+    // Unique per call: tests run in parallel and must not share (or delete) a folder.
+    static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!(
+        "probebridge-cycles-{}-{name}-{n}",
+        std::process::id()
+    ));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir

@@ -363,8 +363,7 @@ impl Machine for CanMachine {
             ));
         }
         let positive = |v: f64| v.is_finite() && v > 0.0;
-        if !positive(mv.feed) || !positive(mv.max_distance)
-        {
+        if !positive(mv.feed) || !positive(mv.max_distance) {
             return Err(MachineError::new(
                 ErrorKind::InvalidRequest,
                 format!(

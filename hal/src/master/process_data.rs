@@ -108,8 +108,8 @@ mod tests {
         let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/machines/table-ac.toml");
         let cfg = MachineConfig::load(&p).unwrap();
         let load = BusLoad::of(&cfg);
-        // SYNC 55 + 5 * (2 * 115 + 52 * 2000/50000) = 1215.4 bits per 2000.
-        assert!((load.cyclic_bits - 1215.4).abs() < 1e-9, "{load}");
-        assert!((load.percent - 60.77).abs() < 1e-9, "{load}");
+        // SYNC 55 + 5 * (2 * 115 + 65 * 2000/50000) = 1218 bits per 2000.
+        assert!((load.cyclic_bits - 1218.0).abs() < 1e-9, "{load}");
+        assert!((load.percent - 60.9).abs() < 1e-9, "{load}");
     }
 }

@@ -587,9 +587,15 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
         }
     }
 
+    /// The axis furthest from its setpoint beyond the window, if any. A drive that is
+    /// faulted, silent or the source of the fault cannot follow and is not waited for.
     fn settled(&self) -> Option<(u8, f64)> {
+        let culprit = self.fault.and_then(|f| f.node);
         let mut worst: Option<(u8, f64)> = None;
         for d in &self.drives {
+            if d.silent || d.statusword & Statusword::FAULT != 0 || Some(d.node) == culprit {
+                continue;
+            }
             let e = (d.actual() - self.setpoint[d.axis.index()]).abs();
             if e > self.cfg.in_position_window && worst.is_none_or(|w| e > w.1) {
                 worst = Some((d.axis.index() as u8, e));
@@ -782,15 +788,10 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
                 let t = t + dt;
                 self.setpoint = profile.position(t);
                 self.activity = if profile.is_done(t) {
-                    match then {
-                        Reply::Error(_) => {
-                            self.reply = Some(then);
-                            Activity::Idle
-                        }
-                        _ => Activity::Settling {
-                            since_ns: now,
-                            then,
-                        },
+                    // Answer only when the axes have come to rest, errors included.
+                    Activity::Settling {
+                        since_ns: now,
+                        then,
                     }
                 } else {
                     Activity::Stopping { profile, t, then }
@@ -807,8 +808,13 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
                     self.activity = Activity::Idle;
                 }
                 Some((axis, error)) if now - since_ns > self.cfg.settle_timeout_ns => {
-                    let err =
-                        RtError::new(ErrorKind::Timeout, Detail::NotInPosition { axis, error });
+                    let err = match then {
+                        // The original fault says more than the axis that then lagged.
+                        Reply::Error(e) => e,
+                        _ => {
+                            RtError::new(ErrorKind::Timeout, Detail::NotInPosition { axis, error })
+                        }
+                    };
                     self.reply = Some(Reply::Error(err));
                     self.activity = Activity::Idle;
                 }

@@ -1,0 +1,160 @@
+//! The `probebridge` binary as a user runs it.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_probebridge"))
+}
+
+fn configs() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs")
+}
+
+fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("pb-cli-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn run(cmd: &mut Command) -> Output {
+    let out = cmd.output().expect("run probebridge");
+    if !out.status.success() {
+        eprintln!("stdout:\n{}", String::from_utf8_lossy(&out.stdout));
+        eprintln!("stderr:\n{}", String::from_utf8_lossy(&out.stderr));
+    }
+    out
+}
+
+/// A plane `z = z0` in a scenario written by hand, probed from above with ball radius
+/// R: the JSON contact has Z = z0 + R within 1e-6 mm.
+#[test]
+fn probe_reports_plane_height_plus_ball_radius() {
+    let dir = tmpdir("probe");
+    for (z0, r) in [(12.0, 3.0), (-40.25, 1.0), (3.3333333, 2.5)] {
+        let scenario = dir.join(format!("plane-{z0}.toml"));
+        std::fs::write(
+            &scenario,
+            format!(
+                "machine = \"{}\"\nseed = 3\n[probe]\nball_radius = {r}\n[[plane]]\npoint = [5.0, 5.0, {z0}]\nnormal = [0.0, 0.0, 1.0]\n",
+                configs().join("machines/table-ac.toml").display()
+            ),
+        )
+        .unwrap();
+        let json = dir.join(format!("contact-{z0}.json"));
+        let out = run(bin().args([
+            "probe",
+            "--scenario",
+            scenario.to_str().unwrap(),
+            "--start",
+            &format!("10,-20,{}", z0 + r + 4.0),
+            "--dir",
+            "0,0,-1",
+            "--dist",
+            "10",
+            "--feed",
+            "150",
+            "--service",
+            &format!("pb-cli-{}-{z0}", std::process::id()),
+            "--json",
+            json.to_str().unwrap(),
+        ]));
+        assert!(out.status.success());
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        let z = v["contact"]["Z"].as_f64().unwrap();
+        assert!((z - (z0 + r)).abs() < 1e-6, "Z = {z}, want {}", z0 + r);
+        assert!((v["contact"]["X"].as_f64().unwrap() - 10.0).abs() < 1e-6);
+        assert!(v["contact"]["C"].is_number() && v["contact"]["A"].is_number());
+        assert!(v["trigger_ns"].as_u64().unwrap() > 0);
+    }
+}
+
+#[test]
+fn probe_without_contact_fails_with_a_clear_message_and_writes_nothing() {
+    let dir = tmpdir("miss");
+    let json = dir.join("contact.json");
+    let out = run(bin().args([
+        "probe",
+        "--scenario",
+        configs().join("scenarios/plane-z10.toml").to_str().unwrap(),
+        "--start",
+        "0,0,40",
+        "--dir",
+        "0,0,-1",
+        "--dist",
+        "5",
+        "--feed",
+        "300",
+        "--service",
+        &format!("pb-cli-miss-{}", std::process::id()),
+        "--json",
+        json.to_str().unwrap(),
+    ]));
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("probe did not trigger") && err.contains("5.000 mm"),
+        "{err}"
+    );
+    assert!(!json.exists());
+}
+
+#[test]
+fn bad_arguments_and_scenarios_are_refused_before_anything_moves() {
+    let out = run(bin().args([
+        "probe", "--start", "0,0", "--dir", "0,0,-1", "--dist", "5", "--feed", "100",
+    ]));
+    assert!(!out.status.success());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("--start \"0,0\": expected three numbers")
+    );
+
+    let dir = tmpdir("bad");
+    let scenario = dir.join("bad.toml");
+    std::fs::write(
+        &scenario,
+        "machine = \"table-ac\"\n[probe]\nball_radius = 3.0\nnoize = 0.1\n",
+    )
+    .unwrap();
+    let out = run(bin().args([
+        "probe",
+        "--scenario",
+        scenario.to_str().unwrap(),
+        "--start",
+        "0,0,50",
+        "--dir",
+        "0,0,-1",
+        "--dist",
+        "5",
+        "--feed",
+        "100",
+    ]));
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bad.toml") && err.contains("noize"), "{err}");
+}
+
+/// The README's first command: contacts printed and the estimator's sphere within 1 µm.
+#[test]
+fn demo_fits_the_sphere_within_a_micrometre() {
+    let out = run(bin().arg("demo"));
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        text.matches("X+").count() + text.matches("X-").count(),
+        5,
+        "{text}"
+    );
+    let line = text
+        .lines()
+        .find(|l| l.contains("centre off by"))
+        .unwrap_or_else(|| panic!("no fit in:\n{text}"));
+    let nums: Vec<f64> = line
+        .split(" by ")
+        .skip(1)
+        .filter_map(|s| s.split(" mm").next()?.trim().parse().ok())
+        .collect();
+    assert_eq!(nums.len(), 2, "{line}");
+    assert!(nums[0] < 1e-3 && nums[1] < 1e-3, "{line}");
+}

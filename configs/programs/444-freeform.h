@@ -1,0 +1,89 @@
+0 BEGIN PGM 444-freeform MM
+1 ; Cycle 444 on the artefacts of configs/scenarios/freeform.toml: table top z = 0,
+2 ; sphere R25 about X-60 Y40 Z30, cylinder R15 along Y through X60 Z20.
+3 ; Every nominal point lies on the surface: Q164 = 0 and Q183 = 0 without errors.
+4 TOOL CALL "TOUCH_PROBE" Z
+5 L Z+100 R0 FMAX
+6 * - table top
+7 TCH PROBE 444 PROBING 3D ~
+    Q263=+0        ;1ST POINT 1ST AXIS ~
+    Q264=-60       ;1ST POINT 2ND AXIS ~
+    Q294=+0        ;1ST POINT 3RD AXIS ~
+    Q581=+0        ;SURFACE NORMAL MAIN AXIS ~
+    Q582=+0        ;SURFACE NORMAL MINOR AXIS ~
+    Q583=+1        ;SURFACE NORMAL TOOL AXIS ~
+    Q320=+0        ;SET-UP CLEARANCE ~
+    Q260=+100      ;CLEARANCE HEIGHT ~
+    QS400="0.1-0.1" ;TOLERANCE ~
+    Q309=+0        ;ERROR REACTION
+8 * - sphere: pole, and 45 deg toward +X and toward -Y
+9 TCH PROBE 444 PROBING 3D ~
+    Q263=-60       ;1ST POINT 1ST AXIS ~
+    Q264=+40       ;1ST POINT 2ND AXIS ~
+    Q294=+55       ;1ST POINT 3RD AXIS ~
+    Q581=+0        ;SURFACE NORMAL MAIN AXIS ~
+    Q582=+0        ;SURFACE NORMAL MINOR AXIS ~
+    Q583=+1        ;SURFACE NORMAL TOOL AXIS ~
+    Q320=+0        ;SET-UP CLEARANCE ~
+    Q260=+100      ;CLEARANCE HEIGHT ~
+    QS400="0.05-0.05" ;TOLERANCE ~
+    Q309=+0        ;ERROR REACTION
+10 TCH PROBE 444 PROBING 3D ~
+    Q263=-42.3223  ;1ST POINT 1ST AXIS ~
+    Q264=+40       ;1ST POINT 2ND AXIS ~
+    Q294=+47.6777  ;1ST POINT 3RD AXIS ~
+    Q581=+1        ;SURFACE NORMAL MAIN AXIS ~
+    Q582=+0        ;SURFACE NORMAL MINOR AXIS ~
+    Q583=+1        ;SURFACE NORMAL TOOL AXIS ~
+    Q320=+0        ;SET-UP CLEARANCE ~
+    Q260=+100      ;CLEARANCE HEIGHT ~
+    QS400="0.05-0.05" ;TOLERANCE ~
+    Q309=+0        ;ERROR REACTION
+11 TCH PROBE 444 PROBING 3D ~
+    Q263=-60       ;1ST POINT 1ST AXIS ~
+    Q264=+22.3223  ;1ST POINT 2ND AXIS ~
+    Q294=+47.6777  ;1ST POINT 3RD AXIS ~
+    Q581=+0        ;SURFACE NORMAL MAIN AXIS ~
+    Q582=-1        ;SURFACE NORMAL MINOR AXIS ~
+    Q583=+1        ;SURFACE NORMAL TOOL AXIS ~
+    Q320=+0        ;SET-UP CLEARANCE ~
+    Q260=+100      ;CLEARANCE HEIGHT ~
+    QS400="0.05-0.05" ;TOLERANCE ~
+    Q309=+0        ;ERROR REACTION
+12 * - cylinder: top line, and 37 deg to either side
+13 TCH PROBE 444 PROBING 3D ~
+    Q263=+60       ;1ST POINT 1ST AXIS ~
+    Q264=+0        ;1ST POINT 2ND AXIS ~
+    Q294=+35       ;1ST POINT 3RD AXIS ~
+    Q581=+0        ;SURFACE NORMAL MAIN AXIS ~
+    Q582=+0        ;SURFACE NORMAL MINOR AXIS ~
+    Q583=+1        ;SURFACE NORMAL TOOL AXIS ~
+    Q320=+0        ;SET-UP CLEARANCE ~
+    Q260=+100      ;CLEARANCE HEIGHT ~
+    QS400="1-1"    ;TOLERANCE ~
+    Q309=+0        ;ERROR REACTION
+14 TCH PROBE 444 PROBING 3D ~
+    Q263=+69       ;1ST POINT 1ST AXIS ~
+    Q264=+10       ;1ST POINT 2ND AXIS ~
+    Q294=+32       ;1ST POINT 3RD AXIS ~
+    Q581=+0.6      ;SURFACE NORMAL MAIN AXIS ~
+    Q582=+0        ;SURFACE NORMAL MINOR AXIS ~
+    Q583=+0.8      ;SURFACE NORMAL TOOL AXIS ~
+    Q320=+0        ;SET-UP CLEARANCE ~
+    Q260=+100      ;CLEARANCE HEIGHT ~
+    QS400="1-1"    ;TOLERANCE ~
+    Q309=+0        ;ERROR REACTION
+15 TCH PROBE 444 PROBING 3D ~
+    Q263=+51       ;1ST POINT 1ST AXIS ~
+    Q264=-10       ;1ST POINT 2ND AXIS ~
+    Q294=+32       ;1ST POINT 3RD AXIS ~
+    Q581=-0.6      ;SURFACE NORMAL MAIN AXIS ~
+    Q582=+0        ;SURFACE NORMAL MINOR AXIS ~
+    Q583=+0.8      ;SURFACE NORMAL TOOL AXIS ~
+    Q320=+0        ;SET-UP CLEARANCE ~
+    Q260=+100      ;CLEARANCE HEIGHT ~
+    QS400="1-1"    ;TOLERANCE ~
+    Q309=+0        ;ERROR REACTION
+16 L Z+100 R0 FMAX
+17 M30
+18 END PGM 444-freeform MM

@@ -1,0 +1,435 @@
+//! Parameter tables and program validation: every range one step outside, the error
+//! kinds, all errors collected, each with its line.
+
+mod common;
+
+use probebridge_cycles::params::{self, CycleTable, Kind};
+use probebridge_cycles::program::{CycleKind, LengthUnit, Origin, ProbeAxis, Statement, Value};
+use probebridge_cycles::{check_program, Program};
+
+/// A valid value for every parameter (in range, points not on a line, normal not 0).
+fn valid_value(cycle: u16, name: &str) -> String {
+    match (cycle, name) {
+        (_, "QS400") => "\"0.4-0.1\"".into(),
+        (431, "Q265") | (431, "Q297") => "+50".into(),
+        (444, "Q583") => "+1".into(),
+        (451, "Q407") => "+12.5".into(),
+        (451, "Q423") => "+4".into(),
+        _ => "+0".into(),
+    }
+}
+
+/// Full program: header (line 1), TOOL CALL (line 2), cycle (line 3), one parameter
+/// per line from line 4 in table order; `over` replaces one value.
+fn program(table: &CycleTable, over: Option<(&str, &str)>) -> String {
+    let mut s = format!(
+        "0 BEGIN PGM T MM\n1 TOOL CALL \"TOUCH_PROBE\" Z\n2 TCH PROBE {} {} ~\n",
+        table.number, table.name
+    );
+    let n = table.params.len();
+    for (i, p) in table.params.iter().enumerate() {
+        let v = match over {
+            Some((name, v)) if name == p.name => v.to_string(),
+            _ => valid_value(table.number, p.name),
+        };
+        let cont = if i + 1 < n { " ~" } else { "" };
+        s.push_str(&format!("  {}={v} ;{}{cont}\n", p.name, p.title));
+    }
+    s.push_str(&format!("{} END PGM T MM\n", n + 3));
+    s
+}
+
+fn line_of(table: &CycleTable, name: &str) -> usize {
+    4 + table.params.iter().position(|p| p.name == name).unwrap()
+}
+
+#[test]
+fn valid_programs_of_every_table_parse() {
+    for table in params::TABLES {
+        let text = program(table, None);
+        Program::parse(&text, &common::config()).unwrap_or_else(|e| panic!("{e}\n{text}"));
+    }
+}
+
+#[test]
+fn every_number_rejected_one_step_outside_and_accepted_at_its_limits() {
+    let cfg = common::config();
+    for table in params::TABLES {
+        for p in table.params {
+            let Kind::Number {
+                min, max, integer, ..
+            } = p.kind
+            else {
+                continue;
+            };
+            let step = if integer { 1.0 } else { 0.0001 };
+            for (v, ok) in [
+                (min, true),
+                (max, true),
+                (min - step, false),
+                (max + step, false),
+            ] {
+                let written = format!("{v:+}");
+                let text = program(table, Some((p.name, &written)));
+                let diags = check_program(&text, &cfg);
+                if ok {
+                    assert!(
+                        diags.is_empty(),
+                        "{} {}={written}: {diags:?}",
+                        table.number,
+                        p.name
+                    );
+                    continue;
+                }
+                assert_eq!(
+                    diags.len(),
+                    1,
+                    "{} {}={written}: {diags:?}",
+                    table.number,
+                    p.name
+                );
+                let d = &diags[0];
+                assert_eq!(d.line, line_of(table, p.name), "{d}");
+                let expected = format!(
+                    "{}={written}: {} out of range {min}..{max}",
+                    p.name, p.title
+                );
+                assert!(d.message.starts_with(&expected), "{d}\nexpected {expected}");
+            }
+            if integer {
+                let text = program(table, Some((p.name, "+1.5")));
+                let diags = check_program(&text, &cfg);
+                assert_eq!(diags.len(), 1, "{}: {diags:?}", p.name);
+                assert!(diags[0].message.contains("whole numbers"), "{}", diags[0]);
+            }
+        }
+    }
+}
+
+#[test]
+fn message_names_line_parameter_comment_and_range() {
+    let text = "11 TOOL CALL \"TOUCH_PROBE\" Z\n12 TCH PROBE 444 ANTASTEN 3D ~\n\
+        Q263=+1e6 ;1. PUNKT 1. ACHSE ~\nQ264=+0 ~\nQ294=+0 ~\nQ581=+1 ~\nQ582=+0 ~\nQ583=+0 ~\nQ260=+100";
+    let e = Program::parse(text, &common::config()).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "line 3: Q263=+1e6: 1. PUNKT 1. ACHSE out of range -99999.9999..99999.9999"
+    );
+}
+
+fn diags_of(text: &str) -> Vec<String> {
+    check_program(text, &common::config())
+        .into_iter()
+        .map(|d| d.to_string())
+        .collect()
+}
+
+const HEAD: &str = "1 TOOL CALL \"TOUCH_PROBE\" Z\n2 TCH PROBE 444 PROBING 3D ~\n";
+
+#[test]
+fn unknown_parameter() {
+    let d = diags_of(&format!(
+        "{HEAD}Q263=+0 ~\nQ264=+0 ~\nQ294=+0 ~\nQ581=+1 ~\nQ582=+0 ~\nQ583=+0 ~\nQ999=+1 ;X ~\nQ260=+50"
+    ));
+    assert_eq!(d.len(), 1, "{d:?}");
+    assert!(
+        d[0].starts_with(
+            "line 9: Q999=+1: unknown parameter for cycle 444 PROBING 3D (allowed: Q263"
+        ),
+        "{}",
+        d[0]
+    );
+}
+
+#[test]
+fn missing_continuation_is_named_at_the_line_without_tilde() {
+    let d = diags_of(&format!(
+        "{HEAD}Q263=+0 ;A ~\nQ264=+0 ;B\nQ294=+0 ;C ~\nQ581=+1 ~\nQ582=+0 ~\nQ583=+0 ~\nQ260=+50"
+    ));
+    assert_eq!(
+        d,
+        vec!["line 4: missing continuation \"~\": the block ends here but line 5 continues it with Q294"]
+    );
+    // The block ends too early: the parameters still expected are named, with the hint.
+    let d = diags_of(&format!(
+        "{HEAD}Q263=+0 ~\nQ264=+0 ~\nQ294=+0\n3 L Z+100 FMAX"
+    ));
+    assert_eq!(d.len(), 4, "{d:?}");
+    for (q, line) in d.iter().zip(["Q581", "Q582", "Q583", "Q260"]) {
+        assert!(
+            q.starts_with("line 2: cycle 444 PROBING 3D: missing required parameter"),
+            "{q}"
+        );
+        assert!(
+            q.contains(line) && q.contains("the block ends at line 5"),
+            "{q}"
+        );
+    }
+    // `~` on the last line, then the file ends.
+    let d = diags_of(&format!("{HEAD}Q263=+0 ~"));
+    assert!(
+        d.iter()
+            .any(|m| m == "line 3: the block continues with \"~\" but the program ends"),
+        "{d:?}"
+    );
+}
+
+#[test]
+fn malformed_number_and_syntax() {
+    let base = "Q263=+0 ~\nQ264=+0 ~\nQ294=+0 ~\nQ581=+1 ~\nQ582=+0 ~\nQ583=+0 ~\nQ260=+50";
+    for bad in ["+1.2.3", "abc", "+", "1,5", "Q1", "--1"] {
+        let d = diags_of(&format!(
+            "{HEAD}{}",
+            base.replace("Q264=+0", &format!("Q264={bad}"))
+        ));
+        assert_eq!(d.len(), 1, "{bad}: {d:?}");
+        assert!(
+            d[0].starts_with(&format!(
+                "line 4: Q264={bad}: 1ST POINT 2ND AXIS: malformed number"
+            )),
+            "{}",
+            d[0]
+        );
+    }
+    let d = diags_of(&format!("{HEAD}{}", base.replace("Q264=+0", "Q264 +0")));
+    assert!(
+        d[0].starts_with("line 4: Q264: expected Qnnn=value"),
+        "{d:?}"
+    );
+    let d = diags_of(&format!(
+        "{HEAD}{}",
+        base.replace("Q264=+0", "QS400=\"open")
+    ));
+    assert!(
+        d.iter()
+            .any(|m| m.starts_with("line 4: QS400=\"open: unterminated string")),
+        "{d:?}"
+    );
+}
+
+#[test]
+fn string_length_limit() {
+    let base =
+        "Q263=+0 ~\nQ264=+0 ~\nQ294=+0 ~\nQ581=+1 ~\nQ582=+0 ~\nQ583=+0 ~\nQ260=+50 ~\nQS400=\"X\"";
+    let long = " ".repeat(255);
+    assert!(diags_of(&format!(
+        "{HEAD}{}",
+        base.replace("\"X\"", &format!("\"{long}\""))
+    ))
+    .is_empty());
+    let too_long = "0".repeat(256);
+    let d = diags_of(&format!(
+        "{HEAD}{}",
+        base.replace("\"X\"", &format!("\"{too_long}\""))
+    ));
+    assert_eq!(d.len(), 1);
+    assert!(
+        d[0].starts_with("line 10: QS400=")
+            && d[0].contains("string of 256 characters is too long (at most 255)"),
+        "{}",
+        d[0]
+    );
+    // And the tolerance grammar.
+    let d = diags_of(&format!("{HEAD}{}", base.replace("\"X\"", "\"0.4*0.1\"")));
+    assert_eq!(d.len(), 1);
+    assert!(
+        d[0].starts_with("line 10: QS400=\"0.4*0.1\": malformed tolerance"),
+        "{}",
+        d[0]
+    );
+}
+
+#[test]
+fn unknown_cycle_number() {
+    let d = diags_of(
+        "1 TOOL CALL \"TOUCH_PROBE\" Z\n2 TCH PROBE 400 BASIC ROTATION ~\nQ263=+0\n3 G425 Q311=+1",
+    );
+    assert_eq!(d.len(), 2, "{d:?}");
+    assert!(d[0].starts_with(
+        "line 2: TCH PROBE 400: unknown cycle number 400 (supported: 431, 444, 450, 451)"
+    ));
+    assert!(d[1].starts_with("line 4: G425: unknown cycle number 425"));
+}
+
+#[test]
+fn keywords_only_where_the_table_allows_them() {
+    let base = "Q263=+0 ~\nQ264=+0 ~\nQ294=+0 ~\nQ581=+1 ~\nQ582=+0 ~\nQ583=+0 ~\nQ320=PREDEF ~\nQ260=PREDEF";
+    let p = Program::parse(&format!("{HEAD}{base}"), &common::config()).unwrap();
+    let c = p.cycles().next().unwrap();
+    assert_eq!(c.number("Q320"), Some(0.5));
+    assert_eq!(c.params["Q320"].origin, Origin::Predef);
+    assert_eq!(c.number("Q260"), Some(150.0));
+    let d = diags_of(&format!("{HEAD}{}", base.replace("Q263=+0", "Q263=PREDEF")));
+    assert_eq!(d, vec!["line 3: Q263=PREDEF: 1ST POINT 1ST AXIS does not take PREDEF (allowed -99999.9999..99999.9999)"]);
+    let d = diags_of(&format!("{HEAD}{}", base.replace("Q263=+0", "Q263=FMAX")));
+    assert!(d[0].contains("does not take FMAX"), "{d:?}");
+    // PREDEF needs a value in the configuration.
+    let mut cfg = common::config();
+    cfg.cycles.predef.remove("Q260");
+    let d = check_program(&format!("{HEAD}{base}"), &cfg);
+    assert_eq!(d.len(), 1);
+    assert_eq!(d[0].line, 10);
+    assert!(
+        d[0].message.contains("no Q260 in [cycles.predef]"),
+        "{}",
+        d[0]
+    );
+    // 451's feed takes FMAX and FAUTO.
+    let text = "1 TOOL CALL \"TOUCH_PROBE\" Z\n2 G451 Q406=+0 Q407=+12.5 Q253=FMAX";
+    let p = Program::parse(text, &common::config()).unwrap();
+    assert_eq!(p.cycles().next().unwrap().params["Q253"].value, Value::Fmax);
+}
+
+#[test]
+fn defaults_fill_optional_parameters() {
+    let p = Program::parse(
+        &format!(
+            "{HEAD}Q263=+0 ~\nQ264=+0 ~\nQ294=+0 ~\nQ581=+1 ~\nQ582=+0 ~\nQ583=+0 ~\nQ260=+50"
+        ),
+        &common::config(),
+    )
+    .unwrap();
+    let c = p.cycles().next().unwrap();
+    for (q, v) in [("Q320", 0.0), ("Q309", 0.0)] {
+        assert_eq!(c.number(q), Some(v));
+        assert_eq!(c.params[q].origin, Origin::Default);
+    }
+    let CycleKind::Probing3d(params) = &c.kind else {
+        panic!()
+    };
+    assert_eq!(params.tolerance, None);
+}
+
+#[test]
+fn all_errors_of_a_program_are_collected() {
+    let text = "0 BEGIN PGM BAD MM\n1 TOOL CALL \"NOPE\" Z\n2 TOOL CALL \"TOUCH_PROBE\" Z\n\
+        3 TCH PROBE 444 ANTASTEN 3D ~\nQ263=+1e6 ~\nQ264=x ~\nQ294=+0 ~\nQ581=+0 ~\nQ582=+0 ~\nQ583=+0 ~\nQ260=+50 ~\nQ309=+3\n\
+        4 TCH PROBE 431 PLANE ~\nQ263=+0 ~\nQ264=+0 ~\nQ294=+0 ~\nQ265=+10 ~\nQ266=+0 ~\nQ295=+0 ~\nQ296=+20 ~\nQ297=+0 ~\nQ298=+0 ~\nQ260=+50\n\
+        5 END PGM OTHER MM";
+    let d = diags_of(text);
+    let lines: Vec<&str> = d.iter().map(|s| s.split(':').next().unwrap()).collect();
+    assert_eq!(
+        lines,
+        ["line 2", "line 5", "line 6", "line 12", "line 14", "line 24"],
+        "{d:#?}"
+    );
+    assert!(d[0].contains("TOOL CALL \"NOPE\": no probe of that name in the probe table (known: \"TOUCH_PROBE\", \"TS 460\")"));
+    assert!(
+        d[4].contains("three nominal points lie on a line"),
+        "{}",
+        d[4]
+    );
+    assert!(d[5].contains("does not match BEGIN PGM BAD MM"), "{}", d[5]);
+    // The zero normal is reported once the other 444 errors are fixed.
+    let d = diags_of(
+        &text
+            .replace("Q263=+1e6", "Q263=+0")
+            .replace("Q264=x", "Q264=+0")
+            .replace("Q309=+3", "Q309=+0"),
+    );
+    assert!(d.iter().any(|m| m.starts_with("line 8: Q581/Q582/Q583: the surface normal is the zero vector")), "{d:#?}");
+}
+
+#[test]
+fn cycle_without_tool_call_and_unknown_probe_number() {
+    let d = diags_of("1 TCH PROBE 450 SAVE ~\nQ410=+0 ~\nQ409=+1");
+    assert_eq!(
+        d,
+        vec!["line 1: cycle 450 SAVE KINEMATICS: no TOOL CALL of a touch probe before this cycle"]
+    );
+    let d = diags_of("1 TOOL CALL 3 Z");
+    assert!(
+        d[0].starts_with("line 1: TOOL CALL 3: the probe table has 2 row(s)"),
+        "{d:?}"
+    );
+    let d = diags_of("1 TOOL CALL \"TOUCH_PROBE\" B");
+    assert!(d[0].contains("probe axis B: expected Z, X or Y"), "{d:?}");
+}
+
+#[test]
+fn tool_calls_by_name_number_and_axis() {
+    let cfg = common::config();
+    let p = Program::parse(
+        "TOOL CALL 2 X\nTOOL CALL \"TOUCH_PROBE\"\nN30 T1 G18 *",
+        &cfg,
+    )
+    .unwrap();
+    let calls: Vec<_> = p
+        .blocks
+        .iter()
+        .filter_map(|b| match &b.statement {
+            Statement::ToolCall(t) => Some((t.probe.name.clone(), t.axis, t.line)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        calls,
+        [
+            ("TS 460".to_string(), ProbeAxis::X, 1),
+            ("TOUCH_PROBE".to_string(), ProbeAxis::X, 2),
+            ("TOUCH_PROBE".to_string(), ProbeAxis::Y, 3)
+        ]
+    );
+}
+
+#[test]
+fn iso_form_on_one_line_and_with_continuation() {
+    let cfg = common::config();
+    let one = "%ISO G71 *\nN10 T\"TOUCH_PROBE\" G17 *\nN20 G444 Q263=+1 Q264=+2 Q294=+3 Q581=+0 Q582=+0 Q583=+1 Q320=+0 Q260=+100 QS400=\"0.4-0.1\" Q309=+1 *\nN30 %ISO G71 *";
+    let cont = "N20 G444 Q263=+1 Q264=+2 Q294=+3 ~\n  Q581=+0 Q582=+0 Q583=+1 ~\n  Q260=+100 QS400=\"0.4-0.1\" Q309=+1";
+    for (text, block) in [(one.to_string(), 20), (format!("N10 T1 G17\n{cont}"), 20)] {
+        let p = Program::parse(&text, &cfg).unwrap_or_else(|e| panic!("{e}"));
+        let c = p.cycles().next().unwrap();
+        assert_eq!((c.cycle, c.block), (444, block));
+        let CycleKind::Probing3d(q) = &c.kind else {
+            panic!()
+        };
+        assert_eq!(q.nominal, [1.0, 2.0, 3.0]);
+        assert_eq!(q.reaction, 1);
+    }
+}
+
+#[test]
+fn inch_programs_are_converted_to_mm() {
+    let text = "0 BEGIN PGM IN INCH\n1 TOOL CALL \"TOUCH_PROBE\" Z\n2 TCH PROBE 444 PROBING 3D ~\n\
+        Q263=+1 ~\nQ264=-2 ~\nQ294=+0.5 ~\nQ581=+0 ~\nQ582=+0 ~\nQ583=+2 ~\nQ320=+0.1 ~\nQ260=+4 ~\nQS400=\"0.01-0.002\"\n\
+        3 G451 Q406=+0 Q407=+0.5 Q253=+100\n4 END PGM IN INCH";
+    let p = Program::parse(text, &common::config()).unwrap();
+    assert_eq!(p.unit, LengthUnit::Inch);
+    let mut cycles = p.cycles();
+    let c = cycles.next().unwrap();
+    let CycleKind::Probing3d(q) = &c.kind else {
+        panic!()
+    };
+    assert!(
+        (q.nominal[0] - 25.4).abs() < 1e-12
+            && (q.nominal[1] + 50.8).abs() < 1e-12
+            && (q.nominal[2] - 12.7).abs() < 1e-12
+    );
+    assert_eq!(q.normal, [0.0, 0.0, 1.0], "normal is dimensionless");
+    assert!((q.clearance - 2.54).abs() < 1e-12 && (q.safe_height - 101.6).abs() < 1e-12);
+    let t = q.tolerance.unwrap();
+    assert!((t.upper - 0.254).abs() < 1e-12 && (t.lower + 0.0508).abs() < 1e-12);
+    let k = cycles.next().unwrap();
+    assert!((k.number("Q407").unwrap() - 12.7).abs() < 1e-12);
+    assert!(
+        (k.number("Q253").unwrap() - 254.0).abs() < 1e-9,
+        "feed in 1/10 inch/min"
+    );
+    assert_eq!(k.number("Q380"), Some(0.0), "angles are not converted");
+}
+
+#[test]
+fn other_blocks_are_accepted_and_not_run() {
+    let text = "0 BEGIN PGM X MM\n1 BLK FORM 0.1 Z X+0 Y+0 Z-20\n2 BLK FORM 0.2 X+100 Y+100 Z+0\n\
+        * - structure\n3 ; a comment\n4 FN 0: Q1 = +5\n5 L Z+100 R0 FMAX M3\n6 CYCL DEF 200 BOHREN ~\n  Q200=+2 ;SICHERHEITS-ABST. ~\n  Q201=-20\n7 STOP\n8 M30\n9 END PGM X MM";
+    let p = Program::parse(text, &common::config()).unwrap();
+    assert_eq!(p.cycles().count(), 0);
+    let others = p
+        .blocks
+        .iter()
+        .filter(|b| matches!(b.statement, Statement::Other(_)))
+        .count();
+    assert_eq!(others, 9);
+    assert_eq!(p.name.as_deref(), Some("X"));
+}

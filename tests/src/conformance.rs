@@ -1,0 +1,274 @@
+//! The `Machine` conformance suite: every backend (CANopen with simulated drives on the
+//! in-process bus, on SocketCAN, Modbus, ...) must pass the same checks. Instantiate
+//! it for a backend with [`machine_conformance!`].
+
+use hal::can::inproc::InprocBus;
+use hal::master::{CanMachine, MasterOptions, Pacing};
+use hal::{Axis, AxisPositions, Contact, ErrorKind, Machine, MachineError, NullSink, ProbeMove};
+use sim::machine::{SimMachine, SimRunner};
+use sim::Scenario;
+use std::time::Duration;
+
+/// A way to get a machine for a scenario.
+pub trait Backend {
+    type M: Machine<Error = MachineError>;
+    fn open(scenario: &Scenario) -> Self::M;
+}
+
+/// A CAN machine together with whatever must live as long as it (the simulator).
+pub struct Held<T> {
+    pub machine: CanMachine,
+    pub keep: T,
+}
+
+impl<T> Machine for Held<T> {
+    type Error = MachineError;
+    fn axes(&self) -> u8 {
+        self.machine.axes()
+    }
+    fn positions(&mut self) -> Result<AxisPositions, MachineError> {
+        self.machine.positions()
+    }
+    fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), MachineError> {
+        self.machine.move_to(target, feed)
+    }
+    fn probe(&mut self, mv: &ProbeMove) -> Result<Contact, MachineError> {
+        self.machine.probe(mv)
+    }
+}
+
+/// CANopen master and simulated drives on the in-process bus, virtual clock.
+pub struct CanInproc;
+
+impl Backend for CanInproc {
+    type M = Held<SimRunner>;
+    fn open(scenario: &Scenario) -> Self::M {
+        let bus = InprocBus::new();
+        let sim = SimRunner::spawn(SimMachine::new(scenario), bus.endpoint());
+        let options = MasterOptions {
+            pacing: Pacing::Lockstep {
+                answer_timeout: Duration::from_millis(500),
+            },
+            ..MasterOptions::default()
+        };
+        let (machine, _) = CanMachine::start(
+            &crate::machine_config(scenario),
+            bus.endpoint(),
+            NullSink,
+            options,
+        )
+        .unwrap_or_else(|e| panic!("CAN machine did not start: {e}"));
+        Held { machine, keep: sim }
+    }
+}
+
+fn plane_scenario(z0: f64, r: f64) -> Scenario {
+    crate::scenario(&format!(
+        r#"
+machine = "table-ac"
+[probe]
+ball_radius = {r}
+[[plane]]
+point = [0.0, 0.0, {z0}]
+normal = [0.0, 0.0, 1.0]
+"#
+    ))
+}
+
+fn probe_down(
+    m: &mut impl Machine<Error = MachineError>,
+    start: [f64; 3],
+    dist: f64,
+) -> Result<Contact, MachineError> {
+    m.move_to(&AxisPositions::linear(start), 5000.0)?;
+    m.probe(&ProbeMove {
+        direction: [0.0, 0.0, -1.0],
+        feed: 200.0,
+        max_distance: dist,
+    })
+}
+
+fn assert_near(what: &str, got: f64, want: f64, tol: f64) {
+    assert!(
+        (got - want).abs() <= tol,
+        "{what}: got {got:.9}, want {want:.9} (tolerance {tol:e})"
+    );
+}
+
+/// A plane `z = z0` probed from above with ball radius R gives Z = z0 + R (noise 0).
+pub fn probes_plane_at_known_height<B: Backend>() {
+    for (z0, r) in [(10.0, 3.0), (-25.5, 2.0), (47.123456, 1.5)] {
+        let mut m = B::open(&plane_scenario(z0, r));
+        let c = probe_down(&mut m, [12.3, -4.5, z0 + r + 5.0], 10.0).unwrap();
+        assert_near("Z", c.positions.get(Axis::Z).unwrap(), z0 + r, 1e-6);
+        assert_near("X", c.positions.get(Axis::X).unwrap(), 12.3, 1e-6);
+        assert_near("Y", c.positions.get(Axis::Y).unwrap(), -4.5, 1e-6);
+        // Every axis of the machine is latched, rotary ones too.
+        assert_eq!(c.positions.mask(), m.axes());
+    }
+}
+
+/// A probing move in any direction stops on the sphere at centre - d (r + R).
+pub fn probes_sphere_along_oblique_direction<B: Backend>() {
+    let sc = crate::scenario(
+        r#"
+machine = "table-ac"
+[probe]
+ball_radius = 2.5
+[[sphere]]
+center = [20.0, 10.0, 60.0]
+radius = 15.0
+"#,
+    );
+    let mut m = B::open(&sc);
+    let d: [f64; 3] = [0.6, -0.48, -0.64];
+    let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    let d = [d[0] / n, d[1] / n, d[2] / n];
+    let reach = 15.0 + 2.5;
+    let start = [
+        20.0 - d[0] * (reach + 4.0),
+        10.0 - d[1] * (reach + 4.0),
+        60.0 - d[2] * (reach + 4.0),
+    ];
+    m.move_to(&AxisPositions::linear([start[0], start[1], 100.0]), 5000.0)
+        .unwrap();
+    m.move_to(&AxisPositions::linear(start), 5000.0).unwrap();
+    let c = m
+        .probe(&ProbeMove {
+            direction: d,
+            feed: 150.0,
+            max_distance: 10.0,
+        })
+        .unwrap();
+    let want = [
+        20.0 - d[0] * reach,
+        10.0 - d[1] * reach,
+        60.0 - d[2] * reach,
+    ];
+    for (i, a) in Axis::LINEAR.iter().enumerate() {
+        assert_near(a.name(), c.positions.get(*a).unwrap(), want[i], 1e-6);
+    }
+}
+
+/// No surface within the distance: NotTriggered, axes stopped at the end of the path.
+pub fn not_triggered_within_max_distance<B: Backend>() {
+    let mut m = B::open(&plane_scenario(0.0, 3.0));
+    let e = probe_down(&mut m, [0.0, 0.0, 50.0], 10.0).unwrap_err();
+    assert_eq!(e.kind, ErrorKind::NotTriggered, "{e}");
+    let p = m.positions().unwrap();
+    assert_near(
+        "Z after a probing move without contact",
+        p.get(Axis::Z).unwrap(),
+        40.0,
+        1e-3,
+    );
+}
+
+/// A deflected probe refuses to start, and nothing moves.
+pub fn deflected_at_start_moves_nothing<B: Backend>() {
+    let mut m = B::open(&plane_scenario(10.0, 3.0));
+    // Ball centre 1 mm below touching height: pressed into the plane.
+    m.move_to(&AxisPositions::linear([5.0, 5.0, 12.0]), 5000.0)
+        .unwrap();
+    let before = m.positions().unwrap();
+    let e = m
+        .probe(&ProbeMove {
+            direction: [1.0, 0.0, 0.0],
+            feed: 100.0,
+            max_distance: 5.0,
+        })
+        .unwrap_err();
+    assert_eq!(e.kind, ErrorKind::AlreadyDeflected, "{e}");
+    assert_eq!(m.positions().unwrap(), before);
+}
+
+/// Moves outside the software limits are refused before anything moves.
+pub fn software_limits_refuse_before_moving<B: Backend>() {
+    let mut m = B::open(&plane_scenario(-150.0, 3.0));
+    let before = m.positions().unwrap();
+    let e = m
+        .move_to(&AxisPositions::linear([10_000.0, 0.0, 0.0]), 1000.0)
+        .unwrap_err();
+    assert_eq!(e.kind, ErrorKind::SoftwareLimit, "{e}");
+    assert!(e.to_string().contains("X+10000"), "{e}");
+    assert_eq!(m.positions().unwrap(), before);
+    // A probing path that would run past the limit is refused too.
+    let z = before.get(Axis::Z).unwrap();
+    let e = m
+        .probe(&ProbeMove {
+            direction: [0.0, 0.0, 1.0],
+            feed: 100.0,
+            max_distance: 1000.0 - z,
+        })
+        .unwrap_err();
+    assert_eq!(e.kind, ErrorKind::SoftwareLimit, "{e}");
+    assert_eq!(m.positions().unwrap(), before);
+}
+
+/// A move with linear and rotary axes arrives exactly.
+pub fn move_arrives_on_all_axes<B: Backend>() {
+    let mut m = B::open(&plane_scenario(-150.0, 3.0));
+    let target = AxisPositions::linear([12.5, -7.25, 80.0])
+        .with(Axis::A, -15.0)
+        .with(Axis::C, 123.456);
+    m.move_to(&target, 4000.0).unwrap();
+    let p = m.positions().unwrap();
+    for (a, v) in target.iter() {
+        assert_near(a.name(), p.get(a).unwrap(), v, 1e-6);
+    }
+}
+
+/// Rotary axes are latched with the linear ones: probing with C at 30 deg reports 30.
+pub fn contact_latches_rotary_axes<B: Backend>() {
+    let mut m = B::open(&plane_scenario(10.0, 3.0));
+    m.move_to(
+        &AxisPositions::linear([0.0, 0.0, 30.0]).with(Axis::C, 30.0),
+        4000.0,
+    )
+    .unwrap();
+    let c = m
+        .probe(&ProbeMove {
+            direction: [0.0, 0.0, -1.0],
+            feed: 100.0,
+            max_distance: 30.0,
+        })
+        .unwrap();
+    assert_near("C", c.positions.get(Axis::C).unwrap(), 30.0, 1e-6);
+    assert_near("A", c.positions.get(Axis::A).unwrap(), 0.0, 1e-6);
+    assert_near("Z", c.positions.get(Axis::Z).unwrap(), 13.0, 1e-6);
+}
+
+/// Instantiates the suite for a backend: `machine_conformance!(path::ToBackend);`
+#[macro_export]
+macro_rules! machine_conformance {
+    ($backend:ty) => {
+        #[test]
+        fn probes_plane_at_known_height() {
+            $crate::conformance::probes_plane_at_known_height::<$backend>()
+        }
+        #[test]
+        fn probes_sphere_along_oblique_direction() {
+            $crate::conformance::probes_sphere_along_oblique_direction::<$backend>()
+        }
+        #[test]
+        fn not_triggered_within_max_distance() {
+            $crate::conformance::not_triggered_within_max_distance::<$backend>()
+        }
+        #[test]
+        fn deflected_at_start_moves_nothing() {
+            $crate::conformance::deflected_at_start_moves_nothing::<$backend>()
+        }
+        #[test]
+        fn software_limits_refuse_before_moving() {
+            $crate::conformance::software_limits_refuse_before_moving::<$backend>()
+        }
+        #[test]
+        fn move_arrives_on_all_axes() {
+            $crate::conformance::move_arrives_on_all_axes::<$backend>()
+        }
+        #[test]
+        fn contact_latches_rotary_axes() {
+            $crate::conformance::contact_latches_rotary_axes::<$backend>()
+        }
+    };
+}
