@@ -22,6 +22,9 @@ struct MachineArgs {
     /// Simulation scenario (TOML); default: configs/scenarios/demo-sphere.toml.
     #[arg(long)]
     scenario: Option<PathBuf>,
+    /// Machine configuration (TOML) of real drives on --can, instead of a scenario.
+    #[arg(long)]
+    machine: Option<PathBuf>,
     /// SocketCAN interface (can0, vcan0); without it the built-in simulator runs on an
     /// in-process bus.
     #[arg(long)]
@@ -38,6 +41,7 @@ impl MachineArgs {
     fn options(&self) -> MachineOptions {
         MachineOptions {
             scenario: self.scenario.clone(),
+            machine: self.machine.clone(),
             can: self.can.clone(),
             realtime: self.realtime,
             service: self.service.clone(),
@@ -73,6 +77,28 @@ enum Cmd {
         #[command(flatten)]
         machine: MachineArgs,
     },
+    /// Run every measuring cycle of an NC program (.h) on the machine.
+    Run {
+        /// The NC program.
+        program: PathBuf,
+        #[command(flatten)]
+        machine: MachineArgs,
+        /// Folder for the protocols (default: next to the program).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Write the results as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Go on where a cycle asks for confirmation.
+        #[arg(long)]
+        yes: bool,
+    },
+    /// Parse and validate an NC program; nothing moves. Exit 0, or 2 with every error.
+    Check {
+        program: PathBuf,
+        #[command(flatten)]
+        machine: MachineArgs,
+    },
     /// Run the simulated drives of a scenario alone on a SocketCAN interface.
     Sim {
         #[arg(long)]
@@ -95,7 +121,7 @@ fn main() -> ExitCode {
     // iceoryx2 logs its defaults at warning level; keep the operator's terminal for
     // what matters unless IOX2_LOG_LEVEL asks for more.
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
-    let result = match cli.command {
+    let result: Result<u8, String> = match cli.command {
         Cmd::Probe {
             machine,
             start,
@@ -103,23 +129,41 @@ fn main() -> ExitCode {
             dist,
             feed,
             json,
-        } => parse_vec3("--start", &start).and_then(|start| {
-            let dir = parse_vec3("--dir", &dir)?;
-            commands::probe::run(&commands::probe::ProbeArgs {
-                machine: machine.options(),
-                start,
-                dir,
-                dist,
-                feed,
-                json,
+        } => parse_vec3("--start", &start)
+            .and_then(|start| {
+                let dir = parse_vec3("--dir", &dir)?;
+                commands::probe::run(&commands::probe::ProbeArgs {
+                    machine: machine.options(),
+                    start,
+                    dir,
+                    dist,
+                    feed,
+                    json,
+                })
             })
+            .map(|()| 0),
+        Cmd::Run {
+            program,
+            machine,
+            out,
+            json,
+            yes,
+        } => commands::run::run(&commands::run::RunArgs {
+            program,
+            machine: machine.options(),
+            out,
+            json,
+            yes,
         }),
-        Cmd::Demo { machine } => commands::demo::run(&machine.options()),
-        Cmd::Sim { scenario, can } => commands::sim::run(scenario, &can),
-        Cmd::Estimator { service, verbose } => commands::estimator::run(&service, verbose),
+        Cmd::Check { program, machine } => commands::check::run(&program, &machine.options()),
+        Cmd::Demo { machine } => commands::demo::run(&machine.options()).map(|()| 0),
+        Cmd::Sim { scenario, can } => commands::sim::run(scenario, &can).map(|()| 0),
+        Cmd::Estimator { service, verbose } => {
+            commands::estimator::run(&service, verbose).map(|()| 0)
+        }
     };
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(code) => ExitCode::from(code),
         Err(e) => {
             eprintln!("probebridge: {e}");
             ExitCode::FAILURE

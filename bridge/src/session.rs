@@ -20,6 +20,9 @@ pub struct MachineOptions {
     /// Simulation scenario (default: the demo scenario). With `can`, it only names the
     /// machine configuration and the probe table radius.
     pub scenario: Option<PathBuf>,
+    /// Machine configuration (TOML) for real drives on `can`; without it the
+    /// scenario's machine is used.
+    pub machine: Option<PathBuf>,
     /// SocketCAN interface; `None` = built-in simulator on the in-process bus.
     pub can: Option<String>,
     /// Pace the built-in simulator in real time instead of a virtual clock.
@@ -31,7 +34,8 @@ pub struct MachineOptions {
 pub struct Session {
     pub machine: CanMachine,
     pub config: MachineConfig,
-    pub scenario: Scenario,
+    /// The simulation scenario, when the machine is (or runs as) the simulator.
+    pub scenario: Option<Scenario>,
     pub startup: StartupReport,
     pub sim: Option<SimRunner>,
 }
@@ -63,10 +67,29 @@ pub fn machine_config(scenario: &Scenario) -> MachineConfig {
     cfg
 }
 
+/// The machine configuration a command works with: `--machine` when given (real
+/// drives), else the scenario's machine with the scenario's probe radius.
+pub fn resolve_machine(
+    opts: &MachineOptions,
+) -> Result<(MachineConfig, Option<Scenario>), SessionError> {
+    match (&opts.machine, &opts.scenario) {
+        (Some(m), None) => {
+            let cfg = MachineConfig::load(m).map_err(|e| SessionError::Scenario(e.to_string()))?;
+            Ok((cfg, None))
+        }
+        (Some(_), Some(_)) => Err(SessionError::Scenario(
+            "give either --machine (real drives) or --scenario (simulator), not both".into(),
+        )),
+        (None, sc) => {
+            let scenario = load_scenario(sc.as_deref())?;
+            Ok((machine_config(&scenario), Some(scenario)))
+        }
+    }
+}
+
 impl Session {
     pub fn open(opts: &MachineOptions) -> Result<Self, SessionError> {
-        let scenario = load_scenario(opts.scenario.as_deref())?;
-        let config = machine_config(&scenario);
+        let (config, scenario) = resolve_machine(opts)?;
         let sink =
             ForwardingSink::spawn(&opts.service).map_err(|e| SessionError::Ipc(e.to_string()))?;
         let run_id = hal::clock::monotonic_ns();
@@ -78,8 +101,13 @@ impl Session {
                     (Box::new(t), None, Pacing::RealTime)
                 }
                 None => {
+                    let Some(scenario) = &scenario else {
+                        return Err(SessionError::Scenario(
+                            "--machine describes real drives: give --can IFACE, or a --scenario for the simulator".into(),
+                        ));
+                    };
                     let bus = InprocBus::new();
-                    let sim = SimRunner::spawn(SimMachine::new(&scenario), bus.endpoint());
+                    let sim = SimRunner::spawn(SimMachine::new(scenario), bus.endpoint());
                     let pacing = if opts.realtime {
                         Pacing::RealTime
                     } else {

@@ -158,3 +158,126 @@ fn demo_fits_the_sphere_within_a_micrometre() {
     assert_eq!(nums.len(), 2, "{line}");
     assert!(nums[0] < 1e-3 && nums[1] < 1e-3, "{line}");
 }
+
+fn q(v: &serde_json::Value, cycle: usize, key: &str) -> f64 {
+    v["cycles"][cycle]["q"][key]
+        .as_f64()
+        .unwrap_or_else(|| panic!("no {key} in {v}"))
+}
+
+/// The manual's 444 example, checked and run: a face 0.25 mm proud of the nominal
+/// point gives Q151 = Q164 = +0.25 and Q183 = 0 with QS400 "1-1".
+#[test]
+fn check_and_run_the_seed_444_example() {
+    let program = configs().join("programs/444-seed.h");
+    let out = run(bin().args(["check", program.to_str().unwrap()]));
+    assert!(out.status.success());
+
+    let dir = tmpdir("seed444");
+    let json = dir.join("r.json");
+    let out = run(bin().args([
+        "run",
+        program.to_str().unwrap(),
+        "--scenario",
+        configs().join("scenarios/seed-444.toml").to_str().unwrap(),
+        "--out",
+        dir.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+        "--service",
+        &format!("pb-cli-seed-{}", std::process::id()),
+    ]));
+    assert!(out.status.success());
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(v["cycles"][0]["block"], 11);
+    assert_eq!(v["cycles"][0]["cycle"], 444);
+    assert_eq!(v["cycles"][0]["status"], "ok");
+    assert!(v["cycles"][0]["message"].is_null());
+    for (k, want) in [
+        ("Q151", 0.25),
+        ("Q152", 0.0),
+        ("Q153", 0.0),
+        ("Q161", 0.25),
+        ("Q164", 0.25),
+        ("Q183", 0.0),
+    ] {
+        assert!((q(&v, 0, k) - want).abs() < 1e-6, "{k} = {}", q(&v, 0, k));
+    }
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("Q164") && stdout.contains("+0.2500"),
+        "{stdout}"
+    );
+}
+
+/// 431 on the shipped tilted plane: the projection angles of its true normal.
+#[test]
+fn run_431_on_the_tilted_plane() {
+    let dir = tmpdir("p431");
+    let json = dir.join("r.json");
+    let out = run(bin().args([
+        "run",
+        configs().join("programs/431-plane.h").to_str().unwrap(),
+        "--scenario",
+        configs()
+            .join("scenarios/tilted-plane.toml")
+            .to_str()
+            .unwrap(),
+        "--out",
+        dir.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+        "--service",
+        &format!("pb-cli-431-{}", std::process::id()),
+    ]));
+    assert!(out.status.success());
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert!((q(&v, 0, "Q158") - 5.0).abs() < 1e-6, "{v}");
+    assert!((q(&v, 0, "Q159") + 3.0).abs() < 1e-6, "{v}");
+    assert!(dir.join("TCHPR431.TXT").exists());
+}
+
+/// Out-of-range values are refused with the line and the range; nothing runs and
+/// nothing is written.
+#[test]
+fn out_of_range_values_are_refused_before_any_motion() {
+    let dir = tmpdir("range");
+    let program = dir.join("bad.h");
+    let text = std::fs::read_to_string(configs().join("programs/431-plane.h"))
+        .unwrap()
+        .replace(
+            "Q263=+0        ;1ST POINT 1ST AXIS",
+            "Q263=+123456   ;1ST POINT 1ST AXIS",
+        )
+        .replace(
+            "Q281=+1        ;MEASURING LOG",
+            "Q281=+3        ;MEASURING LOG",
+        );
+    std::fs::write(&program, text).unwrap();
+    let out = run(bin().args(["check", program.to_str().unwrap()]));
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("line 8: Q263=+123456") && err.contains("99999.9999"),
+        "{err}"
+    );
+    assert!(
+        err.contains("line 19: Q281=+3") && err.contains("0..2"),
+        "{err}"
+    );
+
+    let json = dir.join("r.json");
+    let out = run(bin().args([
+        "run",
+        program.to_str().unwrap(),
+        "--out",
+        dir.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]));
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("nothing moved"));
+    assert!(!json.exists() && !dir.join("TCHPR431.TXT").exists());
+}

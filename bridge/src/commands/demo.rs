@@ -24,12 +24,15 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
     for note in &s.startup.notes {
         println!("  note: {note}");
     }
-    let sphere = s
+    let scenario = s
         .scenario
+        .as_ref()
+        .ok_or("the demo runs on the simulator only")?;
+    let sphere = scenario
         .spheres
         .first()
         .copied()
-        .ok_or_else(|| format!("{}: the demo needs a [[sphere]]", s.scenario.path.display()))?;
+        .ok_or_else(|| format!("{}: the demo needs a [[sphere]]", scenario.path.display()))?;
     let probe = s
         .config
         .probes

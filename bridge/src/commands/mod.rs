@@ -1,8 +1,10 @@
 //! One module per `probebridge` subcommand.
 
+pub mod check;
 pub mod demo;
 pub mod estimator;
 pub mod probe;
+pub mod run;
 pub mod sim;
 
 /// Parses "X,Y,Z" into three numbers, naming the option on error.

@@ -1,0 +1,103 @@
+//! `probebridge run PROGRAM`: every measuring cycle of an NC program, in order, on the
+//! configured machine; results as a table, protocols next to the program (or in
+//! `--out`), and JSON with `--json`.
+
+use crate::output::write_atomic;
+use crate::session::{resolve_machine, MachineOptions, Session};
+use cycles::program::{Program, ProgramError};
+use cycles::runner::{run_program, ProgressEvent, RunOptions};
+use std::io::{BufRead, IsTerminal, Write};
+use std::path::PathBuf;
+
+pub struct RunArgs {
+    pub program: PathBuf,
+    pub machine: MachineOptions,
+    pub out: Option<PathBuf>,
+    pub json: Option<PathBuf>,
+    /// Go on without asking where a cycle asks for confirmation.
+    pub yes: bool,
+}
+
+/// Exit status: 0 every cycle succeeded, 1 a cycle failed or stopped the program,
+/// 2 the program is invalid (nothing moved).
+pub fn run(args: &RunArgs) -> Result<u8, String> {
+    let (cfg, _) = resolve_machine(&args.machine).map_err(|e| e.to_string())?;
+    let program = match Program::load(&args.program, &cfg) {
+        Ok(p) => p,
+        Err(ProgramError::Invalid { path, errors }) => {
+            for d in &errors.0 {
+                eprintln!("{}: {d}", path.display());
+            }
+            eprintln!(
+                "{}: {} error(s); nothing moved",
+                path.display(),
+                errors.0.len()
+            );
+            return Ok(2);
+        }
+        Err(e) => return Err(e.to_string()),
+    };
+    let out_dir = args
+        .out
+        .clone()
+        .or_else(|| program.folder().map(|p| p.to_path_buf()))
+        .unwrap_or_else(|| PathBuf::from("."));
+    std::fs::create_dir_all(&out_dir)
+        .map_err(|e| format!("cannot create {}: {e}", out_dir.display()))?;
+
+    let mut session = Session::open(&args.machine).map_err(|e| e.to_string())?;
+    for note in &session.startup.notes {
+        eprintln!("note: {note}");
+    }
+    let total = program.cycles().count();
+    let mut done = 0usize;
+    let mut progress = |ev: ProgressEvent| match ev {
+        ProgressEvent::CycleStarted { block, cycle, line } => {
+            done += 1;
+            eprintln!("[{done}/{total}] block {block} (line {line}): cycle {cycle}");
+        }
+        ProgressEvent::Contact { centre, .. } => {
+            eprintln!(
+                "    contact at X{:+.4} Y{:+.4} Z{:+.4}",
+                centre[0], centre[1], centre[2]
+            );
+        }
+        ProgressEvent::Note { text, .. } => eprintln!("    {text}"),
+        ProgressEvent::Protocol { path, .. } => eprintln!("    protocol {}", path.display()),
+        ProgressEvent::CycleFinished { status, .. } => eprintln!("    {status:?}"),
+        _ => {}
+    };
+    let yes = args.yes;
+    let mut confirm = |text: &str| -> bool {
+        println!("{text}");
+        if yes {
+            return true;
+        }
+        print!("Press Enter to go on, or type n and Enter to stop: ");
+        let _ = std::io::stdout().flush();
+        let stdin = std::io::stdin();
+        if !stdin.is_terminal() {
+            // Without an operator there is nobody to confirm: stop (use --yes).
+            println!();
+        }
+        let mut line = String::new();
+        match stdin.lock().read_line(&mut line) {
+            Ok(0) | Err(_) => false,
+            Ok(_) => !line.trim().eq_ignore_ascii_case("n"),
+        }
+    };
+    let mut opts = RunOptions {
+        out_dir,
+        confirm: &mut confirm,
+        progress: &mut progress,
+    };
+    let report = run_program(&program, &mut session.machine, &session.config, &mut opts);
+    print!("{}", report.to_text());
+    if let Some(path) = &args.json {
+        write_atomic(path, report.to_json().as_bytes())?;
+    }
+    if let Some(why) = &report.stopped {
+        eprintln!("program stopped: {why}");
+    }
+    Ok(if report.completed() { 0 } else { 1 })
+}
