@@ -92,6 +92,10 @@ enum Cmd {
         /// Go on where a cycle asks for confirmation.
         #[arg(long)]
         yes: bool,
+        /// Active kinematics file of the machine (cycles 450/451); default:
+        /// <machine>.kinematics.toml beside the machine configuration.
+        #[arg(long)]
+        kinematics: Option<PathBuf>,
     },
     /// Parse and validate an NC program; nothing moves. Exit 0, or 2 with every error.
     Check {
@@ -148,12 +152,14 @@ fn main() -> ExitCode {
             out,
             json,
             yes,
+            kinematics,
         } => commands::run::run(&commands::run::RunArgs {
             program,
             machine: machine.options(),
             out,
             json,
             yes,
+            kinematics,
         }),
         Cmd::Check { program, machine } => commands::check::run(&program, &machine.options()),
         Cmd::Demo { machine } => commands::demo::run(&machine.options()).map(|()| 0),

@@ -13,6 +13,7 @@ pub mod cycle431;
 pub mod cycle444;
 pub mod error;
 pub mod geometry;
+pub mod kinematics_file;
 pub mod params;
 pub mod parser;
 pub mod plane;

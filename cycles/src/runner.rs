@@ -58,6 +58,17 @@ pub struct RunOptions<'a> {
     /// Shows a text (the 431 protocol with Q281=2) and returns whether to go on.
     pub confirm: &'a mut dyn FnMut(&str) -> bool,
     pub progress: &'a mut dyn FnMut(ProgressEvent),
+    /// The machine's active kinematics file (cycles 450, 451); `None`: the default
+    /// beside the machine configuration.
+    pub kinematics: Option<PathBuf>,
+}
+
+impl RunOptions<'_> {
+    pub fn kinematics_path(&self, cfg: &MachineConfig) -> PathBuf {
+        self.kinematics
+            .clone()
+            .unwrap_or_else(|| crate::kinematics_file::ActiveKinematics::default_path(cfg))
+    }
 }
 
 /// Checks, before anything moves, what only the machine and its configuration can
@@ -66,7 +77,9 @@ pub struct RunOptions<'a> {
 fn preflight(call: &CycleCall, machine_axes: u8, cfg: &MachineConfig) -> Result<(), String> {
     match call.kind {
         CycleKind::MeasurePlane(_) | CycleKind::Probing3d(_) => {}
-        CycleKind::MeasureKinematics | CycleKind::SaveKinematics => {
+        // Works on files only: no probe, no motion.
+        CycleKind::SaveKinematics => return Ok(()),
+        CycleKind::MeasureKinematics => {
             return Err(format!(
                 "cycle {} is validated but cannot run in this build (no kinematics model); nothing moved",
                 call.cycle
@@ -112,7 +125,15 @@ pub fn run_program<M: Machine>(
             cycle: call.cycle,
             line: call.line,
         });
-        let outcome = run_cycle(call, machine, opts, program_path, &mut points, &mut report);
+        let outcome = run_cycle(
+            call,
+            machine,
+            cfg,
+            opts,
+            program_path,
+            &mut points,
+            &mut report,
+        );
         let result = match outcome {
             Ok((q, stop)) => {
                 if let Some(m) = &stop {
@@ -154,6 +175,7 @@ type Outcome = Result<(BTreeMap<String, f64>, Option<String>), CycleError>;
 fn run_cycle<M: Machine>(
     call: &CycleCall,
     machine: &mut M,
+    cfg: &MachineConfig,
     opts: &mut RunOptions,
     program_path: Option<&std::path::Path>,
     points: &mut Vec<Probing3dRecord>,
@@ -181,11 +203,37 @@ fn run_cycle<M: Machine>(
             note_protocol(call, path, opts, report);
             Ok((out.q, out.stop))
         }
-        CycleKind::MeasureKinematics | CycleKind::SaveKinematics => Err(CycleError::Plan(format!(
+        CycleKind::SaveKinematics => {
+            let message = save_kinematics_cycle(call, cfg, opts)?;
+            (opts.progress)(ProgressEvent::Note {
+                block: call.block,
+                text: message.clone(),
+            });
+            Ok((BTreeMap::new(), None))
+        }
+        CycleKind::MeasureKinematics => Err(CycleError::Plan(format!(
             "cycle {} cannot run in this build",
             call.cycle
         ))),
     }
+}
+
+/// Cycle 450 SAVE KINEMATICS (Q410 mode, Q409 designation) on the active kinematics
+/// file.
+fn save_kinematics_cycle(
+    call: &CycleCall,
+    cfg: &MachineConfig,
+    opts: &RunOptions,
+) -> Result<String, CycleError> {
+    use crate::kinematics_file::{save_kinematics, SaveMode};
+    // Both are required and range-checked by the parameter table.
+    let mode = call
+        .number("Q410")
+        .and_then(SaveMode::from_q410)
+        .ok_or_else(|| CycleError::Plan("Q410 must be 0..3".into()))?;
+    let designation = call.number("Q409").unwrap_or(0.0) as u32;
+    save_kinematics(mode, designation, &opts.kinematics_path(cfg), cfg)
+        .map_err(|e| CycleError::Plan(e.to_string()))
 }
 
 fn note_protocol(

@@ -29,6 +29,7 @@ fn run(p: &Program, m: &mut MockMachine) -> probebridge_cycles::ProgramReport {
         out_dir: common::temp_dir("programs"),
         confirm: &mut confirm,
         progress: &mut progress,
+        kinematics: None,
     };
     probebridge_cycles::run_program(p, m, &machine(), &mut opts)
 }

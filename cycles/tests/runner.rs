@@ -123,6 +123,7 @@ fn nothing_moves_when_validation_fails() {
         out_dir: common::temp_dir("run-probe"),
         confirm: &mut confirm,
         progress: &mut progress,
+        kinematics: None,
     };
     let report = probebridge_cycles::run_program(&program, &mut m, &other, &mut opts);
     assert_eq!(m.motion_count(), 0);
@@ -176,6 +177,7 @@ fn progress_reports_cycles_moves_and_contacts() {
         out_dir: common::temp_dir("run-progress"),
         confirm: &mut confirm,
         progress: &mut progress,
+        kinematics: None,
     };
     probebridge_cycles::run_program(&program, &mut m, &common::config(), &mut opts);
     use probebridge_cycles::ProgressEvent as E;

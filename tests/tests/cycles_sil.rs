@@ -20,6 +20,7 @@ fn run(program: &str, sc: &sim::Scenario) -> ProgramReport {
         out_dir: out,
         confirm: &mut confirm,
         progress: &mut progress,
+        kinematics: None,
     };
     run_program(&program, &mut m, &cfg, &mut opts)
 }

@@ -16,6 +16,9 @@ pub struct RunArgs {
     pub json: Option<PathBuf>,
     /// Go on without asking where a cycle asks for confirmation.
     pub yes: bool,
+    /// The active kinematics file (cycles 450/451); default: beside the machine
+    /// configuration.
+    pub kinematics: Option<PathBuf>,
 }
 
 /// Exit status: 0 every cycle succeeded, 1 a cycle failed or stopped the program,
@@ -90,6 +93,7 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
         out_dir,
         confirm: &mut confirm,
         progress: &mut progress,
+        kinematics: args.kinematics.clone(),
     };
     let report = run_program(&program, &mut session.machine, &session.config, &mut opts);
     print!("{}", report.to_text());

@@ -260,6 +260,7 @@ pub fn run(
         out_dir: out_dir.to_path_buf(),
         confirm: &mut confirm_fn,
         progress: &mut progress,
+        kinematics: None,
     };
     let report = probebridge_cycles::run_program(program, m, &cfg, &mut opts);
     (report, shown)

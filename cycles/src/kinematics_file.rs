@@ -1,0 +1,430 @@
+//! The machine's active kinematics corrections on disk, and cycle 450 SAVE KINEMATICS.
+//!
+//! The nominal chain lives in the machine configuration; what cycle 451 measures and
+//! corrects (ISO 230-7 location errors and zero errors of the rotary axes) lives in a
+//! small TOML file beside it, `<machine>.kinematics.toml`:
+//!
+//! ```toml
+//! machine = "table-ac"
+//! [errors]
+//! EX0C = 0.0123
+//! EB0A = -0.0041
+//! ```
+//!
+//! Every write is atomic (temporary file, fsync, rename, fsync of the folder) and keeps
+//! the version it replaces as `<file>.prev`, so a power cut never leaves a half-written
+//! model and the operator can always go back one step. Cycle 450 keeps its saves in
+//! `<file stem>.saved/<designation>.toml` beside it.
+
+use hal::config::MachineConfig;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// ISO 230-7 names of the errors a rotary axis can carry: location errors in QS order,
+/// then the zero error.
+pub fn error_names(axis: hal::Axis) -> &'static [&'static str] {
+    match axis {
+        hal::Axis::A => &["EY0A", "EZ0A", "EB0A", "EC0A", "EA0A"],
+        hal::Axis::B => &["EZ0B", "EX0B", "EC0B", "EA0B", "EB0B"],
+        hal::Axis::C => &["EX0C", "EY0C", "EA0C", "EB0C", "EC0C"],
+        _ => &[],
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum KinematicsFileError {
+    #[error("cannot read {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: {message}")]
+    Invalid { path: PathBuf, message: String },
+    #[error("cannot write {path}: {source}")]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+}
+
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct FileFormat {
+    machine: String,
+    #[serde(default)]
+    errors: BTreeMap<String, f64>,
+}
+
+/// The active kinematics corrections of a machine, by ISO name, mm / deg.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ActiveKinematics {
+    pub machine: String,
+    pub errors: BTreeMap<String, f64>,
+    pub path: PathBuf,
+}
+
+impl ActiveKinematics {
+    /// `<dir of cfg.path>/<cfg.name>.kinematics.toml`.
+    pub fn default_path(cfg: &MachineConfig) -> PathBuf {
+        let dir = cfg.path.parent().unwrap_or(Path::new("."));
+        dir.join(format!("{}.kinematics.toml", cfg.name))
+    }
+
+    /// Reads `path`; an absent file is the nominal chain (all errors 0). Names must be
+    /// errors of rotary axes the machine has, values finite.
+    pub fn load(path: &Path, cfg: &MachineConfig) -> Result<Self, KinematicsFileError> {
+        let text = match std::fs::read_to_string(path) {
+            Ok(t) => t,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                return Ok(Self {
+                    machine: cfg.name.clone(),
+                    errors: BTreeMap::new(),
+                    path: path.to_path_buf(),
+                })
+            }
+            Err(source) => {
+                return Err(KinematicsFileError::Read {
+                    path: path.to_path_buf(),
+                    source,
+                })
+            }
+        };
+        Self::parse(&text, path, cfg)
+    }
+
+    fn parse(text: &str, path: &Path, cfg: &MachineConfig) -> Result<Self, KinematicsFileError> {
+        let invalid = |message: String| KinematicsFileError::Invalid {
+            path: path.to_path_buf(),
+            message,
+        };
+        let f: FileFormat = toml::from_str(text).map_err(|e| invalid(e.to_string()))?;
+        if f.machine != cfg.name {
+            return Err(invalid(format!(
+                "written for machine {:?}, but the machine is {:?}",
+                f.machine, cfg.name
+            )));
+        }
+        for (name, v) in &f.errors {
+            let known = cfg
+                .axes
+                .iter()
+                .filter(|a| a.name.is_rotary())
+                .any(|a| error_names(a.name).contains(&name.as_str()));
+            if !known {
+                return Err(invalid(format!(
+                    "errors.{name}: not an error of a rotary axis of machine {}",
+                    cfg.name
+                )));
+            }
+            if !v.is_finite() {
+                return Err(invalid(format!("errors.{name}: {v} is not a number")));
+            }
+        }
+        Ok(Self {
+            machine: f.machine,
+            errors: f.errors,
+            path: path.to_path_buf(),
+        })
+    }
+
+    /// The value of `name` (0 when absent).
+    pub fn error(&self, name: &str) -> f64 {
+        self.errors.get(name).copied().unwrap_or(0.0)
+    }
+
+    fn render(&self) -> String {
+        let f = FileFormat {
+            machine: self.machine.clone(),
+            errors: self.errors.clone(),
+        };
+        format!(
+            "# Active kinematics corrections of machine {}: ISO 230-7 location errors and\n\
+             # zero errors of the rotary axes (mm, deg), written by probebridge.\n{}",
+            self.machine,
+            toml::to_string(&f).unwrap_or_default()
+        )
+    }
+
+    /// Writes atomically, keeping the replaced version as `<path>.prev`. Writes nothing
+    /// (and keeps the file byte for byte) when the errors equal what is on disk.
+    pub fn write(&self) -> Result<(), KinematicsFileError> {
+        if let Ok(text) = std::fs::read_to_string(&self.path) {
+            if let Ok(FileFormat { errors, machine }) = toml::from_str::<FileFormat>(&text) {
+                if errors == self.errors && machine == self.machine {
+                    return Ok(());
+                }
+            }
+            copy_atomic(&self.path, &prev_path(&self.path))?;
+        }
+        write_atomic(&self.path, self.render().as_bytes())
+    }
+}
+
+fn prev_path(path: &Path) -> PathBuf {
+    let mut s = path.as_os_str().to_owned();
+    s.push(".prev");
+    PathBuf::from(s)
+}
+
+fn write_error(path: &Path) -> impl Fn(std::io::Error) -> KinematicsFileError + '_ {
+    move |source| KinematicsFileError::Write {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// Temporary file in the same folder, fsync, rename over `path`, fsync the folder.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), KinematicsFileError> {
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).map_err(write_error(dir))?;
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)?;
+        // The rename is durable only once the folder is.
+        std::fs::File::open(dir)?.sync_all()
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result.map_err(write_error(path))
+}
+
+fn copy_atomic(from: &Path, to: &Path) -> Result<(), KinematicsFileError> {
+    let bytes = std::fs::read(from).map_err(|source| KinematicsFileError::Read {
+        path: from.to_path_buf(),
+        source,
+    })?;
+    write_atomic(to, &bytes)
+}
+
+/// Where cycle 450 keeps its saves for the kinematics file `active`.
+pub fn saves_dir(active: &Path) -> PathBuf {
+    let stem = active
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "kinematics".into());
+    active.with_file_name(format!("{stem}.saved"))
+}
+
+fn save_path(active: &Path, designation: u32) -> PathBuf {
+    saves_dir(active).join(format!("{designation}.toml"))
+}
+
+/// Cycle 450's Q410.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SaveMode {
+    Save,
+    Restore,
+    Show,
+    Delete,
+}
+
+impl SaveMode {
+    pub fn from_q410(v: f64) -> Option<Self> {
+        match v as i64 {
+            0 => Some(Self::Save),
+            1 => Some(Self::Restore),
+            2 => Some(Self::Show),
+            3 => Some(Self::Delete),
+            _ => None,
+        }
+    }
+}
+
+/// Cycle 450 SAVE KINEMATICS on the kinematics file `active` of `cfg`. Returns what to
+/// tell the operator. A restore validates the save against the machine before
+/// replacing the active file atomically.
+pub fn save_kinematics(
+    mode: SaveMode,
+    designation: u32,
+    active: &Path,
+    cfg: &MachineConfig,
+) -> Result<String, KinematicsFileError> {
+    let path = save_path(active, designation);
+    let missing = |what: &str| KinematicsFileError::Invalid {
+        path: path.clone(),
+        message: format!("nothing is saved under designation {designation}; nothing was {what}"),
+    };
+    match mode {
+        SaveMode::Save => {
+            let current = ActiveKinematics::load(active, cfg)?;
+            let existed = path.exists();
+            let mut saved = current.clone();
+            saved.path = path.clone();
+            write_atomic(&path, saved.render().as_bytes())?;
+            Ok(format!(
+                "active kinematics saved under {designation}{} ({})",
+                if existed {
+                    ", replacing the earlier save"
+                } else {
+                    ""
+                },
+                path.display()
+            ))
+        }
+        SaveMode::Restore => {
+            if !path.exists() {
+                return Err(missing("restored"));
+            }
+            let mut saved = ActiveKinematics::load(&path, cfg)?;
+            saved.path = active.to_path_buf();
+            saved.write()?;
+            Ok(format!(
+                "kinematics {designation} restored into {} (previous version kept as .prev)",
+                active.display()
+            ))
+        }
+        SaveMode::Show => {
+            let mut lines = Vec::new();
+            let dir = saves_dir(active);
+            let mut names: Vec<u32> = std::fs::read_dir(&dir)
+                .map(|rd| {
+                    rd.filter_map(|e| e.ok())
+                        .filter_map(|e| e.path().file_stem()?.to_str()?.parse().ok())
+                        .collect()
+                })
+                .unwrap_or_default();
+            names.sort_unstable();
+            if names.is_empty() {
+                return Ok(format!("no kinematics saved in {}", dir.display()));
+            }
+            for n in names {
+                let k = ActiveKinematics::load(&save_path(active, n), cfg)?;
+                let errors: Vec<String> = k
+                    .errors
+                    .iter()
+                    .map(|(k, v)| format!("{k}={v:+.6}"))
+                    .collect();
+                let mark = if n == designation { " <-" } else { "" };
+                lines.push(format!(
+                    "{n}: {}{mark}",
+                    if errors.is_empty() {
+                        "nominal".into()
+                    } else {
+                        errors.join(" ")
+                    }
+                ));
+            }
+            Ok(lines.join("\n"))
+        }
+        SaveMode::Delete => {
+            if !path.exists() {
+                return Err(missing("deleted"));
+            }
+            std::fs::remove_file(&path).map_err(write_error(&path))?;
+            Ok(format!("saved kinematics {designation} deleted"))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cfg(dir: &Path) -> MachineConfig {
+        let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/machines/table-ac.toml");
+        let text = std::fs::read_to_string(src).unwrap();
+        MachineConfig::parse(&text, &dir.join("table-ac.toml")).unwrap()
+    }
+
+    fn tmp(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("pb-kin-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    #[test]
+    fn absent_file_is_nominal_and_write_keeps_previous() {
+        let d = tmp("write");
+        let c = cfg(&d);
+        let path = ActiveKinematics::default_path(&c);
+        assert_eq!(path, d.join("table-ac.kinematics.toml"));
+        let mut k = ActiveKinematics::load(&path, &c).unwrap();
+        assert!(k.errors.is_empty());
+        k.errors.insert("EX0C".into(), 0.012);
+        k.write().unwrap();
+        assert!(!prev_path(&path).exists(), "nothing to keep the first time");
+        let first = std::fs::read(&path).unwrap();
+        k.errors.insert("EB0A".into(), -0.003);
+        k.write().unwrap();
+        assert_eq!(std::fs::read(prev_path(&path)).unwrap(), first);
+        let back = ActiveKinematics::load(&path, &c).unwrap();
+        assert_eq!(back.error("EB0A"), -0.003);
+        assert_eq!(back.error("EX0C"), 0.012);
+        assert_eq!(back.error("EY0C"), 0.0);
+        // Unchanged errors: the file stays byte for byte.
+        let before = std::fs::read(&path).unwrap();
+        let modified = std::fs::metadata(&path).unwrap().modified().unwrap();
+        back.write().unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), before);
+        assert_eq!(
+            std::fs::metadata(&path).unwrap().modified().unwrap(),
+            modified
+        );
+    }
+
+    #[test]
+    fn bad_files_are_refused_with_the_reason() {
+        let d = tmp("bad");
+        let c = cfg(&d);
+        let path = d.join("k.toml");
+        std::fs::write(&path, "machine = \"table-ac\"\n[errors]\nEX0B = 0.1\n").unwrap();
+        let e = ActiveKinematics::load(&path, &c).unwrap_err().to_string();
+        assert!(
+            e.contains("errors.EX0B") && e.contains("not an error of a rotary axis"),
+            "{e}"
+        );
+        std::fs::write(&path, "machine = \"other\"\n").unwrap();
+        let e = ActiveKinematics::load(&path, &c).unwrap_err().to_string();
+        assert!(e.contains("written for machine \"other\""), "{e}");
+    }
+
+    #[test]
+    fn cycle_450_save_show_restore_delete() {
+        let d = tmp("450");
+        let c = cfg(&d);
+        let path = ActiveKinematics::default_path(&c);
+        let mut k = ActiveKinematics::load(&path, &c).unwrap();
+        k.errors.insert("EY0C".into(), 0.02);
+        k.write().unwrap();
+        save_kinematics(SaveMode::Save, 7, &path, &c).unwrap();
+        k.errors.insert("EY0C".into(), 0.5);
+        k.write().unwrap();
+        let shown = save_kinematics(SaveMode::Show, 7, &path, &c).unwrap();
+        assert!(shown.contains("7: EY0C=+0.020000 <-"), "{shown}");
+        save_kinematics(SaveMode::Restore, 7, &path, &c).unwrap();
+        assert_eq!(
+            ActiveKinematics::load(&path, &c).unwrap().error("EY0C"),
+            0.02
+        );
+        // The version the restore replaced is kept.
+        assert_eq!(
+            ActiveKinematics::load(&prev_path(&path), &c)
+                .unwrap()
+                .error("EY0C"),
+            0.5
+        );
+        save_kinematics(SaveMode::Delete, 7, &path, &c).unwrap();
+        let e = save_kinematics(SaveMode::Restore, 7, &path, &c)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("nothing is saved under designation 7"), "{e}");
+        assert_eq!(
+            ActiveKinematics::load(&path, &c).unwrap().error("EY0C"),
+            0.02
+        );
+    }
+}
