@@ -35,6 +35,9 @@ struct MachineArgs {
     /// iceoryx2 service prefix for contacts and estimator requests.
     #[arg(long, default_value = "probebridge")]
     service: String,
+    /// Record the CAN traffic of the session in candump's log format.
+    #[arg(long)]
+    candump: Option<PathBuf>,
 }
 
 impl MachineArgs {
@@ -45,6 +48,7 @@ impl MachineArgs {
             can: self.can.clone(),
             realtime: self.realtime,
             service: self.service.clone(),
+            candump: self.candump.clone(),
         }
     }
 }

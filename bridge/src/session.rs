@@ -29,6 +29,8 @@ pub struct MachineOptions {
     pub realtime: bool,
     /// iceoryx2 service prefix for contact samples.
     pub service: String,
+    /// Record the master's CAN traffic in candump's log format.
+    pub candump: Option<PathBuf>,
 }
 
 pub struct Session {
@@ -118,6 +120,16 @@ impl Session {
                     (Box::new(bus.endpoint()), Some(sim), pacing)
                 }
             };
+        let transport: Box<dyn CanTransport> = match &opts.candump {
+            Some(path) => {
+                let file = std::fs::File::create(path).map_err(|e| {
+                    SessionError::Scenario(format!("cannot create {}: {e}", path.display()))
+                })?;
+                let iface = opts.can.as_deref().unwrap_or("inproc");
+                Box::new(hal::can::record::Recorder::new(transport, file, iface))
+            }
+            None => transport,
+        };
         let options = MasterOptions {
             pacing,
             run_id,

@@ -8,7 +8,6 @@
 //!
 //! Only classic 11-bit frames: that is all CANopen uses.
 
-use core::fmt::Write as _;
 
 use super::CanFrame;
 
@@ -33,22 +32,34 @@ fn err(column: usize, reason: impl Into<String>) -> CandumpError {
 /// One log line, without the newline. The timestamp is printed in microseconds, as
 /// candump does.
 pub fn format_line(timestamp_ns: u64, iface: &str, frame: &CanFrame) -> String {
+    let mut s = String::with_capacity(48);
+    let _ = write_line(&mut s, timestamp_ns, iface, frame);
+    s
+}
+
+/// [`format_line`] into any `fmt::Write`, without allocating (the recorder formats
+/// into a stack buffer from the real-time thread).
+pub fn write_line(
+    w: &mut impl core::fmt::Write,
+    timestamp_ns: u64,
+    iface: &str,
+    frame: &CanFrame,
+) -> core::fmt::Result {
     let secs = timestamp_ns / 1_000_000_000;
     let micros = (timestamp_ns % 1_000_000_000) / 1_000;
-    let mut s = String::with_capacity(48);
-    let _ = write!(s, "({secs}.{micros:06}) {iface} {:03X}#", frame.cob_id());
+    write!(w, "({secs}.{micros:06}) {iface} {:03X}#", frame.cob_id())?;
     if frame.is_rtr() {
-        s.push('R');
+        w.write_char('R')?;
         let dlc = embedded_can::Frame::dlc(frame);
         if dlc > 0 {
-            let _ = write!(s, "{dlc}");
+            write!(w, "{dlc}")?;
         }
     } else {
         for b in frame.data() {
-            let _ = write!(s, "{b:02X}");
+            write!(w, "{b:02X}")?;
         }
     }
-    s
+    Ok(())
 }
 
 /// Timestamp (ns), interface and frame of one log line.

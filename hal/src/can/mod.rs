@@ -2,6 +2,7 @@
 //! never touches a socket; a transport only moves frames.
 
 pub mod candump;
+pub mod record;
 mod frame;
 pub mod inproc;
 pub mod socketcan;
