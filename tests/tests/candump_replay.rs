@@ -36,7 +36,7 @@ fn session<T: CanTransport>(transport: T) -> (ContactSample, RtLoop<T, NullSink>
         answer_timeout: Duration::from_millis(50),
     };
     let mut rt = RtLoop::new(&cfg, LoopConfig::from_machine(&cfg, pacing), t, NullSink);
-    let mut next = |rt: &mut RtLoop<T, NullSink>| loop {
+    let next = |rt: &mut RtLoop<T, NullSink>| loop {
         rt.cycle().unwrap();
         if let Some(r) = rt.take_reply() {
             break r;
