@@ -20,6 +20,9 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
     println!("starting the simulated machine and bringing the drives up over CANopen ...");
     let mut s = Session::open(&opts).map_err(|e| e.to_string())?;
     println!("  machine {}: {}", s.config.name, s.config.description);
+    for d in &s.startup.drives {
+        println!("  {d}");
+    }
     println!("  {}", s.startup.bus_load);
     for note in &s.startup.notes {
         println!("  note: {note}");

@@ -28,6 +28,8 @@ pub struct StartupReport {
     pub realtime_priority: bool,
     /// The process's memory is locked (no page faults in the loop).
     pub memory_locked: bool,
+    /// Each drive: axis, node and the device name it reports.
+    pub drives: Vec<String>,
     pub notes: Vec<String>,
 }
 
@@ -107,7 +109,7 @@ impl CanMachine {
             ));
         }
         startup::boot(&mut transport, cfg)?;
-        startup::configure(&mut transport, cfg)?;
+        let drives = startup::configure(&mut transport, cfg)?;
 
         let loop_cfg = LoopConfig::from_machine(cfg, options.pacing);
         let (cmd_tx, cmd_rx) = sync_channel::<Command>(1);
@@ -180,6 +182,7 @@ impl CanMachine {
                 bus_load,
                 realtime_priority,
                 memory_locked,
+                drives,
                 notes,
             },
         ))

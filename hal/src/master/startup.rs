@@ -10,7 +10,7 @@ use crate::canopen::cob_id::{self, CobKind};
 use crate::canopen::nmt::{self, NmtCommand};
 use crate::canopen::object;
 use crate::canopen::pdo::{configuration_writes, PdoDirection};
-use crate::canopen::sdo::{SdoClient, SdoClientEvent, SdoOutcome};
+use crate::canopen::sdo::{SdoAbortCode, SdoClient, SdoClientEvent, SdoOutcome};
 use crate::cia402::mode::ModeOfOperation;
 use crate::config::{AxisConfig, MachineConfig};
 use crate::machine::{ErrorKind, MachineError};
@@ -59,6 +59,47 @@ pub fn boot<T: CanTransport>(t: &mut T, cfg: &MachineConfig) -> Result<(), Machi
     Ok(())
 }
 
+enum Request<'a> {
+    Download(&'a [u8]),
+    Upload,
+}
+
+/// Runs one SDO transfer to completion. An abort by the drive is the outcome
+/// `Aborted`, not an error: the caller decides what it means.
+fn sdo_transfer<T: CanTransport>(
+    t: &mut T,
+    axis: &AxisConfig,
+    index: u16,
+    sub: u8,
+    request: Request<'_>,
+    timeout: Duration,
+) -> Result<SdoOutcome, MachineError> {
+    let mut client = SdoClient::new(axis.node);
+    let first = match request {
+        Request::Download(data) => client.download(index, sub, data),
+        Request::Upload => client.upload(index, sub),
+    }
+    .map_err(|e| {
+        MachineError::new(
+            ErrorKind::Other,
+            format!("SDO 0x{index:04X}:{sub:02X}: {e}"),
+        )
+        .with_node(axis.node)
+    })?;
+    sdo_exchange(t, &mut client, first, axis, index, sub, timeout)
+}
+
+fn refused(axis: &AxisConfig, what: String, code: SdoAbortCode) -> MachineError {
+    MachineError::new(
+        ErrorKind::DriveFault,
+        format!(
+            "axis {}: {what} refused with SDO abort 0x{:08X} ({code})",
+            axis.name, code.0
+        ),
+    )
+    .with_node(axis.node)
+}
+
 /// One SDO download, waiting for the answer.
 pub fn sdo_download<T: CanTransport>(
     t: &mut T,
@@ -68,25 +109,13 @@ pub fn sdo_download<T: CanTransport>(
     data: &[u8],
     timeout: Duration,
 ) -> Result<(), MachineError> {
-    let mut client = SdoClient::new(axis.node);
-    let first = client.download(index, sub, data).map_err(|e| {
-        MachineError::new(
-            ErrorKind::Other,
-            format!("SDO 0x{index:04X}:{sub:02X}: {e}"),
-        )
-        .with_node(axis.node)
-    })?;
-    match sdo_exchange(t, &mut client, first, axis, index, sub, timeout)? {
-        SdoOutcome::Downloaded => Ok(()),
-        SdoOutcome::Uploaded(_) => Ok(()),
-        SdoOutcome::Aborted(code) => Err(MachineError::new(
-            ErrorKind::DriveFault,
-            format!(
-                "axis {}: writing 0x{index:04X}:{sub:02X} = {:02X?} refused with SDO abort 0x{:08X} ({code})",
-                axis.name, data, code.0
-            ),
-        )
-        .with_node(axis.node)),
+    match sdo_transfer(t, axis, index, sub, Request::Download(data), timeout)? {
+        SdoOutcome::Aborted(code) => Err(refused(
+            axis,
+            format!("writing 0x{index:04X}:{sub:02X} = {data:02X?}"),
+            code,
+        )),
+        SdoOutcome::Downloaded | SdoOutcome::Uploaded(_) => Ok(()),
     }
 }
 
@@ -98,25 +127,14 @@ pub fn sdo_upload<T: CanTransport>(
     sub: u8,
     timeout: Duration,
 ) -> Result<Vec<u8>, MachineError> {
-    let mut client = SdoClient::new(axis.node);
-    let first = client.upload(index, sub).map_err(|e| {
-        MachineError::new(
-            ErrorKind::Other,
-            format!("SDO 0x{index:04X}:{sub:02X}: {e}"),
-        )
-        .with_node(axis.node)
-    })?;
-    match sdo_exchange(t, &mut client, first, axis, index, sub, timeout)? {
+    match sdo_transfer(t, axis, index, sub, Request::Upload, timeout)? {
+        SdoOutcome::Aborted(code) => Err(refused(
+            axis,
+            format!("reading 0x{index:04X}:{sub:02X}"),
+            code,
+        )),
         SdoOutcome::Uploaded(v) => Ok(v.to_vec()),
         SdoOutcome::Downloaded => Ok(Vec::new()),
-        SdoOutcome::Aborted(code) => Err(MachineError::new(
-            ErrorKind::DriveFault,
-            format!(
-                "axis {}: reading 0x{index:04X}:{sub:02X} refused with SDO abort 0x{:08X} ({code})",
-                axis.name, code.0
-            ),
-        )
-        .with_node(axis.node)),
     }
 }
 
@@ -134,7 +152,7 @@ fn sdo_exchange<T: CanTransport>(
     loop {
         let now = Instant::now();
         if now >= deadline {
-            if let Some(abort) = client.abort(crate::canopen::sdo::SdoAbortCode::TIMEOUT) {
+            if let Some(abort) = client.abort(SdoAbortCode::TIMEOUT) {
                 let _ = t.transmit(&abort);
             }
             return Err(MachineError::new(
@@ -165,10 +183,29 @@ fn sdo_exchange<T: CanTransport>(
     }
 }
 
-/// Writes the configuration of every drive (see module doc).
-pub fn configure<T: CanTransport>(t: &mut T, cfg: &MachineConfig) -> Result<(), MachineError> {
+/// Writes the configuration of every drive (see module doc). Returns what each drive
+/// calls itself (0x1008, optional in CiA 301: a drive without it is "unnamed").
+pub fn configure<T: CanTransport>(
+    t: &mut T,
+    cfg: &MachineConfig,
+) -> Result<Vec<String>, MachineError> {
     let timeout = Duration::from_millis(cfg.bus.sdo_timeout_ms as u64);
+    let mut drives = Vec::new();
     for axis in &cfg.axes {
+        let name = match sdo_transfer(
+            t,
+            axis,
+            object::MANUFACTURER_DEVICE_NAME,
+            0,
+            Request::Upload,
+            timeout,
+        )? {
+            SdoOutcome::Uploaded(v) => String::from_utf8_lossy(&v)
+                .trim_end_matches('\0')
+                .to_string(),
+            _ => "unnamed".to_string(),
+        };
+        drives.push(format!("{} = node {}: {name}", axis.name, axis.node));
         let n = axis.node;
         sdo_download(
             t,
@@ -210,5 +247,5 @@ pub fn configure<T: CanTransport>(t: &mut T, cfg: &MachineConfig) -> Result<(), 
     }
     t.transmit(&nmt::encode(NmtCommand::Start, 0))
         .map_err(transport_error)?;
-    Ok(())
+    Ok(drives)
 }
