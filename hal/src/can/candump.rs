@@ -8,7 +8,6 @@
 //!
 //! Only classic 11-bit frames: that is all CANopen uses.
 
-
 use super::CanFrame;
 
 /// Where and why a log line does not parse. Columns count characters from 1.

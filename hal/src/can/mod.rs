@@ -2,9 +2,9 @@
 //! never touches a socket; a transport only moves frames.
 
 pub mod candump;
-pub mod record;
 mod frame;
 pub mod inproc;
+pub mod record;
 pub mod socketcan;
 
 pub use frame::CanFrame;
