@@ -1,11 +1,10 @@
 //! Cycle 431 MEASURE PLANE: three points probed along the probe axis, the plane's
 //! spatial angles (for PLANE SPATIAL) and projection angles.
 
-use crate::cycle444::number;
 use crate::error::CycleError;
 use crate::plane::{plane_angles, PlaneAngles, COLLINEAR_SIN};
 use crate::positioning::Positioner;
-use crate::program::{CycleCall, Diagnostic, LengthUnit, Param};
+use crate::program::{CycleCall, Diagnostic, LengthUnit, Param, ParamReader};
 use crate::runner::ProgressEvent;
 use hal::Machine;
 use nalgebra::Vector3;
@@ -35,30 +34,20 @@ impl PlaneParams {
         params: &BTreeMap<String, Param>,
         _unit: LengthUnit,
     ) -> Result<Self, Vec<Diagnostic>> {
-        let mut problems = Vec::new();
-        let mut get = |name: &str| match number(params, name) {
-            Ok((v, _)) => v,
-            Err(message) => {
-                problems.push(Diagnostic { line: 0, message });
-                0.0
-            }
-        };
-        let points = POINTS.map(|names| names.map(&mut get));
-        let clearance = get("Q320");
-        let safe_height = get("Q260");
-        let protocol = get("Q281") as u8;
+        let mut r = ParamReader::new(params);
+        let points = POINTS.map(|names| names.map(|n| r.number(n)));
+        let clearance = r.number("Q320");
+        let safe_height = r.number("Q260");
+        let protocol = r.number("Q281") as u8;
         let v = points.map(Vector3::from);
         let (a, b) = (v[1] - v[0], v[2] - v[0]);
         if a.cross(&b).norm() <= COLLINEAR_SIN * a.norm() * b.norm() {
-            problems.push(Diagnostic {
-                line: params.get("Q263").map_or(0, |p| p.line),
-                message: "Q263..Q298: the three nominal points lie on a line (or coincide); they do not define a plane".into(),
-            });
+            r.problem(
+                r.line("Q263"),
+                "Q263..Q298: the three nominal points lie on a line (or coincide); they do not define a plane",
+            );
         }
-        if !problems.is_empty() {
-            return Err(problems);
-        }
-        Ok(PlaneParams {
+        r.finish(PlaneParams {
             points,
             clearance,
             safe_height,

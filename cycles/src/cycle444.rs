@@ -4,7 +4,7 @@
 
 use crate::error::CycleError;
 use crate::positioning::Positioner;
-use crate::program::{CycleCall, Diagnostic, LengthUnit, Param, ProbeAxis, Value};
+use crate::program::{CycleCall, Diagnostic, LengthUnit, Param, ParamReader, ProbeAxis};
 use crate::runner::ProgressEvent;
 use crate::tolerance::{Tolerance, WorkpieceStatus};
 use hal::Machine;
@@ -30,71 +30,37 @@ pub struct Probing3dParams {
     pub reaction: u8,
 }
 
-pub(crate) fn number(params: &BTreeMap<String, Param>, name: &str) -> Result<(f64, usize), String> {
-    match params.get(name) {
-        Some(Param {
-            value: Value::Number(v),
-            line,
-            ..
-        }) => Ok((*v, *line)),
-        _ => Err(format!("{name}: no numeric value")),
-    }
-}
-
 impl Probing3dParams {
     /// Checks what the table cannot: the normal is not zero, QS400 follows the grammar.
     pub fn from_params(
         params: &BTreeMap<String, Param>,
         unit: LengthUnit,
     ) -> Result<Self, Vec<Diagnostic>> {
-        let mut problems = Vec::new();
-        let mut get = |name: &str| match number(params, name) {
-            Ok((v, _)) => v,
-            Err(message) => {
-                problems.push(Diagnostic { line: 0, message });
-                0.0
-            }
-        };
-        let nominal = [get("Q263"), get("Q264"), get("Q294")];
-        let written = Vector3::new(get("Q581"), get("Q582"), get("Q583"));
-        let clearance = get("Q320");
-        let safe_height = get("Q260");
-        let reaction = get("Q309") as u8;
-        let normal_line = params.get("Q581").map_or(0, |p| p.line);
+        let mut r = ParamReader::new(params);
+        let nominal = [r.number("Q263"), r.number("Q264"), r.number("Q294")];
+        let written = Vector3::new(r.number("Q581"), r.number("Q582"), r.number("Q583"));
+        let clearance = r.number("Q320");
+        let safe_height = r.number("Q260");
+        let reaction = r.number("Q309") as u8;
         if written.norm() == 0.0 {
-            problems.push(Diagnostic {
-                line: normal_line,
-                message:
-                    "Q581/Q582/Q583: the surface normal is the zero vector; it needs a direction"
-                        .into(),
-            });
+            r.problem(
+                r.line("Q581"),
+                "Q581/Q582/Q583: the surface normal is the zero vector; it needs a direction",
+            );
         }
-        let (text, text_line) = match params.get("QS400") {
-            Some(Param {
-                value: Value::Text(t),
-                line,
-                ..
-            }) => (t.clone(), *line),
-            _ => (String::new(), 0),
-        };
+        let (text, text_line) = r.text("QS400");
         let tolerance = match Tolerance::parse(&text) {
             Ok(t) => t.map(|t| match unit {
                 LengthUnit::Mm => t,
                 LengthUnit::Inch => t.scaled(25.4),
             }),
             Err(e) => {
-                problems.push(Diagnostic {
-                    line: text_line,
-                    message: e.to_string(),
-                });
+                r.problem(text_line, e.to_string());
                 None
             }
         };
-        if !problems.is_empty() {
-            return Err(problems);
-        }
         let n = written.normalize();
-        Ok(Probing3dParams {
+        r.finish(Probing3dParams {
             nominal,
             normal: [n.x, n.y, n.z],
             clearance,

@@ -144,6 +144,73 @@ pub struct CycleCall {
     pub kind: CycleKind,
 }
 
+/// Reads the parameters of a validated cycle block for a cycle's own checks. The
+/// parameter table guarantees every value; a gap is reported as a diagnostic (never a
+/// panic), and the line of a parameter is at hand for messages.
+pub(crate) struct ParamReader<'a> {
+    params: &'a BTreeMap<String, Param>,
+    pub problems: Vec<Diagnostic>,
+}
+
+impl<'a> ParamReader<'a> {
+    pub fn new(params: &'a BTreeMap<String, Param>) -> Self {
+        Self {
+            params,
+            problems: Vec::new(),
+        }
+    }
+
+    /// The numeric value of `name`; 0 (and a problem) when it has none.
+    pub fn number(&mut self, name: &str) -> f64 {
+        match self.params.get(name) {
+            Some(Param {
+                value: Value::Number(v),
+                ..
+            }) => *v,
+            _ => {
+                self.problems.push(Diagnostic {
+                    line: 0,
+                    message: format!("{name}: no numeric value"),
+                });
+                0.0
+            }
+        }
+    }
+
+    /// The text of `name` and its line (empty and 0 when absent).
+    pub fn text(&self, name: &str) -> (String, usize) {
+        match self.params.get(name) {
+            Some(Param {
+                value: Value::Text(t),
+                line,
+                ..
+            }) => (t.clone(), *line),
+            _ => (String::new(), 0),
+        }
+    }
+
+    /// Line of `name` in the program (0 when absent).
+    pub fn line(&self, name: &str) -> usize {
+        self.params.get(name).map_or(0, |p| p.line)
+    }
+
+    pub fn problem(&mut self, line: usize, message: impl Into<String>) {
+        self.problems.push(Diagnostic {
+            line,
+            message: message.into(),
+        });
+    }
+
+    /// `Ok(value)` when no problem was found.
+    pub fn finish<T>(self, value: T) -> Result<T, Vec<Diagnostic>> {
+        if self.problems.is_empty() {
+            Ok(value)
+        } else {
+            Err(self.problems)
+        }
+    }
+}
+
 impl CycleCall {
     pub fn number(&self, name: &str) -> Option<f64> {
         match self.params.get(name)?.value {
