@@ -12,6 +12,9 @@ pub enum ErrorKind {
     NotTriggered,
     /// The probe was already deflected when the probing move was to start.
     AlreadyDeflected,
+    /// The probe was deflected during a positioning move (a collision); the axes
+    /// were braked.
+    ProbeCollision,
     /// A drive reported a fault (EMCY or fault bit in the statusword).
     DriveFault,
     /// A node stopped sending its heartbeat, or never came up.
@@ -33,6 +36,7 @@ impl ErrorKind {
         match self {
             ErrorKind::NotTriggered => "probe did not trigger",
             ErrorKind::AlreadyDeflected => "probe already deflected at start",
+            ErrorKind::ProbeCollision => "probe deflected during a positioning move",
             ErrorKind::DriveFault => "drive fault",
             ErrorKind::NodeLost => "node lost",
             ErrorKind::Timeout => "timeout",
@@ -154,6 +158,13 @@ pub trait Machine {
 
     /// Probing move from the current position; see [`ProbeMove`].
     fn probe(&mut self, mv: &ProbeMove) -> Result<Contact, Self::Error>;
+
+    /// The samples of the following probing moves belong to run `run_id` (a backend
+    /// that publishes [`crate::ContactSample`]s tags them with it, so that an estimator
+    /// can tell one measurement from the next). Default: nothing to tag.
+    fn set_run(&mut self, run_id: u64) {
+        let _ = run_id;
+    }
 }
 
 impl<M: Machine + ?Sized> Machine for &mut M {
@@ -169,5 +180,8 @@ impl<M: Machine + ?Sized> Machine for &mut M {
     }
     fn probe(&mut self, mv: &ProbeMove) -> Result<Contact, Self::Error> {
         (**self).probe(mv)
+    }
+    fn set_run(&mut self, run_id: u64) {
+        (**self).set_run(run_id)
     }
 }

@@ -70,6 +70,11 @@ impl Backend for CanInproc {
 /// Environment variable naming the SocketCAN interface for [`SocketCan`] (`vcan0` in
 /// the CI VM). Without it the SocketCAN suite is skipped.
 pub const CAN_IFACE_ENV: &str = "PROBEBRIDGE_TEST_CAN";
+/// Optional: SYNC period (µs) for [`SocketCan`] instead of the machine's (the CI VM
+/// emulates its CPU and cannot hold 2 ms; only behaviour is checked there).
+pub const CAN_SYNC_US_ENV: &str = "PROBEBRIDGE_TEST_CAN_SYNC_US";
+/// Optional: heartbeat timeout (ms) for [`SocketCan`] instead of the machine's.
+pub const CAN_HEARTBEAT_TIMEOUT_MS_ENV: &str = "PROBEBRIDGE_TEST_CAN_HEARTBEAT_TIMEOUT_MS";
 
 /// CANopen master and simulated drives on a real SocketCAN interface (`vcan0`), each on
 /// its own socket in this process (two sockets on one interface see each other's
@@ -109,18 +114,21 @@ impl Backend for SocketCan {
             SocketCanTransport::open(&iface)
                 .unwrap_or_else(|e| panic!("{who}: cannot open {iface}: {e}"))
         };
+        let mut cfg = crate::machine_config(scenario);
+        let env = |name: &str| std::env::var(name).ok().and_then(|v| v.parse().ok());
+        if let Some(us) = env(CAN_SYNC_US_ENV) {
+            cfg.bus.sync_period_us = us;
+        }
+        if let Some(ms) = env(CAN_HEARTBEAT_TIMEOUT_MS_ENV) {
+            cfg.bus.heartbeat_timeout_ms = ms as u16;
+        }
         let sim = SimRunner::spawn(SimMachine::new(scenario), open("simulated drives"));
         let options = MasterOptions {
             pacing: Pacing::RealTime,
             ..MasterOptions::default()
         };
-        let (machine, _) = CanMachine::start(
-            &crate::machine_config(scenario),
-            open("master"),
-            NullSink,
-            options,
-        )
-        .unwrap_or_else(|e| panic!("CAN machine on {iface} did not start: {e}"));
+        let (machine, _) = CanMachine::start(&cfg, open("master"), NullSink, options)
+            .unwrap_or_else(|e| panic!("CAN machine on {iface} did not start: {e}"));
         Held {
             machine,
             keep: (sim, bus),
@@ -233,9 +241,14 @@ pub fn not_triggered_within_max_distance<B: Backend>() {
 /// A deflected probe refuses to start, and nothing moves.
 pub fn deflected_at_start_moves_nothing<B: Backend>() {
     let mut m = B::open(&plane_scenario(10.0, 3.0));
-    // Ball centre 1 mm below touching height: pressed into the plane.
-    m.move_to(&AxisPositions::linear([5.0, 5.0, 12.0]), 5000.0)
+    // Pushing the stylus into the plane is a collision: the axes brake with the
+    // stylus pressed in, which is the deflected start this check needs.
+    m.move_to(&AxisPositions::linear([5.0, 5.0, 30.0]), 5000.0)
         .unwrap();
+    let e = m
+        .move_to(&AxisPositions::linear([5.0, 5.0, 12.0]), 5000.0)
+        .unwrap_err();
+    assert_eq!(e.kind, ErrorKind::ProbeCollision, "{e}");
     let before = m.positions().unwrap();
     let e = m
         .probe(&ProbeMove {
@@ -246,6 +259,26 @@ pub fn deflected_at_start_moves_nothing<B: Backend>() {
         .unwrap_err();
     assert_eq!(e.kind, ErrorKind::AlreadyDeflected, "{e}");
     assert_eq!(m.positions().unwrap(), before);
+}
+
+/// A positioning move that runs the stylus into material brakes with ProbeCollision
+/// well within the probe's overtravel; retracting from there works.
+pub fn positioning_into_material_is_a_collision<B: Backend>() {
+    let mut m = B::open(&plane_scenario(10.0, 3.0));
+    m.move_to(&AxisPositions::linear([0.0, 0.0, 40.0]), 5000.0)
+        .unwrap();
+    let e = m
+        .move_to(&AxisPositions::linear([0.0, 0.0, 0.0]), 5000.0)
+        .unwrap_err();
+    assert_eq!(e.kind, ErrorKind::ProbeCollision, "{e}");
+    let z = m.positions().unwrap().get(Axis::Z).unwrap();
+    // Touching height is 13; braking from 5000 mm/min must end far above Z 8.
+    assert!(z < 13.0 && z > 10.0, "stopped at Z {z}");
+    m.move_to(&AxisPositions::linear([0.0, 0.0, 40.0]), 5000.0)
+        .unwrap();
+    // And the machine probes normally afterwards.
+    let c = probe_down(&mut m, [0.0, 0.0, 20.0], 10.0).unwrap();
+    assert_near("Z", c.positions.get(Axis::Z).unwrap(), 13.0, 1e-6);
 }
 
 /// Moves outside the software limits are refused before anything moves.
@@ -319,54 +352,26 @@ pub fn skipped<B: Backend>(test: &str) -> bool {
 #[macro_export]
 macro_rules! machine_conformance {
     ($backend:ty) => {
-        #[test]
-        fn probes_plane_at_known_height() {
-            if $crate::conformance::skipped::<$backend>("probes_plane_at_known_height") {
-                return;
+        $crate::machine_conformance!(@tests $backend:
+            probes_plane_at_known_height,
+            probes_sphere_along_oblique_direction,
+            not_triggered_within_max_distance,
+            deflected_at_start_moves_nothing,
+            positioning_into_material_is_a_collision,
+            software_limits_refuse_before_moving,
+            move_arrives_on_all_axes,
+            contact_latches_rotary_axes,
+        );
+    };
+    (@tests $backend:ty: $($name:ident),* $(,)?) => {
+        $(
+            #[test]
+            fn $name() {
+                if $crate::conformance::skipped::<$backend>(stringify!($name)) {
+                    return;
+                }
+                $crate::conformance::$name::<$backend>()
             }
-            $crate::conformance::probes_plane_at_known_height::<$backend>()
-        }
-        #[test]
-        fn probes_sphere_along_oblique_direction() {
-            if $crate::conformance::skipped::<$backend>("probes_sphere_along_oblique_direction") {
-                return;
-            }
-            $crate::conformance::probes_sphere_along_oblique_direction::<$backend>()
-        }
-        #[test]
-        fn not_triggered_within_max_distance() {
-            if $crate::conformance::skipped::<$backend>("not_triggered_within_max_distance") {
-                return;
-            }
-            $crate::conformance::not_triggered_within_max_distance::<$backend>()
-        }
-        #[test]
-        fn deflected_at_start_moves_nothing() {
-            if $crate::conformance::skipped::<$backend>("deflected_at_start_moves_nothing") {
-                return;
-            }
-            $crate::conformance::deflected_at_start_moves_nothing::<$backend>()
-        }
-        #[test]
-        fn software_limits_refuse_before_moving() {
-            if $crate::conformance::skipped::<$backend>("software_limits_refuse_before_moving") {
-                return;
-            }
-            $crate::conformance::software_limits_refuse_before_moving::<$backend>()
-        }
-        #[test]
-        fn move_arrives_on_all_axes() {
-            if $crate::conformance::skipped::<$backend>("move_arrives_on_all_axes") {
-                return;
-            }
-            $crate::conformance::move_arrives_on_all_axes::<$backend>()
-        }
-        #[test]
-        fn contact_latches_rotary_axes() {
-            if $crate::conformance::skipped::<$backend>("contact_latches_rotary_axes") {
-                return;
-            }
-            $crate::conformance::contact_latches_rotary_axes::<$backend>()
-        }
+        )*
     };
 }

@@ -54,6 +54,7 @@ pub struct RtError {
 pub enum Detail {
     NotTriggered { distance: f64 },
     Deflected,
+    Collision,
     Emcy,
     FaultBit,
     HeartbeatLost { silent_ms: f64 },
@@ -88,6 +89,9 @@ impl From<RtError> for MachineError {
                 format!("no contact within {distance:.3} mm; axes stopped at the end of the path")
             }
             Detail::Deflected => "the probe signal is high before the move; nothing moved".into(),
+            Detail::Collision => {
+                "the stylus touched something while positioning; all axes braked. Retract away from the contact".into()
+            }
             Detail::Emcy => "emergency message received; all axes stopped".into(),
             Detail::FaultBit => "statusword reports Fault; all axes stopped".into(),
             Detail::HeartbeatLost { silent_ms } => {

@@ -91,6 +91,8 @@ struct DriveLink {
     actual_inc: i32,
     tp_status: u16,
     tp_status_fresh: bool,
+    /// Probe input level last reported (bit 7 of 0x60B9).
+    probe_level: bool,
     latch_inc: Option<i32>,
     latch_rx_ns: u64,
     last_emcy: Option<u16>,
@@ -205,6 +207,7 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
                 actual_inc: 0,
                 tp_status: 0,
                 tp_status_fresh: false,
+                probe_level: false,
                 latch_inc: None,
                 latch_rx_ns: 0,
                 last_emcy: None,
@@ -449,6 +452,18 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
                     d.tp_status = status;
                     d.tp_status_fresh = true;
                     let st = TouchProbeStatus::from_bits(status);
+                    let level = st.input_level(Probe::One);
+                    let rising = level && !d.probe_level;
+                    d.probe_level = level;
+                    // A touch while positioning (probe not armed) is a collision: brake.
+                    // Every drive sees the same probe, so no node is to blame.
+                    if rising && matches!(self.activity, Activity::Moving { .. }) {
+                        self.abort_motion(RtError::new(
+                            ErrorKind::ProbeCollision,
+                            Detail::Collision,
+                        ));
+                        return;
+                    }
                     if st.enabled(Probe::One)
                         && st.positive_edge_stored(Probe::One)
                         && d.tp_function != 0
@@ -541,6 +556,18 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
             t: 0.0,
             then: Reply::Contact(sample),
         };
+    }
+
+    /// Brakes a positioning move and fails it with `err`, without marking the machine
+    /// faulted (nothing is broken: the operator retracts and goes on).
+    fn abort_motion(&mut self, err: RtError) {
+        if let Activity::Moving { profile, t } = self.activity {
+            self.activity = Activity::Stopping {
+                profile: profile.stop_at(t, &self.limits),
+                t: 0.0,
+                then: Reply::Error(err),
+            };
+        }
     }
 
     fn set_fault(&mut self, err: RtError) {
