@@ -175,6 +175,12 @@ pub struct RtLoop<T: CanTransport, S: SampleSink> {
     /// Time of the SYNC most recently sent (virtual under lockstep).
     sync_ns: u64,
     epoch_ns: u64,
+    /// Clock of the heartbeat supervision: advances with the loop but at most two
+    /// periods per cycle, so a stall of the loop itself (no SCHED_FIFO on a loaded
+    /// machine) is not taken for silent nodes: a consumer that was not running cannot
+    /// judge what it missed. Real losses are still seen after the timeout of
+    /// supervised time.
+    supervised_ns: u64,
     setpoint: [f64; MAX_AXES],
     activity: Activity,
     reply: Option<Reply>,
@@ -238,6 +244,7 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
             cycle: 0,
             sync_ns: now,
             epoch_ns: now,
+            supervised_ns: 0,
             setpoint: [0.0; MAX_AXES],
             activity: Activity::Enabling { since_ns: now },
             reply: None,
@@ -355,7 +362,7 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
         if let Some(HeartbeatEvent::Lost {
             node,
             silent_for_ns,
-        }) = self.heartbeat.check(self.sync_ns)
+        }) = self.heartbeat.check(self.supervised_ns)
         {
             self.set_fault(
                 RtError::new(
@@ -403,6 +410,7 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
                     self.on_frame(&f);
                 }
                 self.sync_ns += self.cfg.period_ns;
+                self.supervised_ns += self.cfg.period_ns;
             }
             Pacing::RealTime => {
                 let deadline = self.epoch_ns + (self.cycle + 1) * self.cfg.period_ns;
@@ -421,7 +429,9 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
                         self.on_frame(&f);
                     }
                 }
-                self.sync_ns = monotonic_ns();
+                let now = monotonic_ns();
+                self.supervised_ns += (now - self.sync_ns).min(2 * self.cfg.period_ns);
+                self.sync_ns = now;
             }
         }
         Ok(())
@@ -489,7 +499,7 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
                 }
             }
             CobKind::Heartbeat { .. } => {
-                self.heartbeat.on_frame(f, self.sync_ns);
+                self.heartbeat.on_frame(f, self.supervised_ns);
             }
             _ => {}
         }
