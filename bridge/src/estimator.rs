@@ -49,6 +49,72 @@ pub struct EstimatorOptions {
     /// Stop on SIGINT/SIGTERM (iceoryx2 installs handlers for the whole process: only
     /// for the estimator process itself, not when it runs in a thread of the bridge).
     pub handle_signals: bool,
+    /// Record when each sample arrived (for `probebridge bench trigger`): written to
+    /// this file when the estimator stops, see [`ReceiveTimes`].
+    pub record_times: Option<std::path::PathBuf>,
+    /// Records kept in memory without reallocating (more are kept, at the cost of a
+    /// reallocation in the receive path).
+    pub record_capacity: usize,
+}
+
+/// Receive times recorded by the estimator: per sample, taken on CLOCK_MONOTONIC right
+/// after the sample was taken from the subscriber (after the wake-up). The file has
+/// one line per sample: `run_id sequence trigger_ns receive_ns t1_ns`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ReceiveTime {
+    pub run_id: u64,
+    pub sequence: u64,
+    /// The sample's `trigger_ns` and `receive_ns` as published.
+    pub trigger_ns: u64,
+    pub receive_ns: u64,
+    /// When the estimator had it.
+    pub t1_ns: u64,
+}
+
+/// Reading and writing the receive-time file of [`EstimatorOptions::record_times`].
+pub struct ReceiveTimes;
+
+impl ReceiveTimes {
+    pub fn write(path: &std::path::Path, times: &[ReceiveTime]) -> std::io::Result<()> {
+        let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+        for t in times {
+            writeln!(
+                out,
+                "{} {} {} {} {}",
+                t.run_id, t.sequence, t.trigger_ns, t.receive_ns, t.t1_ns
+            )?;
+        }
+        out.flush()
+    }
+
+    pub fn read(path: &std::path::Path) -> Result<Vec<ReceiveTime>, String> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        text.lines()
+            .enumerate()
+            .map(|(i, line)| {
+                let v: Vec<u64> = line
+                    .split_whitespace()
+                    .map(str::parse)
+                    .collect::<Result<_, _>>()
+                    .map_err(|e| format!("{} line {}: {e}", path.display(), i + 1))?;
+                match v[..] {
+                    [run_id, sequence, trigger_ns, receive_ns, t1_ns] => Ok(ReceiveTime {
+                        run_id,
+                        sequence,
+                        trigger_ns,
+                        receive_ns,
+                        t1_ns,
+                    }),
+                    _ => Err(format!(
+                        "{} line {}: expected 5 numbers",
+                        path.display(),
+                        i + 1
+                    )),
+                }
+            })
+            .collect()
+    }
 }
 
 /// [`run_estimator_with`] with default options (quiet, no signal handlers).
@@ -121,6 +187,70 @@ pub fn run_estimator_with(
     );
 
     let mut store = RunStore::default();
+    let mut times: Vec<ReceiveTime> = Vec::with_capacity(if options.record_times.is_some() {
+        options.record_capacity
+    } else {
+        0
+    });
+    let mut receive = |store: &mut RunStore, mut log: &mut dyn Write| -> Result<(), IpcError> {
+        while let Some(sample) = contacts.try_receive()? {
+            if options.record_times.is_some() {
+                times.push(ReceiveTime {
+                    run_id: sample.run_id,
+                    sequence: sample.sequence,
+                    trigger_ns: sample.trigger_ns,
+                    receive_ns: sample.receive_ns,
+                    t1_ns: hal::clock::monotonic_ns(),
+                });
+            }
+            store.add(&sample, options.verbose, &mut log);
+        }
+        Ok(())
+    };
+    let result = serve(
+        &contacts,
+        &server,
+        &request_listener,
+        &result_notifier,
+        &waitset,
+        options,
+        stop,
+        &mut store,
+        &mut receive,
+        &mut log,
+    );
+    if let Some(path) = &options.record_times {
+        match ReceiveTimes::write(path, &times) {
+            Ok(()) => {
+                let _ = writeln!(
+                    log,
+                    "estimator: {} receive times written to {}",
+                    times.len(),
+                    path.display()
+                );
+            }
+            Err(e) => {
+                let _ = writeln!(log, "estimator: cannot write {}: {e}", path.display());
+            }
+        }
+    }
+    let _ = writeln!(log, "estimator: stopped");
+    result
+}
+
+#[allow(clippy::too_many_arguments)]
+fn serve(
+    contacts: &ContactSubscriber,
+    server: &Server<Svc, EstimatorRequest, (), EstimatorReply, ()>,
+    request_listener: &iceoryx2::port::listener::Listener<Svc>,
+    result_notifier: &Notifier<Svc>,
+    waitset: &WaitSet<Svc>,
+    options: &EstimatorOptions,
+    stop: &AtomicBool,
+    store: &mut RunStore,
+    receive: &mut dyn FnMut(&mut RunStore, &mut dyn Write) -> Result<(), IpcError>,
+    mut log: &mut dyn Write,
+) -> Result<(), EstimatorError> {
     while !stop.load(Ordering::Relaxed) {
         // Consume the wake-up events first, then everything that is there: whatever
         // arrives after this gets a new event and wakes the next wait.
@@ -129,9 +259,7 @@ pub fn run_estimator_with(
             .try_wait(|_| {})
             .map_err(|e| IpcError::iox("read request events", e))?;
 
-        while let Some(sample) = contacts.try_receive()? {
-            store.add(&sample, options.verbose, &mut log);
-        }
+        receive(store, &mut *log)?;
         let mut shutdown = false;
         while let Some(active) = server
             .receive()
@@ -139,9 +267,7 @@ pub fn run_estimator_with(
         {
             let request = *active.payload();
             // A request that was sent before the samples it is about were drained.
-            while let Some(sample) = contacts.try_receive()? {
-                store.add(&sample, options.verbose, &mut log);
-            }
+            receive(store, &mut *log)?;
             let reply = store.answer(&request, &mut log);
             shutdown |= request.request_kind() == Some(RequestKind::Shutdown);
             let sent = active
@@ -156,7 +282,7 @@ pub fn run_estimator_with(
                 let _ = writeln!(log, "estimator: {e}");
             }
             drop(active);
-            notify(&result_notifier, &mut log);
+            notify(result_notifier, &mut log);
         }
         if shutdown {
             let _ = writeln!(log, "estimator: shutdown requested");
@@ -176,11 +302,10 @@ pub fn run_estimator_with(
             Err(e) => return Err(EstimatorError::Wait(format!("{e:?}"))),
         }
     }
-    let _ = writeln!(log, "estimator: stopped");
     Ok(())
 }
 
-fn notify(notifier: &Notifier<Svc>, log: &mut impl Write) {
+fn notify(notifier: &Notifier<Svc>, log: &mut dyn Write) {
     if let Err(e) = notifier.notify() {
         let _ = writeln!(log, "estimator: could not notify the client: {e:?}");
     }
@@ -200,6 +325,8 @@ struct RunStore {
     /// Oldest first.
     runs: Vec<Run>,
     last_sequence: Option<u64>,
+    /// Cycle 451's identifications in progress.
+    identify: crate::ipc::IdentifySessions,
 }
 
 impl RunStore {
@@ -296,6 +423,9 @@ impl RunStore {
                 };
                 result.to_reply(request)
             }
+            Some(RequestKind::IdentifyData)
+            | Some(RequestKind::Identify)
+            | Some(RequestKind::IdentifyResult) => self.identify.answer(request, log),
             Some(RequestKind::Forget) => {
                 match self.runs.iter().position(|r| r.run_id == request.run_id) {
                     Some(i) => {

@@ -2,6 +2,7 @@
 //! fieldbus drives. This library holds what the `probebridge` binary is made of, so the
 //! integration tests can drive the same code.
 
+pub mod bench;
 pub mod commands;
 pub mod configs;
 pub mod estimator;

@@ -157,6 +157,33 @@ fn demo_fits_the_sphere_within_a_micrometre() {
         .collect();
     assert_eq!(nums.len(), 2, "{line}");
     assert!(nums[0] < 1e-3 && nums[1] < 1e-3, "{line}");
+    // Then cycle 451 mode 1 on A and C: EX0C (injected 0.012 mm) corrected in a
+    // temporary kinematics file, the protocol written.
+    assert!(
+        text.contains("cycle 451 MEASURE KINEMATICS, mode 1"),
+        "{text}"
+    );
+    let ex0c = text
+        .lines()
+        .find(|l| l.trim_start().starts_with("EX0C"))
+        .unwrap_or_else(|| panic!("no EX0C in:\n{text}"));
+    let v: Vec<f64> = ex0c
+        .split_whitespace()
+        .skip(1)
+        .take(3)
+        .map(|x| x.parse().unwrap())
+        .collect();
+    assert!(
+        v[0] == 0.0 && (v[1] - 0.012).abs() < 1e-4 && v[2] == 0.012,
+        "{ex0c}"
+    );
+    let protocol = text
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("protocol: "))
+        .unwrap_or_else(|| panic!("no protocol in:\n{text}"));
+    assert!(protocol.ends_with("TCHPRAUTO.html") && !protocol.contains("configs/"));
+    assert!(Path::new(protocol).exists());
+    assert!(text.contains("corrected errors written"), "{text}");
 }
 
 fn q(v: &serde_json::Value, cycle: usize, key: &str) -> f64 {

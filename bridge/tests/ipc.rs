@@ -117,6 +117,7 @@ impl EstimatorThread {
             let options = EstimatorOptions {
                 verbose,
                 handle_signals: false,
+                ..EstimatorOptions::default()
             };
             let result = run_estimator_with(&prefix, &options, &flag, &mut log);
             let mut log = String::from_utf8(log).unwrap();

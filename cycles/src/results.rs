@@ -24,6 +24,9 @@ pub struct CycleResult {
     pub status: Status,
     /// Why it failed, or why the program stopped after it (Q309, no confirmation).
     pub message: Option<String>,
+    /// Cycle 451: every measuring position, its sphere, the errors before and after.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kinematics: Option<Box<crate::cycle451::KinematicsReport>>,
 }
 
 impl CycleResult {
@@ -35,6 +38,7 @@ impl CycleResult {
             qs: BTreeMap::new(),
             status: Status::Error,
             message: Some(message.into()),
+            kinematics: None,
         }
     }
 }
@@ -79,6 +83,9 @@ impl ProgramReport {
             }
             for (k, v) in &c.qs {
                 out.push_str(&format!("  {k} = \"{v}\"\n"));
+            }
+            if let Some(k) = &c.kinematics {
+                out.push_str(&k.summary());
             }
         }
         if let Some(s) = &self.stopped {

@@ -4,8 +4,11 @@
 
 use crate::cycle431::PlaneRecord;
 use crate::cycle444::Probing3dRecord;
+use crate::cycle451::KinematicsReport;
 use crate::error::CycleError;
-use crate::program::{CycleCall, CycleKind, Program};
+use crate::kinematics::{Estimator, LocalEstimator};
+use crate::linear::{parse_linear, MoveFeed};
+use crate::program::{CycleCall, CycleKind, Program, Statement};
 use crate::protocol;
 use crate::results::{CycleResult, ProgramReport, Status};
 use crate::{cycle431, cycle444};
@@ -61,6 +64,9 @@ pub struct RunOptions<'a> {
     /// The machine's active kinematics file (cycles 450, 451); `None`: the default
     /// beside the machine configuration.
     pub kinematics: Option<PathBuf>,
+    /// Where cycle 451 fits its spheres and solves its identification (the bridge's
+    /// estimator process); `None`: in this process ([`LocalEstimator`]).
+    pub estimator: Option<&'a mut dyn Estimator>,
 }
 
 impl RunOptions<'_> {
@@ -74,16 +80,20 @@ impl RunOptions<'_> {
 /// Checks, before anything moves, what only the machine and its configuration can
 /// tell: the probe of each cycle is still in the probe table, the machine has X, Y, Z,
 /// and this build can run the cycle.
-fn preflight(call: &CycleCall, machine_axes: u8, cfg: &MachineConfig) -> Result<(), String> {
+fn preflight(
+    call: &CycleCall,
+    machine_axes: u8,
+    cfg: &MachineConfig,
+    kinematics: &std::path::Path,
+) -> Result<(), String> {
     match call.kind {
         CycleKind::MeasurePlane(_) | CycleKind::Probing3d(_) => {}
         // Works on files only: no probe, no motion.
         CycleKind::SaveKinematics => return Ok(()),
         CycleKind::MeasureKinematics => {
-            return Err(format!(
-                "cycle {} is validated but cannot run in this build (no kinematics model); nothing moved",
-                call.cycle
-            ));
+            crate::cycle451::plan(call, cfg).map_err(|e| format!("{e}; nothing moved"))?;
+            crate::kinematics_file::ActiveKinematics::load(kinematics, cfg)
+                .map_err(|e| format!("active kinematics: {e}; nothing moved"))?;
         }
     }
     if cfg.probe(&call.tool.probe.name).is_none() {
@@ -108,8 +118,9 @@ pub fn run_program<M: Machine>(
 ) -> ProgramReport {
     let mut report = ProgramReport::default();
     let axes = machine.axes();
+    let kinematics = opts.kinematics_path(cfg);
     for call in program.cycles() {
-        if let Err(message) = preflight(call, axes, cfg) {
+        if let Err(message) = preflight(call, axes, cfg, &kinematics) {
             report.stopped = Some(format!("block {}: {message}", call.block));
             report
                 .cycles
@@ -117,9 +128,42 @@ pub fn run_program<M: Machine>(
             return report;
         }
     }
+    for block in &program.blocks {
+        if let Statement::Other(code) = &block.statement {
+            if let Some(Err(message)) = parse_linear(code, program.unit) {
+                report.stopped = Some(format!("line {}: {message}; nothing moved", block.line));
+                return report;
+            }
+        }
+    }
+    // Rapid positioning: as fast as the slowest axis on the path allows.
+    let rapid = cfg.axes.iter().map(|a| a.max_feed).fold(0.0, f64::max);
     let program_path = program.path.as_deref();
     let mut points: Vec<Probing3dRecord> = Vec::new();
-    for call in program.cycles() {
+    for block in &program.blocks {
+        let call = match &block.statement {
+            Statement::Cycle(call) => &**call,
+            Statement::Other(code) => {
+                if let Some(Ok(mv)) = parse_linear(code, program.unit) {
+                    let feed = match mv.feed {
+                        MoveFeed::Rapid => rapid,
+                        MoveFeed::Feed(f) => f,
+                    };
+                    let number = block.number.unwrap_or(block.line as u32);
+                    (opts.progress)(ProgressEvent::Move {
+                        block: number,
+                        target: mv.target,
+                        feed,
+                    });
+                    if let Err(e) = machine.move_to(&mv.target, feed) {
+                        report.stopped = Some(format!("block {number} (line {}): {e}", block.line));
+                        break;
+                    }
+                }
+                continue;
+            }
+            _ => continue,
+        };
         (opts.progress)(ProgressEvent::CycleStarted {
             block: call.block,
             cycle: call.cycle,
@@ -135,17 +179,18 @@ pub fn run_program<M: Machine>(
             &mut report,
         );
         let result = match outcome {
-            Ok((q, stop)) => {
-                if let Some(m) = &stop {
+            Ok(out) => {
+                if let Some(m) = &out.stop {
                     report.stopped = Some(format!("block {}: {m}", call.block));
                 }
                 CycleResult {
                     block: call.block,
                     cycle: call.cycle,
-                    q,
-                    qs: BTreeMap::new(),
+                    q: out.q,
+                    qs: out.qs,
                     status: Status::Ok,
-                    message: stop,
+                    message: out.stop,
+                    kinematics: out.kinematics,
                 }
             }
             Err(e) => {
@@ -170,7 +215,27 @@ pub fn run_program<M: Machine>(
     report
 }
 
-type Outcome = Result<(BTreeMap<String, f64>, Option<String>), CycleError>;
+/// What a cycle gives the report.
+struct CycleOutput {
+    q: BTreeMap<String, f64>,
+    qs: BTreeMap<String, String>,
+    /// The program stops after this cycle, with this message.
+    stop: Option<String>,
+    kinematics: Option<Box<KinematicsReport>>,
+}
+
+impl CycleOutput {
+    fn new(q: BTreeMap<String, f64>, stop: Option<String>) -> Self {
+        Self {
+            q,
+            qs: BTreeMap::new(),
+            stop,
+            kinematics: None,
+        }
+    }
+}
+
+type Outcome = Result<CycleOutput, CycleError>;
 
 fn run_cycle<M: Machine>(
     call: &CycleCall,
@@ -185,7 +250,7 @@ fn run_cycle<M: Machine>(
         CycleKind::MeasurePlane(p) => {
             let out = cycle431::run(call, p, machine, opts.progress)?;
             let stop = plane_protocol(call, p.protocol, &out.record, opts, program_path, report)?;
-            Ok((out.q, stop))
+            Ok(CycleOutput::new(out.q, stop))
         }
         CycleKind::Probing3d(p) => {
             let out = cycle444::run(call, p, machine, opts.progress)?;
@@ -201,7 +266,7 @@ fn run_cycle<M: Machine>(
                     message: e.to_string(),
                 })?;
             note_protocol(call, path, opts, report);
-            Ok((out.q, out.stop))
+            Ok(CycleOutput::new(out.q, out.stop))
         }
         CycleKind::SaveKinematics => {
             let message = save_kinematics_cycle(call, cfg, opts)?;
@@ -209,12 +274,36 @@ fn run_cycle<M: Machine>(
                 block: call.block,
                 text: message.clone(),
             });
-            Ok((BTreeMap::new(), None))
+            Ok(CycleOutput::new(BTreeMap::new(), None))
         }
-        CycleKind::MeasureKinematics => Err(CycleError::Plan(format!(
-            "cycle {} cannot run in this build",
-            call.cycle
-        ))),
+        CycleKind::MeasureKinematics => {
+            let plan = crate::cycle451::plan(call, cfg).map_err(CycleError::Plan)?;
+            let kinematics = opts.kinematics_path(cfg);
+            let mut local = LocalEstimator;
+            let estimator: &mut dyn Estimator = match opts.estimator.as_deref_mut() {
+                Some(e) => e,
+                None => &mut local,
+            };
+            let mut ctx = crate::cycle451::Context {
+                cfg,
+                kinematics,
+                estimator,
+                confirm: &mut *opts.confirm,
+                progress: &mut *opts.progress,
+                out_dir: &opts.out_dir,
+                program: program_path,
+            };
+            let out = crate::cycle451::run(call, &plan, machine, &mut ctx)?;
+            if let Some(path) = out.protocol {
+                note_protocol(call, path, opts, report);
+            }
+            Ok(CycleOutput {
+                q: out.q,
+                qs: out.qs,
+                stop: out.stop,
+                kinematics: Some(Box::new(out.report)),
+            })
+        }
     }
 }
 

@@ -30,6 +30,7 @@ fn run(p: &Program, m: &mut MockMachine) -> probebridge_cycles::ProgramReport {
         confirm: &mut confirm,
         progress: &mut progress,
         kinematics: None,
+        estimator: None,
     };
     probebridge_cycles::run_program(p, m, &machine(), &mut opts)
 }

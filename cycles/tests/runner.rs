@@ -92,8 +92,8 @@ fn nothing_moves_when_validation_fails() {
     assert!(!check_program(&bad, &cfg).is_empty());
     assert_eq!(m.motion_count(), 0);
 
-    // A cycle this build validates but cannot run (451) stops the program before the
-    // first cycle moves anything.
+    // A cycle the machine cannot run (451 on a machine without rotary axes) stops the
+    // program before the first cycle moves anything.
     let text = format!(
         "1 TOOL CALL \"TOUCH_PROBE\" Z\n{}20 G451 Q406=+0 Q407=+12.5\n",
         point(10, 0.0)
@@ -124,6 +124,7 @@ fn nothing_moves_when_validation_fails() {
         confirm: &mut confirm,
         progress: &mut progress,
         kinematics: None,
+        estimator: None,
     };
     let report = probebridge_cycles::run_program(&program, &mut m, &other, &mut opts);
     assert_eq!(m.motion_count(), 0);
@@ -159,6 +160,7 @@ fn report_json_has_the_agreed_shape() {
         qs: Default::default(),
         status: Status::Ok,
         message: None,
+        kinematics: None,
     });
     assert_eq!(
         serde_json::to_string(&one).unwrap(),
@@ -178,6 +180,7 @@ fn progress_reports_cycles_moves_and_contacts() {
         confirm: &mut confirm,
         progress: &mut progress,
         kinematics: None,
+        estimator: None,
     };
     probebridge_cycles::run_program(&program, &mut m, &common::config(), &mut opts);
     use probebridge_cycles::ProgressEvent as E;

@@ -35,6 +35,7 @@ fn run(text: &str, kin: &std::path::Path) -> (probebridge_cycles::ProgramReport,
         confirm: &mut confirm,
         progress: &mut progress,
         kinematics: Some(kin.to_path_buf()),
+        estimator: None,
     };
     let report = run_program(&program, &mut m, &cfg, &mut opts);
     assert_eq!(m.motion_count(), 0, "cycle 450 must not move the machine");

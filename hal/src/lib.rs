@@ -19,6 +19,7 @@ pub mod contact_sample;
 pub mod machine;
 pub mod master;
 pub mod motion;
+pub mod rt;
 
 pub use axis::{Axis, AxisPositions};
 pub use contact_sample::{ContactSample, NullSink, SampleSink, SinkError};

@@ -481,7 +481,9 @@ impl SimDrive {
 
     /// Ends a step at `to_inc`. `latch_fraction`: the probe signal rose at this
     /// fraction of the step; `level`: the probe signal at the end of the step.
-    pub fn end_step(&mut self, to_inc: i32, latch_fraction: Option<f64>, level: bool) {
+    /// Returns whether touch probe 1 latched in this step.
+    pub fn end_step(&mut self, to_inc: i32, latch_fraction: Option<f64>, level: bool) -> bool {
+        let mut latched = false;
         if let Some(frac) = latch_fraction {
             let f = TouchProbeFunction::from_bits(self.od.tp_function);
             let st = TouchProbeStatus::from_bits(self.od.tp_status);
@@ -493,6 +495,7 @@ impl SimDrive {
                 let pos = from + frac * (to_inc as f64 - from);
                 self.od.tp_pos_edge = pos.round() as i32;
                 self.od.tp_status |= TouchProbeStatus::POSITIVE_EDGE_STORED;
+                latched = true;
             }
         }
         if level {
@@ -501,6 +504,7 @@ impl SimDrive {
             self.od.tp_status &= !TouchProbeStatus::INPUT_LEVEL;
         }
         self.od.actual = to_inc;
+        latched
     }
 
     /// Puts the drive into Fault with an EMCY `code` (sent with the next SYNC answer).

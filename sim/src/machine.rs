@@ -11,7 +11,7 @@ use hal::axis::AxisPositions;
 use hal::can::{CanFrame, CanTransport, TransportError};
 use hal::canopen::cob_id::{self, CobKind};
 use hal::config::MachineConfig;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
@@ -43,6 +43,59 @@ pub struct SimMachine {
     time_us: u64,
     faults: Vec<PlannedFault>,
     syncs: u64,
+    latch_log: Option<Arc<LatchLog>>,
+}
+
+/// Latches the ring of a [`LatchLog`] remembers.
+pub const LATCH_LOG_CAPACITY: usize = 4096;
+
+/// When the simulated drives latched, on CLOCK_MONOTONIC (the clock every process of
+/// the gateway shares): the t0 of trigger-latency benchmarks. The simulation records
+/// into it without locking or allocating; a reader in another thread asks for latch
+/// number `n` (counted from 0) while it is among the last [`LATCH_LOG_CAPACITY`].
+pub struct LatchLog {
+    count: AtomicU64,
+    t0_ns: [AtomicU64; LATCH_LOG_CAPACITY],
+}
+
+impl LatchLog {
+    pub fn new() -> Arc<Self> {
+        Arc::new(Self {
+            count: AtomicU64::new(0),
+            t0_ns: [const { AtomicU64::new(0) }; LATCH_LOG_CAPACITY],
+        })
+    }
+
+    /// Latches recorded so far.
+    pub fn count(&self) -> u64 {
+        self.count.load(Ordering::Acquire)
+    }
+
+    /// Instant of latch `n`, if it happened and is still in the ring.
+    pub fn get(&self, n: u64) -> Option<u64> {
+        let count = self.count();
+        if n >= count || count - n > LATCH_LOG_CAPACITY as u64 {
+            return None;
+        }
+        let t = self.t0_ns[(n % LATCH_LOG_CAPACITY as u64) as usize].load(Ordering::Relaxed);
+        // Overwritten meanwhile by a writer that lapped the reader?
+        (self.count() - n <= LATCH_LOG_CAPACITY as u64).then_some(t)
+    }
+
+    /// Single writer: the simulation thread.
+    fn record(&self, t0_ns: u64) {
+        let n = self.count.load(Ordering::Relaxed);
+        self.t0_ns[(n % LATCH_LOG_CAPACITY as u64) as usize].store(t0_ns, Ordering::Relaxed);
+        self.count.store(n + 1, Ordering::Release);
+    }
+}
+
+impl core::fmt::Debug for LatchLog {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("LatchLog")
+            .field("count", &self.count())
+            .finish()
+    }
 }
 
 impl SimMachine {
@@ -92,7 +145,13 @@ impl SimMachine {
             time_us: 0,
             faults,
             syncs: 0,
+            latch_log: None,
         }
+    }
+
+    /// Records the wall-clock instant of every latch into `log` (benchmarks).
+    pub fn set_latch_log(&mut self, log: Arc<LatchLog>) {
+        self.latch_log = Some(log);
     }
 
     /// Simulated time since the first SYNC, µs.
@@ -158,11 +217,18 @@ impl SimMachine {
         let latch = self.world.step(&from, &to);
         let level = self.world.deflected(&to);
         let collision = self.world.penetration(&to) > PROBE_OVERTRAVEL_MM;
+        let mut latched = false;
         for d in &mut self.drives {
             let target = d.drive.next_position_inc();
-            d.drive.end_step(target, latch, level);
+            latched |= d.drive.end_step(target, latch, level);
             if collision {
                 d.drive.raise_fault(EMCY_PROBE_COLLISION);
+            }
+        }
+        if latched {
+            if let Some(log) = &self.latch_log {
+                // Before the drives send their latch frames below.
+                log.record(hal::clock::monotonic_ns());
             }
         }
         for d in &mut self.drives {
@@ -179,12 +245,23 @@ pub struct SimRunner {
 
 impl SimRunner {
     /// Serves `machine` on `transport`: every frame is handled as it arrives.
-    pub fn spawn<T: CanTransport + 'static>(mut machine: SimMachine, mut transport: T) -> Self {
+    pub fn spawn<T: CanTransport + 'static>(machine: SimMachine, transport: T) -> Self {
+        Self::spawn_with_init(machine, transport, || {})
+    }
+
+    /// As [`SimRunner::spawn`], calling `init` first in the simulation thread (a
+    /// benchmark gives the drives' stand-in real-time priority there).
+    pub fn spawn_with_init<T: CanTransport + 'static>(
+        mut machine: SimMachine,
+        mut transport: T,
+        init: impl FnOnce() + Send + 'static,
+    ) -> Self {
         let stop = Arc::new(AtomicBool::new(false));
         let stop2 = stop.clone();
         let thread = std::thread::Builder::new()
             .name("probebridge-sim".into())
             .spawn(move || {
+                init();
                 let mut out: Vec<CanFrame> = Vec::with_capacity(64);
                 while !stop2.load(Ordering::Acquire) {
                     let Some(f) = transport.receive(Duration::from_millis(50))? else {

@@ -3,6 +3,7 @@
 
 pub mod conformance;
 pub mod loopback;
+pub mod spec451;
 
 use sim::Scenario;
 use std::path::{Path, PathBuf};

@@ -21,6 +21,7 @@ fn run(program: &str, sc: &sim::Scenario) -> ProgramReport {
         confirm: &mut confirm,
         progress: &mut progress,
         kinematics: None,
+        estimator: None,
     };
     run_program(&program, &mut m, &cfg, &mut opts)
 }

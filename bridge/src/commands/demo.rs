@@ -1,10 +1,19 @@
 //! `probebridge demo`: the simulated table-ac machine with a calibration sphere, the
 //! estimator as a child process, the sphere's pole and four points around it probed in
-//! real time, and the sphere fitted by the estimator from the published contacts.
+//! real time, and the sphere fitted by the estimator from the published contacts. Then
+//! cycle 451 mode 1 on the rotary axes of the scenario (A and C on the default one, with
+//! its injected location errors), on the simulator's virtual clock so that the dozens of
+//! probing moves take seconds, the spheres fitted and the identification solved by the
+//! same estimator process, written to a temporary copy of the kinematics file (the
+//! repository's configuration stays as it is): the errors before and after, and where
+//! the protocol is.
 
-use crate::ipc::EstimatorChild;
+use crate::ipc::{EstimatorChild, IpcEstimator};
 use crate::session::{MachineOptions, Session};
-use hal::{AxisPositions, Machine, ProbeMove};
+use cycles::kinematics_file::ActiveKinematics;
+use cycles::program::Program;
+use cycles::runner::{run_program, ProgressEvent, RunOptions};
+use hal::{Axis, AxisPositions, Machine, ProbeMove};
 use std::time::Duration;
 
 pub fn run(machine: &MachineOptions) -> Result<(), String> {
@@ -131,5 +140,165 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
         dev_len,
         (radius - r).abs()
     );
+    drop(s);
+    kinematics(&opts, &estimator)
+}
+
+/// The measuring range the demo gives each rotary axis (start, end, points), inside
+/// the axis's software limits.
+fn demo_range(axis: Axis, cfg: &hal::config::MachineConfig) -> Option<(f64, f64, u32)> {
+    let a = cfg.axis(axis)?;
+    let (start, end, n): (f64, f64, u32) = match axis {
+        Axis::C => (90.0, 270.0, 3),
+        Axis::A => (-90.0, 90.0, 4),
+        _ => (-60.0, 60.0, 4),
+    };
+    let (start, end) = (start.max(a.min), end.min(a.max));
+    (end > start).then_some((start, end, n))
+}
+
+/// Cycle 451 mode 1 on the scenario's rotary axes; see the module doc.
+fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), String> {
+    let mut opts = opts.clone();
+    opts.realtime = false;
+    let mut s = Session::open(&opts).map_err(|e| e.to_string())?;
+    let scenario = s
+        .scenario
+        .clone()
+        .ok_or("the demo runs on the simulator only")?;
+    let sphere = scenario.spheres[0];
+    let cfg = s.config.clone();
+    let probe = cfg.probes[0].clone();
+    let dir = std::env::temp_dir().join(format!("probebridge-demo-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    // A temporary copy of the machine's kinematics file.
+    let shipped = ActiveKinematics::default_path(&cfg);
+    let kin = dir.join(shipped.file_name().unwrap_or_default());
+    let _ = std::fs::remove_file(&kin);
+    let _ = std::fs::remove_file(kin.with_extension("toml.prev"));
+    if shipped.exists() {
+        std::fs::copy(&shipped, &kin).map_err(|e| format!("{}: {e}", shipped.display()))?;
+    }
+    let before = ActiveKinematics::load(&kin, &cfg).map_err(|e| e.to_string())?;
+
+    let mut q = String::new();
+    let mut measured = Vec::new();
+    for (axis, base) in [(Axis::A, 411), (Axis::B, 415), (Axis::C, 419)] {
+        let (start, end, n) = demo_range(axis, &cfg).unwrap_or((0.0, 0.0, 0));
+        if n > 0 {
+            measured.push(axis);
+        }
+        q.push_str(&format!(
+            "  Q{}={start:+} ~\n  Q{}={end:+} ~\n  Q{}=+0 ~\n  Q{}={n:+} ~\n",
+            base,
+            base + 1,
+            base + 2,
+            base + 3
+        ));
+    }
+    let c = sphere.center;
+    let above = c[2] + sphere.radius + probe.radius + probe.set_up + 5.0;
+    let text = format!(
+        "0 BEGIN PGM DEMO451 MM\n1 TOOL CALL \"{}\" Z\n2 L Z{:+} R0 FMAX\n3 L X{:+} Y{:+} R0 FMAX\n4 L Z{above:+} R0 FMAX\n\
+5 TCH PROBE 451 MEASURE KINEMATICS ~\n  Q406=+1 ;MODE ~\n  Q407={:+} ;SPHERE RADIUS ~\n  Q320=+0 ~\n  Q408=+0 ~\n\
+  Q253=+750 ~\n  Q380=+0 ~\n{q}  Q423=+4 ~\n  Q431=+0 ~\n  Q432=+0\n6 L Z{:+} R0 FMAX\n7 END PGM DEMO451 MM\n",
+        probe.name,
+        above + 50.0,
+        c[0],
+        c[1],
+        sphere.radius,
+        above + 50.0,
+    );
+    let program_path = dir.join("demo451.h");
+    std::fs::write(&program_path, &text).map_err(|e| e.to_string())?;
+    let program = Program::load(&program_path, &cfg).map_err(|e| e.to_string())?;
+    println!();
+    println!(
+        "cycle 451 MEASURE KINEMATICS, mode 1 (optimise position) on {} (virtual clock):",
+        measured
+            .iter()
+            .map(|a| a.name())
+            .collect::<Vec<_>>()
+            .join(" and ")
+    );
+    println!("  program {}", program_path.display());
+    println!("  kinematics: a temporary copy, {}", kin.display());
+    let mut spheres = 0usize;
+    let mut progress = |ev: ProgressEvent| {
+        if let ProgressEvent::Note { text, .. } = ev {
+            if text.starts_with("measuring") {
+                spheres += 1;
+                println!("  {spheres:2}. {}", &text["measuring ".len()..]);
+            }
+        }
+    };
+    let mut confirm = |_: &str| true;
+    let mut ipc = IpcEstimator {
+        client: estimator.client(),
+        timeout: Duration::from_secs(10),
+    };
+    let t0 = std::time::Instant::now();
+    let mut run = RunOptions {
+        out_dir: dir.clone(),
+        confirm: &mut confirm,
+        progress: &mut progress,
+        kinematics: Some(kin.clone()),
+        estimator: Some(&mut ipc),
+    };
+    let report = run_program(&program, &mut s.machine, &cfg, &mut run);
+    drop(s);
+    let result = report
+        .cycles
+        .iter()
+        .find(|c| c.cycle == 451)
+        .ok_or("cycle 451 did not run")?;
+    if let Some(why) = &report.stopped {
+        return Err(format!("cycle 451: {why}"));
+    }
+    let k = result
+        .kinematics
+        .as_ref()
+        .ok_or("cycle 451 gave no kinematics result")?;
+    println!(
+        "  measured in {:.1} s; spheres fitted and errors identified by the {}",
+        t0.elapsed().as_secs_f64(),
+        k.estimator
+    );
+    println!("  error       before       after    injected (scenario truth)");
+    for a in &measured {
+        for name in cycles::kinematics_file::error_names(*a) {
+            let b = before.error(name);
+            let after = k.errors_after.get(*name).copied().unwrap_or(b);
+            let truth = scenario.truth.get(name).unwrap_or(0.0);
+            println!(
+                "  {name}  {b:+10.6}  {after:+10.6}  {truth:+10.6}{}",
+                if after != b { "  corrected" } else { "" }
+            );
+        }
+    }
+    for a in &k.axes {
+        println!(
+            "  axis {}: dispersion {:.6} -> {:.6} mm (Q14x), max deviation {:.6} -> {:.6} mm",
+            a.axis, a.dispersion_before, a.dispersion_after, a.max_before, a.max_after
+        );
+    }
+    for (name, v) in &result.qs {
+        println!("  {name} = \"{v}\"");
+    }
+    println!(
+        "  mode 1 corrects the positions of the axes; the orientation errors stay (mode 2 finds them too)"
+    );
+    println!(
+        "  kinematics {}: {}",
+        kin.display(),
+        if k.written {
+            "corrected errors written"
+        } else {
+            "not changed"
+        }
+    );
+    for p in &report.protocols {
+        println!("  protocol: {}", p.display());
+    }
     Ok(())
 }

@@ -1,5 +1,6 @@
 //! One module per `probebridge` subcommand.
 
+pub mod bench;
 pub mod check;
 pub mod demo;
 pub mod estimator;

@@ -2,12 +2,17 @@
 //! configured machine; results as a table, protocols next to the program (or in
 //! `--out`), and JSON with `--json`.
 
+use crate::ipc::{EstimatorChild, EstimatorClient, IpcEstimator};
 use crate::output::write_atomic;
 use crate::session::{resolve_machine, MachineOptions, Session};
 use cycles::program::{Program, ProgramError};
 use cycles::runner::{run_program, ProgressEvent, RunOptions};
 use std::io::{BufRead, IsTerminal, Write};
 use std::path::PathBuf;
+use std::time::Duration;
+
+/// Longest wait for one answer of the estimator process.
+const ESTIMATOR_TIMEOUT: Duration = Duration::from_secs(10);
 
 pub struct RunArgs {
     pub program: PathBuf,
@@ -48,6 +53,14 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     std::fs::create_dir_all(&out_dir)
         .map_err(|e| format!("cannot create {}: {e}", out_dir.display()))?;
 
+    // Cycle 451 fits its spheres and solves its identification in the estimator
+    // process: use the one serving this prefix, or start one. It must subscribe before
+    // the first contact is published.
+    let estimator = if program.cycles().any(|c| c.cycle == 451) {
+        estimator_link(&args.machine.service)
+    } else {
+        None
+    };
     let mut session = Session::open(&args.machine).map_err(|e| e.to_string())?;
     for note in &session.startup.notes {
         eprintln!("note: {note}");
@@ -94,7 +107,15 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
         confirm: &mut confirm,
         progress: &mut progress,
         kinematics: args.kinematics.clone(),
+        estimator: None,
     };
+    let mut ipc = estimator.as_ref().map(|e| IpcEstimator {
+        client: e.client(),
+        timeout: ESTIMATOR_TIMEOUT,
+    });
+    if let Some(e) = ipc.as_mut() {
+        opts.estimator = Some(e);
+    }
     let report = run_program(&program, &mut session.machine, &session.config, &mut opts);
     print!("{}", report.to_text());
     if let Some(path) = &args.json {
@@ -104,4 +125,45 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
         eprintln!("program stopped: {why}");
     }
     Ok(if report.completed() { 0 } else { 1 })
+}
+
+/// The estimator process cycle 451 talks to.
+enum EstimatorLink {
+    /// Already serving the prefix (a daemon, or another bridge's).
+    Running(EstimatorClient),
+    /// Started by this run; stops with it.
+    Child(EstimatorChild),
+}
+
+impl EstimatorLink {
+    fn client(&self) -> &EstimatorClient {
+        match self {
+            EstimatorLink::Running(c) => c,
+            EstimatorLink::Child(c) => c.client(),
+        }
+    }
+}
+
+/// Connects to the estimator on `prefix`, or starts one as a child process. Without
+/// either the cycle computes in this process (said on stderr).
+fn estimator_link(prefix: &str) -> Option<EstimatorLink> {
+    if let Ok(c) = EstimatorClient::connect(prefix, Duration::from_millis(300)) {
+        eprintln!("estimator: using the estimator process serving {prefix}");
+        return Some(EstimatorLink::Running(c));
+    }
+    match EstimatorChild::spawn(prefix, ESTIMATOR_TIMEOUT) {
+        Ok(child) => {
+            eprintln!(
+                "estimator: started the estimator process (pid {}) on {prefix}",
+                child.id()
+            );
+            Some(EstimatorLink::Child(child))
+        }
+        Err(e) => {
+            eprintln!(
+                "estimator: cannot start the estimator process ({e}); cycle 451 computes in this process"
+            );
+            None
+        }
+    }
 }

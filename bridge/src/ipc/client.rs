@@ -129,6 +129,9 @@ impl EstimatorClient {
             Some(RequestKind::FitSphere) => "a sphere fit request",
             Some(RequestKind::Forget) => "a forget request",
             Some(RequestKind::Shutdown) => "a shutdown request",
+            Some(RequestKind::IdentifyData) => "an identification input chunk",
+            Some(RequestKind::Identify) => "an identification request",
+            Some(RequestKind::IdentifyResult) => "an identification result request",
             _ => "a request",
         };
         // Events from earlier replies must not count as the answer to this one.

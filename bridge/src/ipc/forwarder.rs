@@ -29,16 +29,32 @@ pub struct ForwardingSink {
 impl ForwardingSink {
     /// Creates the [`ContactPublisher`] on `prefix` and starts the forwarder thread.
     pub fn spawn(prefix: &str) -> Result<Self, IpcError> {
+        Self::spawn_realtime(prefix, 0).map(|(sink, _)| sink)
+    }
+
+    /// As [`ForwardingSink::spawn`], the forwarder thread under SCHED_FIFO at
+    /// `priority` (0: do not ask). The forwarder is on the hot path: left to the
+    /// ordinary scheduler, its wake-up waits behind whatever else runs on a busy
+    /// gateway. Returns whether SCHED_FIFO was granted.
+    pub fn spawn_realtime(prefix: &str, priority: i32) -> Result<(Self, bool), IpcError> {
         let mut publisher = ContactPublisher::new(prefix)?;
         let (tx, rx) = sync_channel::<ContactSample>(FORWARD_QUEUE);
+        let (got_tx, got_rx) = sync_channel::<bool>(1);
         let forwarder = std::thread::Builder::new()
             .name("pb-contact-fwd".into())
-            .spawn(move || forward(&mut publisher, rx))?;
-        Ok(Self {
-            tx: Some(tx),
-            forwarder: Some(forwarder),
-            refused: 0,
-        })
+            .spawn(move || {
+                let _ = got_tx.send(priority > 0 && hal::rt::set_fifo_priority(priority));
+                forward(&mut publisher, rx)
+            })?;
+        let fifo = got_rx.recv().unwrap_or(false);
+        Ok((
+            Self {
+                tx: Some(tx),
+                forwarder: Some(forwarder),
+                refused: 0,
+            },
+            fifo,
+        ))
     }
 
     /// Stops the forwarder after it has published everything queued; returns its

@@ -26,12 +26,14 @@
 
 mod client;
 mod forwarder;
+mod identify;
 mod payload;
 mod publisher;
 mod subscriber;
 
 pub use client::{EstimatorChild, EstimatorClient};
 pub use forwarder::{ForwardingSink, FORWARD_QUEUE};
+pub use identify::{IdentifySessions, IpcEstimator, CHUNK, MAX_INPUT, MAX_SESSIONS};
 pub use payload::{
     EstimatorReply, EstimatorRequest, ReplyStatus, RequestKind, SphereResult, REPLY_VALUES,
     REQUEST_MAX_RUNS, REQUEST_PARAMS,

@@ -32,6 +32,19 @@ pub enum RequestKind {
     Forget = 3,
     /// Ask the estimator process to exit after replying.
     Shutdown = 4,
+    /// Cycle 451: one chunk of an identification input (see
+    /// `cycles::kinematics::codec`) for session `run_id`: `params[0]` is the offset of
+    /// the chunk (chunks arrive in order), `params[1..n_params]` the values. Reply: `Ok`
+    /// with `n_points` = values received so far, or `BadRequest`.
+    IdentifyData = 5,
+    /// Cycle 451: solve the identification uploaded for session `run_id`, whose input
+    /// has `params[0]` values. Reply: `Ok` with the first [`REPLY_VALUES`] values of the
+    /// encoded result (an identification error is encoded in it, not a status) and
+    /// `n_points` = its full length; `UnknownRun` without such a session; `BadRequest`
+    /// for an incomplete or malformed input.
+    Identify = 6,
+    /// Cycle 451: the values of session `run_id`'s result from offset `params[0]`.
+    IdentifyResult = 7,
 }
 
 impl RequestKind {
@@ -41,6 +54,9 @@ impl RequestKind {
             2 => Self::FitSphere,
             3 => Self::Forget,
             4 => Self::Shutdown,
+            5 => Self::IdentifyData,
+            6 => Self::Identify,
+            7 => Self::IdentifyResult,
             _ => return None,
         })
     }
@@ -160,6 +176,20 @@ impl EstimatorRequest {
 
     pub const fn shutdown() -> Self {
         Self::new(RequestKind::Shutdown, 0)
+    }
+
+    /// A request of `kind` about `run_id` carrying `params` (at most [`REQUEST_PARAMS`]).
+    pub fn with_params(kind: RequestKind, run_id: u64, params: &[f64]) -> Self {
+        let mut r = Self::new(kind, run_id);
+        let n = params.len().min(REQUEST_PARAMS);
+        r.params[..n].copy_from_slice(&params[..n]);
+        r.n_params = n as u32;
+        r
+    }
+
+    /// The valid parameters, or `None` if `n_params` is too large.
+    pub fn params(&self) -> Option<&[f64]> {
+        self.params.get(..self.n_params as usize)
     }
 
     pub fn request_kind(&self) -> Option<RequestKind> {
@@ -348,6 +378,9 @@ mod tests {
             RequestKind::FitSphere,
             RequestKind::Forget,
             RequestKind::Shutdown,
+            RequestKind::IdentifyData,
+            RequestKind::Identify,
+            RequestKind::IdentifyResult,
         ] {
             assert_eq!(RequestKind::from_u32(k as u32), Some(k));
         }

@@ -261,6 +261,7 @@ pub fn run(
         confirm: &mut confirm_fn,
         progress: &mut progress,
         kinematics: None,
+        estimator: None,
     };
     let report = probebridge_cycles::run_program(program, m, &cfg, &mut opts);
     (report, shown)

@@ -318,6 +318,10 @@ fn run_thread<T: CanTransport, S: SampleSink>(
 impl Machine for CanMachine {
     type Error = MachineError;
 
+    fn set_run(&mut self, run_id: u64) {
+        self.set_run_id(run_id);
+    }
+
     fn axes(&self) -> u8 {
         self.config.axis_mask()
     }

@@ -1,0 +1,213 @@
+//! Cycle 451 through `probebridge run` as a user runs it: the estimator process is
+//! started, the spheres are fitted and the identification solved there, and the
+//! results are checked against the scenario's injected errors and against an
+//! independent computation of spec.md's formulas.
+
+#[path = "../../tests/src/spec451.rs"]
+#[allow(dead_code)]
+mod spec451;
+
+use spec451::*;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_probebridge"))
+}
+
+fn configs() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs")
+}
+
+fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("pb-cli451-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn run(cmd: &mut Command) -> Output {
+    let out = cmd.output().expect("run probebridge");
+    if !out.status.success() {
+        eprintln!("stdout:\n{}", String::from_utf8_lossy(&out.stdout));
+        eprintln!("stderr:\n{}", String::from_utf8_lossy(&out.stderr));
+    }
+    out
+}
+
+fn machine(name: &str) -> hal::config::MachineConfig {
+    hal::config::MachineConfig::load(&configs().join(format!("machines/{name}.toml"))).unwrap()
+}
+
+/// A scenario written here with every location error of A and C injected, noise 0.
+const SCENARIO: &str = r#"
+seed = 11
+[probe]
+ball_radius = 3.0
+noise = 0.0
+pretravel = 0.0
+[truth]
+EY0A = -0.014
+EZ0A = 0.009
+EB0A = -0.006
+EC0A = 0.003
+EX0C = 0.021
+EY0C = -0.017
+EA0C = 0.005
+EB0C = -0.004
+[[sphere]]
+center = [-40.0, 45.0, 70.0]
+radius = 12.5
+"#;
+
+const PROGRAM: &str = "0 BEGIN PGM K MM
+1 TOOL CALL \"TOUCH_PROBE\" Z
+2 L Z+150 R0 FMAX
+3 L X-40 Y+45 R0 FMAX
+4 L Z+92.5 R0 FMAX
+5 TCH PROBE 451 MEASURE KINEMATICS ~
+    Q406=+2 ;MODE ~
+    Q407=+12.5 ;SPHERE RADIUS ~
+    Q320=+0 ;SET-UP CLEARANCE ~
+    Q408=+0 ;RETR. HEIGHT ~
+    Q253=+750 ;F PRE-POSITIONING ~
+    Q380=+0 ;REFERENCE ANGLE ~
+    Q411=-90 ~
+    Q412=+90 ~
+    Q413=+0 ~
+    Q414=+4 ~
+    Q415=+0 ~
+    Q416=+0 ~
+    Q417=+0 ~
+    Q418=+0 ~
+    Q419=+60 ~
+    Q420=+300 ~
+    Q421=+0 ~
+    Q422=+5 ~
+    Q423=+4 ;NO. OF PROBE POINTS ~
+    Q431=+0 ;PRESET ~
+    Q432=+0 ;BACKLASH, ANG. RANGE
+6 END PGM K MM
+";
+
+/// Must show: on a scenario written by hand (noise 0), `probebridge run` recovers every
+/// injected error, and Q141..Q146 / QS144..QS146 match spec.md's formulas computed
+/// independently; the estimator process did the fitting and the identification.
+#[test]
+fn run_451_recovers_hand_written_errors_in_the_estimator_process() {
+    let dir = tmpdir("mode2");
+    let scenario = dir.join("scenario.toml");
+    std::fs::write(
+        &scenario,
+        format!(
+            "machine = \"{}\"\n{SCENARIO}",
+            configs().join("machines/table-ac.toml").display()
+        ),
+    )
+    .unwrap();
+    let program = dir.join("k.h");
+    std::fs::write(&program, PROGRAM).unwrap();
+    let json = dir.join("r.json");
+    let kin = dir.join("table-ac.kinematics.toml");
+    let out = run(bin().args([
+        "run",
+        program.to_str().unwrap(),
+        "--scenario",
+        scenario.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+        "--kinematics",
+        kin.to_str().unwrap(),
+        "--service",
+        &format!("pb-cli451-{}", std::process::id()),
+    ]));
+    assert!(out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("started the estimator process"), "{stderr}");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let c = &v["cycles"][0];
+    assert_eq!(c["status"], "ok", "{c}");
+    assert!(
+        c["kinematics"]["estimator"]
+            .as_str()
+            .unwrap()
+            .starts_with("estimator process"),
+        "{}",
+        c["kinematics"]["estimator"]
+    );
+    let after = errors_of(&c["kinematics"]["errors_after"]);
+    for (name, truth) in [
+        ("EY0A", -0.014),
+        ("EZ0A", 0.009),
+        ("EB0A", -0.006),
+        ("EC0A", 0.003),
+        ("EX0C", 0.021),
+        ("EY0C", -0.017),
+        ("EA0C", 0.005),
+        ("EB0C", -0.004),
+    ] {
+        assert!(
+            (after[name] - truth).abs() < 1e-4,
+            "{name}: {} vs {truth}",
+            after[name]
+        );
+    }
+    check_results_against_spec(c, &machine("table-ac"));
+    // Every measuring position with all its angles, centre and radius.
+    let positions = c["kinematics"]["axes"][1]["positions"].as_array().unwrap();
+    assert_eq!(positions.len(), 6);
+    for p in positions {
+        assert!(p["angles"]["A"].is_number() && p["angles"]["C"].is_number());
+        assert!((p["radius"].as_f64().unwrap() - 12.5).abs() < 1e-4);
+        assert!(p["centre"][2].is_number());
+    }
+    // Written, with the protocol next to the program.
+    assert_eq!(c["kinematics"]["written"], true);
+    let k = std::fs::read_to_string(&kin).unwrap();
+    assert!(k.contains("EB0C") && k.contains("EY0A"), "{k}");
+    let html = std::fs::read_to_string(dir.join("TCHPRAUTO.html")).unwrap();
+    assert!(html.contains("<title>EYC</title>") && html.contains("<title>EZA</title>"));
+}
+
+/// The shipped check program on the demo scenario: mode 0 leaves the kinematics file
+/// byte for byte, exit 0, the dispersion of the injected errors shows.
+#[test]
+fn run_451_check_program_changes_nothing() {
+    let dir = tmpdir("check");
+    let kin = dir.join("k.toml");
+    let text = "machine = \"table-ac\"\n[errors]\nEY0C = 0.001 # by hand\n";
+    std::fs::write(&kin, text).unwrap();
+    let json = dir.join("r.json");
+    let out = run(bin().args([
+        "run",
+        configs().join("programs/451-check.h").to_str().unwrap(),
+        "--scenario",
+        configs()
+            .join("scenarios/demo-sphere.toml")
+            .to_str()
+            .unwrap(),
+        "--out",
+        dir.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+        "--kinematics",
+        kin.to_str().unwrap(),
+        "--service",
+        &format!("pb-cli451c-{}", std::process::id()),
+    ]));
+    assert!(out.status.success());
+    assert_eq!(std::fs::read_to_string(&kin).unwrap(), text);
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let c = &v["cycles"][0];
+    assert!(c["q"]["Q143"].as_f64().unwrap() > 0.005, "{c}");
+    assert_eq!(c["q"]["Q142"], -1.0);
+    assert_eq!(
+        c["qs"]["QS145"],
+        "-1.0000000 -1.0000000 -1.0000000 -1.0000000"
+    );
+    assert!((c["q"]["Q147"].as_f64().unwrap() - 50.0).abs() < 1e-3);
+    check_results_against_spec(c, &machine("table-ac"));
+    assert!(dir.join("TCHPRAUTO.html").exists());
+}

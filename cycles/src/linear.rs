@@ -1,0 +1,106 @@
+//! Straight positioning blocks between the cycles, `L X+50 Y-30 Z+97.5 R0 FMAX`: the
+//! runner moves there, so that a program can pre-position the probe (cycle 451 starts
+//! over the calibration sphere). Absolute machine coordinates of X, Y, Z, A, B, C;
+//! `R0`; `F<feed>`, `FMAX`, `FAUTO`; `M` functions are accepted and ignored. Anything
+//! else in an `L` block (incremental `IX`, radius compensation `RL`/`RR`, polar or
+//! circular moves) is refused before anything moves.
+
+use crate::program::LengthUnit;
+use hal::{Axis, AxisPositions};
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum MoveFeed {
+    /// Rapid (FMAX, FAUTO, or no feed given).
+    Rapid,
+    /// mm/min (deg/min for rotary-only moves).
+    Feed(f64),
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LinearMove {
+    pub target: AxisPositions,
+    pub feed: MoveFeed,
+}
+
+fn number(s: &str) -> Option<f64> {
+    let v: f64 = s.parse().ok()?;
+    v.is_finite().then_some(v)
+}
+
+/// `None` when `code` is not an `L` block; otherwise the move or why it cannot run.
+pub fn parse_linear(code: &str, unit: LengthUnit) -> Option<Result<LinearMove, String>> {
+    let mut words = code.split_whitespace();
+    if !words.next()?.eq_ignore_ascii_case("L") {
+        return None;
+    }
+    let inch = unit == LengthUnit::Inch;
+    let mut target = AxisPositions::new();
+    let mut feed = MoveFeed::Rapid;
+    for w in words {
+        let u = w.to_ascii_uppercase();
+        if u == "R0" || u == "FMAX" || u == "FAUTO" {
+            continue;
+        }
+        if u.starts_with('M') && u[1..].chars().all(|c| c.is_ascii_digit()) && u.len() > 1 {
+            continue;
+        }
+        if let Some(rest) = u.strip_prefix('F') {
+            match number(rest) {
+                Some(f) if f > 0.0 => {
+                    feed = MoveFeed::Feed(if inch { f * 2.54 } else { f });
+                    continue;
+                }
+                _ => return Some(Err(format!("L block: {w}: the feed must be a number > 0"))),
+            }
+        }
+        let Some(axis) = u.get(..1).and_then(Axis::from_name) else {
+            return Some(Err(format!(
+                "L block: {w}: only absolute X/Y/Z/A/B/C, R0, F and M words can run here"
+            )));
+        };
+        let Some(v) = number(&u[1..]) else {
+            return Some(Err(format!("L block: {w}: not a coordinate")));
+        };
+        if target.contains(axis) {
+            return Some(Err(format!("L block: {axis} given twice")));
+        }
+        let v = if inch && !axis.is_rotary() {
+            v * 25.4
+        } else {
+            v
+        };
+        target.set(axis, v);
+    }
+    if target.mask() == 0 {
+        return Some(Err("L block without a coordinate".into()));
+    }
+    Some(Ok(LinearMove { target, feed }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn positioning_blocks() {
+        let m = parse_linear("L X+50 Y-30 Z+97.5 R0 FMAX", LengthUnit::Mm)
+            .unwrap()
+            .unwrap();
+        assert_eq!(m.target.xyz(), [50.0, -30.0, 97.5]);
+        assert_eq!(m.feed, MoveFeed::Rapid);
+        let m = parse_linear("L C+90 F500 M3", LengthUnit::Mm)
+            .unwrap()
+            .unwrap();
+        assert_eq!(m.target.get(Axis::C), Some(90.0));
+        assert_eq!(m.feed, MoveFeed::Feed(500.0));
+        let m = parse_linear("L Z+1 F10", LengthUnit::Inch)
+            .unwrap()
+            .unwrap();
+        assert_eq!(m.target.get(Axis::Z), Some(25.4));
+        assert!(parse_linear("CYCL DEF 200", LengthUnit::Mm).is_none());
+        assert!(parse_linear("LBL 1", LengthUnit::Mm).is_none());
+        for bad in ["L IX+5", "L X+5 RL", "L", "L X+1 X+2", "L Xabc"] {
+            assert!(parse_linear(bad, LengthUnit::Mm).unwrap().is_err(), "{bad}");
+        }
+    }
+}

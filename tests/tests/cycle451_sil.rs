@@ -1,0 +1,641 @@
+//! Cycle 451 MEASURE KINEMATICS on the simulated machines over CANopen (master and
+//! simulated CiA 402 drives on the in-process bus), checked against the scenarios'
+//! injected truth and against an independent computation of spec.md's formulas
+//! written here with plain arrays (its own kinematic chain, its own Gauss-Newton).
+
+use cycles::program::Program;
+use cycles::results::{CycleResult, ProgramReport, Status};
+use cycles::runner::{run_program, RunOptions};
+use probebridge_tests::conformance::{Backend, CanInproc};
+use probebridge_tests::spec451::*;
+use probebridge_tests::{configs_dir, machine_config, scenario};
+
+use std::path::{Path, PathBuf};
+
+// ---------------------------------------------------------------------------------
+// Running a program.
+
+struct Run {
+    report: ProgramReport,
+    confirmations: Vec<String>,
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("pb-451-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn run_with(
+    program: &str,
+    sc: &sim::Scenario,
+    cfg: &hal::config::MachineConfig,
+    dir: &Path,
+    answer: bool,
+) -> Run {
+    let program = Program::parse(program, cfg).unwrap_or_else(|e| panic!("{e}"));
+    let mut m = CanInproc::open(sc);
+    let mut confirmations = Vec::new();
+    let mut confirm = |t: &str| {
+        confirmations.push(t.to_string());
+        answer
+    };
+    let mut progress = |_| {};
+    let mut opts = RunOptions {
+        out_dir: dir.to_path_buf(),
+        confirm: &mut confirm,
+        progress: &mut progress,
+        kinematics: Some(dir.join("kinematics.toml")),
+        estimator: None,
+    };
+    let report = run_program(&program, &mut m, cfg, &mut opts);
+    Run {
+        report,
+        confirmations,
+    }
+}
+
+fn run(program: &str, sc: &sim::Scenario, dir: &Path) -> Run {
+    run_with(program, sc, &machine_config(sc), dir, true)
+}
+
+/// Per rotary axis: (start, end, incidence, points).
+#[derive(Clone, Copy)]
+struct Ax(f64, f64, f64, u32);
+const NONE: Ax = Ax(0.0, 0.0, 0.0, 0);
+
+struct P451 {
+    mode: u8,
+    radius: f64,
+    q408: f64,
+    a: Ax,
+    b: Ax,
+    c: Ax,
+    points: u32,
+    preset: u8,
+    backlash: f64,
+}
+
+impl Default for P451 {
+    fn default() -> Self {
+        P451 {
+            mode: 2,
+            radius: 12.5,
+            q408: 0.0,
+            a: NONE,
+            b: NONE,
+            c: NONE,
+            points: 4,
+            preset: 0,
+            backlash: 0.0,
+        }
+    }
+}
+
+/// The probe put 5 mm above the pole of the sphere at `centre`, then cycle 451.
+fn program(p: &P451, centre: [f64; 3]) -> String {
+    let z = centre[2] + p.radius + 3.0 + 2.0 + 5.0;
+    format!(
+        "0 BEGIN PGM K451 MM\n1 TOOL CALL \"TOUCH_PROBE\" Z\n2 L X{:+} Y{:+} Z{z:+} R0 FMAX\n\
+3 TCH PROBE 451 MEASURE KINEMATICS ~\n  Q406={:+} ;MODE ~\n  Q407={:+} ;SPHERE RADIUS ~\n\
+  Q320=+0 ;SET-UP CLEARANCE ~\n  Q408={:+} ;RETR. HEIGHT ~\n  Q253=+750 ;F PRE-POSITIONING ~\n\
+  Q380=+0 ;REFERENCE ANGLE ~\n\
+  Q411={:+} ~\n  Q412={:+} ~\n  Q413={:+} ~\n  Q414={:+} ~\n\
+  Q415={:+} ~\n  Q416={:+} ~\n  Q417={:+} ~\n  Q418={:+} ~\n\
+  Q419={:+} ~\n  Q420={:+} ~\n  Q421={:+} ~\n  Q422={:+} ~\n\
+  Q423={:+} ;NO. OF PROBE POINTS ~\n  Q431={:+} ;PRESET ~\n  Q432={:+} ;BACKLASH, ANG. RANGE\n\
+4 END PGM K451 MM\n",
+        centre[0],
+        centre[1],
+        p.mode,
+        p.radius,
+        p.q408,
+        p.a.0,
+        p.a.1,
+        p.a.2,
+        p.a.3,
+        p.b.0,
+        p.b.1,
+        p.b.2,
+        p.b.3,
+        p.c.0,
+        p.c.1,
+        p.c.2,
+        p.c.3,
+        p.points,
+        p.preset,
+        p.backlash
+    )
+}
+
+fn demo_sphere() -> sim::Scenario {
+    sim::Scenario::load(
+        &configs_dir().join("scenarios/demo-sphere.toml"),
+        Some(&configs_dir().join("machines")),
+    )
+    .unwrap()
+}
+
+fn head_b_table_c() -> sim::Scenario {
+    sim::Scenario::load(
+        &configs_dir().join("scenarios/head-b-table-c.toml"),
+        Some(&configs_dir().join("machines")),
+    )
+    .unwrap()
+}
+
+fn only_cycle(r: &Run) -> &CycleResult {
+    assert_eq!(r.report.cycles.len(), 1, "{:#?}", r.report);
+    &r.report.cycles[0]
+}
+
+fn json(r: &Run) -> serde_json::Value {
+    let v: serde_json::Value = serde_json::from_str(&r.report.to_json()).unwrap();
+    v["cycles"][0].clone()
+}
+
+fn all_location_errors(axes: &[char]) -> Vec<String> {
+    axes.iter().flat_map(|a| qs_names(*a)).collect()
+}
+
+// ---------------------------------------------------------------------------------
+// The tests.
+
+#[test]
+fn table_ac_mode_2_recovers_the_injected_errors_and_matches_spec() {
+    let sc = demo_sphere();
+    let dir = temp_dir("ac-mode2");
+    let p = P451 {
+        a: Ax(-90.0, 90.0, 0.0, 4),
+        c: Ax(90.0, 270.0, 0.0, 3),
+        ..P451::default()
+    };
+    let r = run(&program(&p, [50.0, -30.0, 80.0]), &sc, &dir);
+    let c = only_cycle(&r);
+    assert_eq!(c.status, Status::Ok, "{:?}", c.message);
+    let v = json(&r);
+    let after = errors_of(&v["kinematics"]["errors_after"]);
+    for name in all_location_errors(&['A', 'C']) {
+        let truth = sc.truth.get(&name).unwrap();
+        assert!(
+            (after[&name] - truth).abs() < 1e-4,
+            "{name}: identified {} vs injected {truth}",
+            after[&name]
+        );
+    }
+    check_results_against_spec(&v, &machine_config(&sc));
+    // Positions of A: 0 (reference), -90, -30, 30, 90 (latched), C at its incidence 0.
+    let a = &v["kinematics"]["axes"][0];
+    let angles: Vec<(f64, f64)> = a["positions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            (
+                p["angles"]["A"].as_f64().unwrap(),
+                p["angles"]["C"].as_f64().unwrap(),
+            )
+        })
+        .collect();
+    for (got, want) in angles.iter().zip([0.0, -90.0, -30.0, 30.0, 90.0]) {
+        assert!(
+            (got.0 - want).abs() < 1e-5 && got.1.abs() < 1e-5,
+            "{angles:?}"
+        );
+    }
+    assert!(r
+        .report
+        .protocols
+        .iter()
+        .any(|p| p.ends_with("TCHPRAUTO.html")));
+    let html = std::fs::read_to_string(dir.join("TCHPRAUTO.html")).unwrap();
+    for plot in ["EXA", "EYA", "EZA", "EXC", "EYC", "EZC"] {
+        assert!(html.contains(&format!("<title>{plot}</title>")), "{plot}");
+    }
+    assert_eq!(html.matches("<svg").count(), 6);
+    assert!(html.contains("stroke=\"red\"") && html.contains("stroke=\"green\""));
+    // Mode 2 wrote them.
+    let written = std::fs::read_to_string(dir.join("kinematics.toml")).unwrap();
+    assert!(written.contains("EX0C"), "{written}");
+}
+
+#[test]
+fn head_b_table_c_mode_2_recovers_the_injected_errors_and_matches_spec() {
+    let sc = head_b_table_c();
+    let dir = temp_dir("bc-mode2");
+    let p = P451 {
+        b: Ax(-60.0, 60.0, 0.0, 4),
+        c: Ax(90.0, 270.0, 0.0, 3),
+        ..P451::default()
+    };
+    let r = run(&program(&p, [40.0, 25.0, 60.0]), &sc, &dir);
+    let c = only_cycle(&r);
+    assert_eq!(c.status, Status::Ok, "{:?}", c.message);
+    let v = json(&r);
+    let after = errors_of(&v["kinematics"]["errors_after"]);
+    for name in all_location_errors(&['B', 'C']) {
+        let truth = sc.truth.get(&name).unwrap();
+        assert!(
+            (after[&name] - truth).abs() < 1e-4,
+            "{name}: identified {} vs injected {truth}",
+            after[&name]
+        );
+    }
+    check_results_against_spec(&v, &machine_config(&sc));
+}
+
+#[test]
+fn with_noise_the_result_is_the_least_squares_optimum() {
+    let text = std::fs::read_to_string(configs_dir().join("scenarios/demo-sphere.toml"))
+        .unwrap()
+        .replace("noise = 0.0", "noise = 0.0015");
+    let sc = scenario(&text);
+    let cfg = machine_config(&sc);
+    let dir = temp_dir("noise");
+    let p = P451 {
+        a: Ax(-90.0, 90.0, 0.0, 4),
+        c: Ax(60.0, 300.0, 0.0, 5),
+        ..P451::default()
+    };
+    let r = run(&program(&p, [50.0, -30.0, 80.0]), &sc, &dir);
+    assert_eq!(
+        only_cycle(&r).status,
+        Status::Ok,
+        "{:?}",
+        only_cycle(&r).message
+    );
+    let v = json(&r);
+    let ch = chain_of(&cfg);
+    let ms = measured(&v);
+    let after = errors_of(&v["kinematics"]["errors_after"]);
+    let f_cycle = spec_objective(&ch, &after, &ms);
+    let (e_ind, f_ind) = independent_optimum(&ch, &ms, &all_location_errors(&['A', 'C']));
+    assert!(f_cycle > 1e-8, "the noise shows: {f_cycle}");
+    assert!(
+        f_ind >= f_cycle * (1.0 - 1e-9) - 1e-15,
+        "the independent solver found a better residual: {f_ind} < {f_cycle}"
+    );
+    for (name, v) in &e_ind {
+        assert!(
+            (after[name] - v).abs() < 1e-6,
+            "{name}: {} vs {v}",
+            after[name]
+        );
+    }
+    // Nudging any identified error makes the objective worse.
+    for name in all_location_errors(&['A', 'C']) {
+        for h in [1e-4, -1e-4] {
+            let mut e = after.clone();
+            *e.get_mut(&name).unwrap() += h;
+            assert!(spec_objective(&ch, &e, &ms) > f_cycle, "{name} {h}");
+        }
+    }
+    check_results_against_spec(&v, &cfg);
+}
+
+const HAND_WRITTEN: &str =
+    "machine = \"table-ac\"\n\n# set by hand\n[errors]\nEB0A = 0.001\nEX0C = 0.002\n";
+
+#[test]
+fn mode_0_leaves_the_kinematics_file_byte_for_byte() {
+    let sc = demo_sphere();
+    let dir = temp_dir("mode0");
+    std::fs::write(dir.join("kinematics.toml"), HAND_WRITTEN).unwrap();
+    let p = P451 {
+        mode: 0,
+        c: Ax(90.0, 270.0, 0.0, 3),
+        points: 3,
+        ..P451::default()
+    };
+    let r = run(&program(&p, [50.0, -30.0, 80.0]), &sc, &dir);
+    let c = only_cycle(&r);
+    assert_eq!(c.status, Status::Ok, "{:?}", c.message);
+    assert_eq!(
+        std::fs::read_to_string(dir.join("kinematics.toml")).unwrap(),
+        HAND_WRITTEN
+    );
+    assert!(!dir.join("kinematics.toml.prev").exists());
+    let v = json(&r);
+    assert_eq!(v["kinematics"]["written"], false);
+    // It reports what position optimisation would give, starting from the file.
+    assert_eq!(v["kinematics"]["errors_before"]["EX0C"], 0.002);
+    assert!((v["kinematics"]["errors_after"]["EX0C"].as_f64().unwrap() - 0.012).abs() < 2e-3);
+    assert!(c.q["Q146"] < c.q["Q143"]);
+    check_results_against_spec(&v, &machine_config(&sc));
+}
+
+#[test]
+fn mode_1_changes_positions_only() {
+    let sc = demo_sphere();
+    let dir = temp_dir("mode1");
+    std::fs::write(dir.join("kinematics.toml"), HAND_WRITTEN).unwrap();
+    let p = P451 {
+        mode: 1,
+        a: Ax(-90.0, 90.0, 0.0, 2),
+        c: Ax(90.0, 270.0, 0.0, 3),
+        points: 3,
+        ..P451::default()
+    };
+    let r = run(&program(&p, [50.0, -30.0, 80.0]), &sc, &dir);
+    assert_eq!(
+        only_cycle(&r).status,
+        Status::Ok,
+        "{:?}",
+        only_cycle(&r).message
+    );
+    let cfg = machine_config(&sc);
+    let path = dir.join("kinematics.toml");
+    let k = cycles::kinematics_file::ActiveKinematics::load(&path, &cfg).unwrap();
+    assert_eq!(
+        std::fs::read_to_string(dir.join("kinematics.toml.prev")).unwrap(),
+        HAND_WRITTEN
+    );
+    for name in ["EB0A", "EC0A", "EA0C", "EB0C", "EA0A", "EC0C"] {
+        let before = if name == "EB0A" { 0.001 } else { 0.0 };
+        assert_eq!(k.error(name), before, "{name} must not change in mode 1");
+    }
+    assert_ne!(k.error("EX0C"), 0.002);
+    assert!(
+        (k.error("EX0C") - 0.012).abs() < 2e-3,
+        "{}",
+        k.error("EX0C")
+    );
+    assert!(k.errors.contains_key("EY0A") || k.errors.contains_key("EZ0A"));
+}
+
+#[test]
+fn a_sphere_of_the_wrong_radius_aborts_with_nothing_written() {
+    let text = std::fs::read_to_string(configs_dir().join("scenarios/demo-sphere.toml"))
+        .unwrap()
+        .replace("radius = 12.5", "radius = 12.0");
+    let sc = scenario(&text);
+    let dir = temp_dir("radius");
+    std::fs::write(dir.join("kinematics.toml"), HAND_WRITTEN).unwrap();
+    let p = P451 {
+        mode: 1,
+        c: Ax(90.0, 270.0, 0.0, 3),
+        ..P451::default()
+    };
+    let r = run(&program(&p, [50.0, -30.0, 80.0]), &sc, &dir);
+    let c = only_cycle(&r);
+    assert_eq!(c.status, Status::Error);
+    let m = c.message.as_deref().unwrap();
+    assert!(m.contains("maxDevCalBall") && m.contains("12.0000"), "{m}");
+    assert!(!r.report.completed());
+    assert_eq!(
+        std::fs::read_to_string(dir.join("kinematics.toml")).unwrap(),
+        HAND_WRITTEN
+    );
+    assert!(!dir.join("kinematics.toml.prev").exists());
+    assert!(!dir.join("TCHPRAUTO.html").exists());
+}
+
+#[test]
+fn injected_backlash_is_measured_within_ten_percent() {
+    let text = std::fs::read_to_string(configs_dir().join("scenarios/demo-sphere.toml"))
+        .unwrap()
+        .replace("[truth]", "[truth]\nbacklash_C = 0.02");
+    let sc = scenario(&text);
+    let dir = temp_dir("backlash");
+    let p = P451 {
+        mode: 0,
+        c: Ax(90.0, 270.0, 0.0, 3),
+        points: 3,
+        backlash: 0.5,
+        preset: 3,
+        ..P451::default()
+    };
+    let r = run(&program(&p, [50.0, -30.0, 80.0]), &sc, &dir);
+    assert_eq!(
+        only_cycle(&r).status,
+        Status::Ok,
+        "{:?}",
+        only_cycle(&r).message
+    );
+    let v = json(&r);
+    // Q431=3: preset at the sphere centre before (so Q147..Q149 are about 0) and after.
+    for (i, want) in [50.0, -30.0, 80.0].into_iter().enumerate() {
+        let shift = v["kinematics"]["preset_shift"][i].as_f64().unwrap();
+        assert!((shift - want).abs() < 0.05, "preset shift {i}: {shift}");
+        let q = v["q"][format!("Q{}", 147 + i)].as_f64().unwrap();
+        assert!(q.abs() < 0.05, "Q{}: {q}", 147 + i);
+    }
+    let a = &v["kinematics"]["axes"][0];
+    let b = a["backlash"].as_f64().unwrap();
+    assert!(
+        (b - 0.02).abs() < 0.002,
+        "measured backlash {b} deg, injected 0.02"
+    );
+    // Every position was approached from both sides.
+    for p in a["positions"].as_array().unwrap() {
+        let sides: Vec<&str> = p["measurements"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|m| m["approach"].as_str().unwrap())
+            .collect();
+        assert_eq!(sides, ["above", "below"]);
+    }
+}
+
+#[test]
+fn no_backlash_on_a_measuring_circle_below_1_mm() {
+    let text = std::fs::read_to_string(configs_dir().join("scenarios/demo-sphere.toml"))
+        .unwrap()
+        .replace("[truth]", "[truth]\nbacklash_C = 0.02")
+        .replace("center = [50.0, -30.0, 80.0]", "center = [0.6, 0.0, 80.0]");
+    let sc = scenario(&text);
+    let dir = temp_dir("backlash-small");
+    let p = P451 {
+        mode: 0,
+        c: Ax(90.0, 270.0, 0.0, 3),
+        points: 3,
+        backlash: 0.5,
+        ..P451::default()
+    };
+    let r = run(&program(&p, [0.6, 0.0, 80.0]), &sc, &dir);
+    assert_eq!(
+        only_cycle(&r).status,
+        Status::Ok,
+        "{:?}",
+        only_cycle(&r).message
+    );
+    let v = json(&r);
+    let a = &v["kinematics"]["axes"][0];
+    assert!(a["circle_radius"].as_f64().unwrap() < 1.0);
+    assert!(a["backlash"].is_null(), "{}", a["backlash"]);
+    let notes = v["kinematics"]["notes"].to_string();
+    assert!(notes.contains("no backlash computed"), "{notes}");
+}
+
+#[test]
+fn a_correction_beyond_max_modification_needs_confirmation() {
+    let text = std::fs::read_to_string(configs_dir().join("scenarios/demo-sphere.toml"))
+        .unwrap()
+        .replace("EX0C = 0.012", "EX0C = 0.7");
+    let sc = scenario(&text);
+    let p = P451 {
+        mode: 1,
+        c: Ax(90.0, 270.0, 0.0, 3),
+        points: 3,
+        ..P451::default()
+    };
+    let cfg = machine_config(&sc);
+    // Refused: nothing written, the program stops.
+    let dir = temp_dir("maxmod-no");
+    let r = run_with(&program(&p, [50.0, -30.0, 80.0]), &sc, &cfg, &dir, false);
+    let c = only_cycle(&r);
+    assert_eq!(r.confirmations.len(), 1);
+    assert!(r.confirmations[0].contains("maxModification") && r.confirmations[0].contains("EX0C"));
+    assert!(c.message.as_deref().unwrap().contains("not confirmed"));
+    assert!(!r.report.completed());
+    assert!(!dir.join("kinematics.toml").exists());
+    // Confirmed: written.
+    let dir = temp_dir("maxmod-yes");
+    let r = run_with(&program(&p, [50.0, -30.0, 80.0]), &sc, &cfg, &dir, true);
+    assert!(r.report.completed(), "{:?}", r.report.stopped);
+    let k = cycles::kinematics_file::ActiveKinematics::load(&dir.join("kinematics.toml"), &cfg)
+        .unwrap();
+    assert!((k.error("EX0C") - 0.7).abs() < 2e-3, "{}", k.error("EX0C"));
+}
+
+#[test]
+fn mode_3_moves_the_tilt_of_c_into_the_machine_datum_of_a() {
+    let sc = demo_sphere();
+    let dir = temp_dir("mode3");
+    let p = P451 {
+        mode: 3,
+        a: Ax(-90.0, 90.0, 0.0, 3),
+        c: Ax(90.0, 270.0, 0.0, 3),
+        points: 3,
+        ..P451::default()
+    };
+    let r = run(&program(&p, [50.0, -30.0, 80.0]), &sc, &dir);
+    assert_eq!(
+        only_cycle(&r).status,
+        Status::Ok,
+        "{:?}",
+        only_cycle(&r).message
+    );
+    let cfg = machine_config(&sc);
+    let k = cycles::kinematics_file::ActiveKinematics::load(&dir.join("kinematics.toml"), &cfg)
+        .unwrap();
+    assert_eq!(k.error("EA0C"), 0.0);
+    assert!(
+        (k.error("EA0A") - 0.004).abs() < 1e-4,
+        "{}",
+        k.error("EA0A")
+    );
+    assert!((k.error("EB0A") - 0.005).abs() < 1e-4);
+    let v = json(&r);
+    assert!(v["q"]["Q146"].as_f64().unwrap() < 1e-4);
+
+    // The B head and C table have no axis nearer the bed in either chain: refused
+    // before anything moves.
+    let sc = head_b_table_c();
+    let dir = temp_dir("mode3-bc");
+    let p = P451 {
+        mode: 3,
+        b: Ax(-60.0, 60.0, 0.0, 2),
+        c: Ax(90.0, 270.0, 0.0, 2),
+        ..P451::default()
+    };
+    let r = run(&program(&p, [40.0, 25.0, 60.0]), &sc, &dir);
+    let c = only_cycle(&r);
+    assert_eq!(c.status, Status::Error);
+    assert!(
+        c.message.as_deref().unwrap().contains("Q406=3"),
+        "{:?}",
+        c.message
+    );
+    assert!(!dir.join("kinematics.toml").exists());
+}
+
+#[test]
+fn hirth_axis_positions_on_the_grid_and_q408_0_refused() {
+    let text = std::fs::read_to_string(configs_dir().join("scenarios/demo-sphere.toml"))
+        .unwrap()
+        .replace("[truth]", "[truth]\nhirth_C = 3.0");
+    let sc = scenario(&text);
+    let mut cfg = machine_config(&sc);
+    cfg.axes
+        .iter_mut()
+        .find(|a| a.name == hal::Axis::C)
+        .unwrap()
+        .hirth = 3.0;
+    let mut p = P451 {
+        mode: 0,
+        c: Ax(-30.0, 90.0, 0.0, 4),
+        points: 3,
+        ..P451::default()
+    };
+    // Q408 = 0 with a Hirth axis: refused, nothing moved.
+    let dir = temp_dir("hirth-0");
+    let r = run_with(&program(&p, [50.0, -30.0, 80.0]), &sc, &cfg, &dir, true);
+    let c = only_cycle(&r);
+    assert_eq!(c.status, Status::Error);
+    assert!(
+        c.message.as_deref().unwrap().contains("Q408=0"),
+        "{:?}",
+        c.message
+    );
+    // With a retraction height: the seed's positions -30, 9, 51, 90.
+    p.q408 = 150.0;
+    let dir = temp_dir("hirth");
+    let r = run_with(&program(&p, [50.0, -30.0, 80.0]), &sc, &cfg, &dir, true);
+    assert_eq!(
+        only_cycle(&r).status,
+        Status::Ok,
+        "{:?}",
+        only_cycle(&r).message
+    );
+    let v = json(&r);
+    let got: Vec<f64> = v["kinematics"]["axes"][0]["positions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["angles"]["C"].as_f64().unwrap())
+        .collect();
+    for (g, w) in got.iter().zip([0.0, -30.0, 9.0, 51.0, 90.0]) {
+        assert!((g - w).abs() < 1e-5, "{got:?}");
+    }
+    assert_eq!(got.len(), 5);
+}
+
+#[test]
+fn parameter_ranges_are_checked_before_anything_moves() {
+    let sc = demo_sphere();
+    let cfg = machine_config(&sc);
+    let good = P451 {
+        c: Ax(90.0, 270.0, 0.0, 3),
+        ..P451::default()
+    };
+    let text = program(&good, [50.0, -30.0, 80.0]);
+    assert!(Program::parse(&text, &cfg).is_ok());
+    for (param, bad) in [
+        ("Q406", "Q406=+4"),
+        ("Q407", "Q407=+0"),
+        ("Q423", "Q423=+9"),
+        ("Q432", "Q432=+3.5"),
+        ("Q422", "Q422=+13"),
+        ("Q431", "Q431=+4"),
+        ("Q380", "Q380=+361"),
+    ] {
+        let prefix = bad.split('=').next().unwrap();
+        let changed: String = text
+            .lines()
+            .map(|l| {
+                if l.trim_start().starts_with(&format!("{prefix}=")) {
+                    let rest = l.split_once(' ').map_or("", |x| x.1);
+                    format!("  {bad} {rest}")
+                } else {
+                    l.to_string()
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("\n");
+        let e = Program::parse(&changed, &cfg).unwrap_err().to_string();
+        assert!(e.contains(param), "{bad}: {e}");
+    }
+}

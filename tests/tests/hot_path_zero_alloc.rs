@@ -1,0 +1,238 @@
+//! The whole hot trigger path allocates nothing: 100 000 probing moves, each one a latch
+//! frame in, the stop started in the same cycle, and a `ContactSample` handed to the
+//! sink the bridge really uses (`ForwardingSink`), whose forwarder thread publishes it
+//! over iceoryx2 to a subscriber in another thread.
+//!
+//! What is counted, precisely:
+//! - **The real-time thread** (this test's thread): every allocation, reallocation and
+//!   free while the triggers run, through a counting global allocator gated by a
+//!   thread-local flag. This thread runs the master's `RtLoop` (frame decoding, CiA 402,
+//!   the latch, the stop, building the sample, `ForwardingSink::publish`) *and* the
+//!   simulated drives (the synchronous `Loopback` bus answers inside `transmit`), so
+//!   their code is counted too. Asserted: 0 allocations, 0 frees.
+//! - **All threads** (printed, not asserted): the same counters without the gate, over
+//!   the same window. They include the forwarder thread's iceoryx2 publish, which in
+//!   iceoryx2 0.10 allocates once per sample inside `loan_uninit` (an `Arc` in
+//!   `ChunkMutSharedState`, freed at `send`), and the subscriber thread's receive.
+//!
+//! The loop runs on the virtual clock (lockstep pacing) so 100 000 triggers take
+//! seconds; the code on the hot path (`on_frame`, the latch, `transmit`, the sink) is the
+//! same under real-time pacing, which only adds clock reads and timed waits.
+
+use hal::master::command::{Command, Reply};
+use hal::master::{startup, LoopConfig, Pacing, RtLoop};
+use probebridge::ipc::{ContactSubscriber, ForwardingSink};
+use probebridge_tests::loopback::Loopback;
+use probebridge_tests::{machine_config, scenario, unique_service};
+use sim::machine::SimMachine;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+struct Counting;
+
+/// This thread (the real-time path) only.
+static RT_ALLOCS: AtomicU64 = AtomicU64::new(0);
+static RT_FREES: AtomicU64 = AtomicU64::new(0);
+/// Every thread, while `WINDOW` is open.
+static ALL_ALLOCS: AtomicU64 = AtomicU64::new(0);
+static ALL_FREES: AtomicU64 = AtomicU64::new(0);
+static WINDOW: AtomicBool = AtomicBool::new(false);
+
+thread_local! {
+    // const-initialised and without a destructor: reading it never allocates.
+    static RT_THREAD: Cell<bool> = const { Cell::new(false) };
+}
+
+fn count(rt: &AtomicU64, all: &AtomicU64) {
+    if WINDOW.load(Ordering::Relaxed) {
+        all.fetch_add(1, Ordering::Relaxed);
+        // try_with: a thread being torn down has no thread-locals left.
+        if RT_THREAD.try_with(Cell::get).unwrap_or(false) {
+            rt.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count(&RT_ALLOCS, &ALL_ALLOCS);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        count(&RT_ALLOCS, &ALL_ALLOCS);
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        count(&RT_FREES, &ALL_FREES);
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        // A reallocation both allocates and frees.
+        count(&RT_ALLOCS, &ALL_ALLOCS);
+        count(&RT_FREES, &ALL_FREES);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+const TRIGGERS: u64 = 100_000;
+/// The real-time thread waits (yielding, without allocating) when the subscriber is
+/// this many samples behind, so neither the forwarder queue (1024) nor the subscriber
+/// buffer (1024) can overflow on a busy machine.
+const MAX_IN_FLIGHT: u64 = 256;
+
+fn until_reply(rt: &mut RtLoop<Loopback, ForwardingSink>) -> Reply {
+    for _ in 0..100_000 {
+        rt.cycle().expect("loopback does not fail");
+        if let Some(r) = rt.take_reply() {
+            return r;
+        }
+    }
+    panic!("no reply within 100 000 cycles");
+}
+
+#[test]
+fn hundred_thousand_triggers_through_the_bridge_sink_allocate_nothing_on_the_rt_thread() {
+    let sc = scenario(
+        r#"
+machine = "table-ac"
+[probe]
+ball_radius = 3.0
+[[plane]]
+point = [0.0, 0.0, 10.0]
+normal = [0.0, 0.0, 1.0]
+"#,
+    );
+    let cfg = machine_config(&sc);
+    let service = unique_service("hotpath");
+
+    // The estimator's side: a subscriber woken by the event, in its own thread.
+    let received = Arc::new(AtomicU64::new(0));
+    let worst = Arc::new(AtomicU64::new(0));
+    let stop = Arc::new(AtomicBool::new(false));
+    let subscriber = ContactSubscriber::new(&service).expect("subscriber");
+    let sub_thread = {
+        let (received, worst, stop) = (received.clone(), worst.clone(), stop.clone());
+        std::thread::spawn(move || {
+            while !stop.load(Ordering::Acquire) {
+                if let Some(s) = subscriber
+                    .receive_timeout(Duration::from_millis(50))
+                    .expect("receive")
+                {
+                    // Z of the ball centre: plane 10 + R 3, in nm.
+                    let err_nm = ((s.positions[2] - 13.0).abs() * 1e6) as u64;
+                    worst.fetch_max(err_nm, Ordering::Relaxed);
+                    received.fetch_add(1, Ordering::Release);
+                }
+            }
+        })
+    };
+
+    let mut bus = Loopback::new(SimMachine::new(&sc));
+    startup::boot(&mut bus, &cfg).unwrap();
+    startup::configure(&mut bus, &cfg).unwrap();
+    let pacing = Pacing::Lockstep {
+        answer_timeout: Duration::from_millis(50),
+    };
+    let sink = ForwardingSink::spawn(&service).expect("forwarding sink");
+    let mut rt = RtLoop::new(&cfg, LoopConfig::from_machine(&cfg, pacing), bus, sink);
+    assert!(matches!(until_reply(&mut rt), Reply::Ready { .. }));
+
+    let mut above = [0.0; 6];
+    above[2] = 13.4;
+    let trigger = |rt: &mut RtLoop<Loopback, ForwardingSink>| {
+        rt.submit(Command::MoveTo {
+            target: above,
+            mask: 0b111,
+            feed: 3000.0,
+        });
+        assert!(matches!(until_reply(rt), Reply::Done { .. }));
+        rt.submit(Command::Probe {
+            direction: [0.0, 0.0, -1.0],
+            feed: 600.0,
+            max_distance: 2.0,
+            run_id: 7,
+        });
+        match until_reply(rt) {
+            Reply::Contact(s) => s,
+            other => panic!("expected a contact, got {other:?}"),
+        }
+    };
+    // Warm-up outside the count: first use of thread-locals, iceoryx2 connections.
+    trigger(&mut rt);
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while received.load(Ordering::Acquire) < 1 && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    assert_eq!(received.load(Ordering::Acquire), 1, "the warm-up sample");
+
+    let published_before = rt.stats().samples_published;
+    let started = Instant::now();
+    RT_THREAD.with(|c| c.set(true));
+    WINDOW.store(true, Ordering::SeqCst);
+    for n in 1..=TRIGGERS {
+        let s = trigger(&mut rt);
+        assert!(s.sequence > 0);
+        // Back-pressure without allocating: yield while the subscriber lags.
+        while n + 1 - received.load(Ordering::Acquire) > MAX_IN_FLIGHT {
+            std::thread::yield_now();
+        }
+    }
+    WINDOW.store(false, Ordering::SeqCst);
+    RT_THREAD.with(|c| c.set(false));
+    let elapsed = started.elapsed();
+    let (rt_allocs, rt_frees) = (
+        RT_ALLOCS.load(Ordering::SeqCst),
+        RT_FREES.load(Ordering::SeqCst),
+    );
+    let (all_allocs, all_frees) = (
+        ALL_ALLOCS.load(Ordering::SeqCst),
+        ALL_FREES.load(Ordering::SeqCst),
+    );
+
+    let stats = rt.stats();
+    // Everything queued reaches the subscriber.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while received.load(Ordering::Acquire) < TRIGGERS + 1 && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    stop.store(true, Ordering::Release);
+    sub_thread.join().unwrap();
+    let refused = rt.sink_mut().refused;
+    drop(rt); // stops the forwarder after it published everything queued
+
+    println!(
+        "{TRIGGERS} triggers in {:.1} s ({} cycles): real-time thread {rt_allocs} allocations, \
+         {rt_frees} frees; all threads {all_allocs} allocations, {all_frees} frees \
+         ({:.2} per sample: the forwarder's iceoryx2 loan); \
+         {} samples received",
+        elapsed.as_secs_f64(),
+        stats.cycles,
+        all_allocs as f64 / TRIGGERS as f64,
+        received.load(Ordering::Acquire)
+    );
+    assert_eq!(
+        stats.samples_published - published_before,
+        TRIGGERS,
+        "one sample per trigger"
+    );
+    assert_eq!(stats.publish_failures, 0);
+    assert_eq!(refused, 0, "the forwarder queue never refused a sample");
+    assert_eq!(
+        received.load(Ordering::Acquire),
+        TRIGGERS + 1,
+        "every sample reached the subscriber"
+    );
+    let worst_nm = worst.load(Ordering::Relaxed);
+    assert!(worst_nm <= 1, "a contact was off by {worst_nm} nm");
+    assert_eq!(
+        (rt_allocs, rt_frees),
+        (0, 0),
+        "the real-time thread allocated {rt_allocs} times and freed {rt_frees} times over {TRIGGERS} triggers"
+    );
+}

@@ -1,0 +1,749 @@
+//! `vcan-check`: checks on the host what the vcan VM left in its results folder (the VM's
+//! own exit status does not come back through vng).
+//!
+//! ```text
+//! vcan-check --results target/vcan/results --reference target/vcan/reference
+//! ```
+//!
+//! - every case of `tests/vcan/cases`: the exit status, the JSON against the host
+//!   reference run (in-process bus; every number to 1e-6) and against the scenario's
+//!   truth (`truth=probe`, `truth=431`, `QNNN=V`);
+//! - every program in `configs/programs` is covered by a case;
+//! - the Machine conformance suite on SocketCAN ran and passed (and was not skipped);
+//! - the candump log (`candump -L vcan0`) parses with `hal::can::candump::parse_log`;
+//!   per case (split at the marker frames 7FF#NN the VM sends before each case): the
+//!   NMT/SDO start-up sequence, the PDO mapping written over SDO, NMT start before the
+//!   first SYNC, the TPDO2 latch frames (for `probe`: the latched values equal the
+//!   reported contact to one increment), and a replay: the master's recorded frames fed
+//!   into a fresh simulator of the case's scenario give exactly the drive frames that
+//!   were recorded.
+//!
+//! Exit status 0 when everything holds, 1 with a list of every difference.
+
+use hal::can::candump::parse_log;
+use hal::can::CanFrame;
+use hal::canopen::cob_id::{classify, CobKind};
+use hal::canopen::object;
+use hal::cia402::touch_probe::TouchProbeStatus;
+use hal::master::process_data;
+use serde_json::Value;
+use sim::machine::SimMachine;
+use sim::Scenario;
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+const TOL: f64 = 1e-6;
+/// COB-ID of the marker frames that split the log per case (CiA 301 restricted range).
+const MARKER: u16 = 0x7FF;
+/// Marker data byte before the conformance suite.
+const CONFORMANCE_MARKER: u8 = 0xFF;
+/// Tests the conformance suite must have passed on SocketCAN.
+const CONFORMANCE_TESTS: usize = 7;
+
+#[derive(Debug)]
+struct Expect {
+    exit: i32,
+    /// Tolerance of the `QNNN=V` expectations.
+    tol: f64,
+    truth_probe: bool,
+    truth_431: bool,
+    q: Vec<(String, f64)>,
+}
+
+#[derive(Debug)]
+struct Case {
+    number: usize,
+    name: String,
+    scenario: PathBuf,
+    /// configs/machines, for the scenario's `machine = "..."`.
+    machines: PathBuf,
+    args: Vec<String>,
+    expect: Expect,
+}
+
+impl Case {
+    /// `probe` and `run` drive the machine; `check` only validates.
+    fn moves(&self) -> bool {
+        matches!(self.args.first().map(String::as_str), Some("probe" | "run"))
+    }
+}
+
+fn parse_cases(configs: &Path, text: &str) -> Result<Vec<Case>, String> {
+    let mut cases = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let t = line.trim();
+        if t.is_empty() || t.starts_with('#') {
+            continue;
+        }
+        let fields: Vec<&str> = t.split('|').map(str::trim).collect();
+        if fields.len() != 4 {
+            return Err(format!(
+                "tests/vcan/cases line {}: expected NAME | SCENARIO | ARGS | EXPECT",
+                i + 1
+            ));
+        }
+        let mut expect = Expect {
+            exit: 0,
+            tol: TOL,
+            truth_probe: false,
+            truth_431: false,
+            q: Vec::new(),
+        };
+        for word in fields[3].split_whitespace() {
+            let (k, v) = word.split_once('=').ok_or_else(|| {
+                format!("tests/vcan/cases line {}: {word:?} is not KEY=VALUE", i + 1)
+            })?;
+            match (k, v) {
+                ("exit", v) => {
+                    expect.exit = v
+                        .parse()
+                        .map_err(|_| format!("line {}: exit={v:?}", i + 1))?
+                }
+                ("tol", v) => {
+                    expect.tol = v
+                        .parse()
+                        .map_err(|_| format!("line {}: tol={v:?}", i + 1))?
+                }
+                ("truth", "probe") => expect.truth_probe = true,
+                ("truth", "431") => expect.truth_431 = true,
+                (q, v) if q.starts_with('Q') => expect.q.push((
+                    q.to_string(),
+                    v.parse()
+                        .map_err(|_| format!("line {}: {q}={v:?} is not a number", i + 1))?,
+                )),
+                _ => {
+                    return Err(format!(
+                        "tests/vcan/cases line {}: unknown expectation {word:?}",
+                        i + 1
+                    ))
+                }
+            }
+        }
+        cases.push(Case {
+            number: cases.len() + 1,
+            name: fields[0].to_string(),
+            scenario: configs.join(fields[1]),
+            machines: configs.join("configs/machines"),
+            args: fields[2].split_whitespace().map(String::from).collect(),
+            expect,
+        });
+    }
+    Ok(cases)
+}
+
+/// Collects failures instead of stopping at the first.
+#[derive(Default)]
+struct Report {
+    failures: Vec<String>,
+    checks: usize,
+}
+
+impl Report {
+    fn check(&mut self, ok: bool, what: impl FnOnce() -> String) {
+        self.checks += 1;
+        if !ok {
+            self.failures.push(what());
+        }
+    }
+    fn fail(&mut self, what: String) {
+        self.checks += 1;
+        self.failures.push(what);
+    }
+}
+
+fn read(path: &Path) -> Result<String, String> {
+    std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+fn read_json(path: &Path) -> Result<Value, String> {
+    serde_json::from_str(&read(path)?).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+fn tail(path: &Path, lines: usize) -> String {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let all: Vec<&str> = text.lines().collect();
+    all[all.len().saturating_sub(lines)..].join("\n    ")
+}
+
+/// Every number of `got` equals `want` to [`TOL`]; keys that depend on the clock or the
+/// folder (`trigger_ns`, `protocols`) are not compared.
+fn compare_json(path: &str, got: &Value, want: &Value, out: &mut Vec<String>) {
+    match (got, want) {
+        (Value::Object(g), Value::Object(w)) => {
+            let keys: BTreeSet<&String> = g.keys().chain(w.keys()).collect();
+            for k in keys {
+                if k == "trigger_ns" || k == "protocols" {
+                    continue;
+                }
+                match (g.get(k), w.get(k)) {
+                    (Some(a), Some(b)) => compare_json(&format!("{path}/{k}"), a, b, out),
+                    (None, _) => out.push(format!("{path}/{k} missing (reference has it)")),
+                    (_, None) => out.push(format!("{path}/{k} is not in the reference")),
+                }
+            }
+        }
+        (Value::Array(g), Value::Array(w)) => {
+            if g.len() != w.len() {
+                out.push(format!(
+                    "{path}: {} entries, reference {}",
+                    g.len(),
+                    w.len()
+                ));
+            }
+            for (i, (a, b)) in g.iter().zip(w).enumerate() {
+                compare_json(&format!("{path}/{i}"), a, b, out);
+            }
+        }
+        (Value::Number(a), Value::Number(b)) => {
+            let (a, b) = (
+                a.as_f64().unwrap_or(f64::NAN),
+                b.as_f64().unwrap_or(f64::NAN),
+            );
+            // NaN on either side is a difference too.
+            let same = (a - b).abs() <= TOL;
+            if !same {
+                out.push(format!("{path} = {a} but the reference says {b}"));
+            }
+        }
+        (a, b) if a == b => {}
+        (a, b) => out.push(format!("{path} = {a} but the reference says {b}")),
+    }
+}
+
+fn vec3_arg(args: &[String], option: &str) -> Option<[f64; 3]> {
+    let i = args.iter().position(|a| a == option)?;
+    let v: Vec<f64> = args
+        .get(i + 1)?
+        .split(',')
+        .map(|s| s.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .ok()?;
+    (v.len() == 3).then(|| [v[0], v[1], v[2]])
+}
+
+/// Where the ball centre touches the scenario's only plane, probing from `start`
+/// along `dir`: distance R from the plane along the line.
+fn probe_truth(sc: &Scenario, start: [f64; 3], dir: [f64; 3]) -> Result<[f64; 3], String> {
+    if sc.planes.len() != 1 || !sc.spheres.is_empty() || !sc.cylinders.is_empty() {
+        return Err("truth=probe needs a scenario with exactly one plane and nothing else".into());
+    }
+    if sc.probe.pretravel != 0.0 || sc.probe.noise != 0.0 {
+        return Err("truth=probe needs pretravel = 0 and noise = 0".into());
+    }
+    let p = &sc.planes[0];
+    let n = [p.normal.x, p.normal.y, p.normal.z];
+    let q = [p.point.x, p.point.y, p.point.z];
+    let len = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
+    let d = dir.map(|v| v / len);
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let nd = dot(n, d);
+    if nd.abs() < 1e-9 {
+        return Err("the probing direction is parallel to the plane".into());
+    }
+    let rel = [start[0] - q[0], start[1] - q[1], start[2] - q[2]];
+    let t = (sc.probe.ball_radius - dot(n, rel)) / nd;
+    Ok([
+        start[0] + t * d[0],
+        start[1] + t * d[1],
+        start[2] + t * d[2],
+    ])
+}
+
+fn check_case(case: &Case, results: &Path, reference: &Path, r: &mut Report) {
+    let name = &case.name;
+    let exit_file = results.join(format!("{name}.exit"));
+    let Ok(exit) = read(&exit_file) else {
+        r.fail(format!(
+            "{name}: did not run in the VM (no {})",
+            exit_file.display()
+        ));
+        return;
+    };
+    let exit: i32 = exit.trim().parse().unwrap_or(-1);
+    r.check(exit == case.expect.exit, || {
+        format!(
+            "{name}: exit status {exit}, expected {}; its stderr ends with:\n    {}",
+            case.expect.exit,
+            tail(&results.join(format!("{name}.stderr")), 8)
+        )
+    });
+    if !case.moves() {
+        return; // `check`: the exit status is all it has
+    }
+    let got = match read_json(&results.join(format!("{name}.json"))) {
+        Ok(v) => v,
+        Err(e) => {
+            r.fail(format!("{name}: no result JSON from the VM: {e}"));
+            return;
+        }
+    };
+    match read_json(&reference.join(format!("{name}.json"))) {
+        Ok(want) => {
+            let mut diffs = Vec::new();
+            compare_json("", &got, &want, &mut diffs);
+            r.check(diffs.is_empty(), || {
+                format!(
+                    "{name}: on vcan0 the result differs from the in-process bus:\n    {}",
+                    diffs.join("\n    ")
+                )
+            });
+        }
+        Err(e) => r.fail(format!("{name}: no host reference: {e}")),
+    }
+    let sc = match Scenario::load(&case.scenario, Some(&case.machines)) {
+        Ok(sc) => sc,
+        Err(e) => {
+            r.fail(format!("{name}: {e}"));
+            return;
+        }
+    };
+    if case.expect.truth_probe {
+        let (Some(start), Some(dir)) = (
+            vec3_arg(&case.args, "--start"),
+            vec3_arg(&case.args, "--dir"),
+        ) else {
+            r.fail(format!("{name}: truth=probe needs --start and --dir"));
+            return;
+        };
+        match probe_truth(&sc, start, dir) {
+            Ok(want) => {
+                for (i, axis) in ["X", "Y", "Z"].iter().enumerate() {
+                    let v = got["contact"][axis].as_f64().unwrap_or(f64::NAN);
+                    r.check((v - want[i]).abs() <= TOL, || {
+                        format!(
+                            "{name}: contact {axis} = {v:.9}, the scenario's truth is {:.9} (plane and R = {})",
+                            want[i], sc.probe.ball_radius
+                        )
+                    });
+                }
+            }
+            Err(e) => r.fail(format!("{name}: {e}")),
+        }
+    }
+    let cycles = got["cycles"].as_array().cloned().unwrap_or_default();
+    if case.args.first().is_some_and(|a| a == "run") {
+        r.check(!cycles.is_empty(), || format!("{name}: no cycle results"));
+        r.check(got.get("stopped").is_none_or(Value::is_null), || {
+            format!("{name}: the program stopped: {}", got["stopped"])
+        });
+    }
+    for c in &cycles {
+        let block = &c["block"];
+        let q = |k: &str| c["q"][k].as_f64().unwrap_or(f64::NAN);
+        r.check(c["status"] == "ok", || {
+            format!(
+                "{name}: block {block}: status {} ({})",
+                c["status"], c["message"]
+            )
+        });
+        for (k, want) in &case.expect.q {
+            let v = q(k);
+            let tol = case.expect.tol;
+            r.check((v - want).abs() <= tol, || {
+                format!("{name}: block {block}: {k} = {v}, expected {want} (tolerance {tol:e})")
+            });
+        }
+        if case.expect.truth_431 && c["cycle"] == 431 {
+            if sc.planes.len() != 1 {
+                r.fail(format!("{name}: truth=431 needs exactly one plane"));
+                continue;
+            }
+            let n = &sc.planes[0].normal;
+            for (k, want) in [
+                ("Q158", (-n.y).atan2(n.z).to_degrees()),
+                ("Q159", n.x.atan2(n.z).to_degrees()),
+            ] {
+                let v = q(k);
+                r.check((v - want).abs() <= TOL, || {
+                    format!("{name}: block {block}: {k} = {v}, the plane's true angle is {want}")
+                });
+            }
+        }
+    }
+}
+
+fn check_conformance(results: &Path, r: &mut Report) {
+    let log = results.join("conformance.log");
+    let exit = read(&results.join("conformance.exit")).unwrap_or_default();
+    let text = read(&log).unwrap_or_default();
+    let passed = text
+        .lines()
+        .filter_map(|l| l.strip_prefix("test result: ok. "))
+        .filter_map(|l| l.split_whitespace().next()?.parse::<usize>().ok())
+        .sum::<usize>();
+    r.check(exit.trim() == "0", || {
+        format!(
+            "conformance suite on SocketCAN: exit status {:?}; its log ends with:\n    {}",
+            exit.trim(),
+            tail(&log, 30)
+        )
+    });
+    r.check(!text.contains("SKIPPED"), || {
+        "conformance suite on SocketCAN was skipped in the VM (PROBEBRIDGE_TEST_CAN not seen)"
+            .into()
+    });
+    r.check(passed >= CONFORMANCE_TESTS, || {
+        format!(
+            "conformance suite on SocketCAN: {passed} tests passed, expected {CONFORMANCE_TESTS}"
+        )
+    });
+}
+
+fn is_master_frame(f: &CanFrame) -> bool {
+    matches!(
+        classify(f.cob_id()),
+        CobKind::Nmt | CobKind::Sync | CobKind::Rpdo { .. } | CobKind::SdoRequest { .. }
+    )
+}
+
+fn is_drive_frame(f: &CanFrame) -> bool {
+    matches!(
+        classify(f.cob_id()),
+        CobKind::Emcy { .. }
+            | CobKind::Tpdo { .. }
+            | CobKind::SdoResponse { .. }
+            | CobKind::Heartbeat { .. }
+    )
+}
+
+/// (node, index, sub) -> value of every expedited SDO download in `frames`.
+fn sdo_downloads(frames: &[CanFrame]) -> BTreeMap<(u8, u16, u8), u32> {
+    let mut out = BTreeMap::new();
+    for f in frames {
+        if let CobKind::SdoRequest { node } = classify(f.cob_id()) {
+            let d = f.data();
+            // Initiate download, expedited, size indicated: 001n 11 11 -> 0x23/27/2B/2F.
+            if d.len() == 8 && d[0] & 0xE3 == 0x23 {
+                let n = 4 - ((d[0] >> 2) & 0b11) as usize;
+                let mut v = [0u8; 4];
+                v[..n].copy_from_slice(&d[4..4 + n]);
+                out.insert(
+                    (node, u16::from_le_bytes([d[1], d[2]]), d[3]),
+                    u32::from_le_bytes(v),
+                );
+            }
+        }
+    }
+    out
+}
+
+/// One case's part of the candump log.
+fn check_segment(case: &Case, frames: &[CanFrame], results: &Path, r: &mut Report) {
+    let name = &case.name;
+    let sc = match Scenario::load(&case.scenario, Some(&case.machines)) {
+        Ok(sc) => sc,
+        Err(e) => return r.fail(format!("{name}: {e}")),
+    };
+    let cfg = &sc.machine;
+    let nodes: Vec<u8> = cfg.axes.iter().map(|a| a.node).collect();
+    if frames.is_empty() {
+        return r.fail(format!("candump {name}: no frames recorded for this case"));
+    }
+
+    // Start-up: NMT reset communication to all, every boot-up, SDO configuration,
+    // NMT start, then SYNC.
+    r.check(
+        frames[0].cob_id() == 0 && frames[0].data() == [0x82, 0],
+        || {
+            format!(
+            "candump {name}: the first frame is {:03X}#{:02X?}, expected the NMT reset 000#8200",
+            frames[0].cob_id(),
+            frames[0].data()
+        )
+        },
+    );
+    let first_sdo = frames
+        .iter()
+        .position(|f| matches!(classify(f.cob_id()), CobKind::SdoRequest { .. }))
+        .unwrap_or(frames.len());
+    let booted: BTreeSet<u8> = frames[..first_sdo]
+        .iter()
+        .filter_map(|f| match classify(f.cob_id()) {
+            CobKind::Heartbeat { node } if f.data() == [0] => Some(node),
+            _ => None,
+        })
+        .collect();
+    for n in &nodes {
+        r.check(booted.contains(n), || {
+            format!(
+                "candump {name}: no boot-up {:03X}#00 of node {n} before the first SDO",
+                0x700 + u16::from(*n)
+            )
+        });
+    }
+    let start = frames
+        .iter()
+        .position(|f| f.cob_id() == 0 && f.data() == [0x01, 0]);
+    let first_sync = frames
+        .iter()
+        .position(|f| classify(f.cob_id()) == CobKind::Sync);
+    let last_sdo = frames
+        .iter()
+        .rposition(|f| matches!(classify(f.cob_id()), CobKind::SdoRequest { .. }));
+    match (start, first_sync, last_sdo) {
+        (Some(s), Some(y), Some(l)) => r.check(l < s && s < y, || {
+            format!("candump {name}: NMT start (frame {s}) must come after the last SDO ({l}) and before the first SYNC ({y})")
+        }),
+        _ => r.fail(format!(
+            "candump {name}: missing NMT start ({start:?}), SYNC ({first_sync:?}) or SDO ({last_sdo:?})"
+        )),
+    }
+    let aborts = frames
+        .iter()
+        .filter(|f| matches!(classify(f.cob_id()), CobKind::SdoResponse { .. }))
+        .filter(|f| f.data().first() == Some(&0x80))
+        .count();
+    r.check(aborts == 0, || {
+        format!("candump {name}: {aborts} SDO abort(s) during start-up")
+    });
+    let writes = sdo_downloads(&frames[..start.unwrap_or(frames.len())]);
+    let entry = |e: &hal::canopen::MapEntry| {
+        (u32::from(e.index) << 16) | (u32::from(e.sub) << 8) | u32::from(e.bits)
+    };
+    for n in &nodes {
+        let mut want: Vec<((u16, u8), u32)> = vec![
+            (
+                (object::COMMUNICATION_CYCLE_PERIOD, 0),
+                cfg.bus.sync_period_us,
+            ),
+            (
+                (object::PRODUCER_HEARTBEAT_TIME, 0),
+                u32::from(cfg.bus.heartbeat_producer_ms),
+            ),
+            ((object::MODES_OF_OPERATION, 0), 8),
+        ];
+        for (base, num, entries) in [
+            (object::RPDO_MAPPING, 0u16, &process_data::RPDO1[..]),
+            (object::RPDO_MAPPING, 1, &process_data::RPDO2[..]),
+            (object::TPDO_MAPPING, 0, &process_data::TPDO1[..]),
+            (object::TPDO_MAPPING, 1, &process_data::TPDO2[..]),
+        ] {
+            want.push(((base + num, 0), entries.len() as u32));
+            for (i, e) in entries.iter().enumerate() {
+                want.push(((base + num, i as u8 + 1), entry(e)));
+            }
+        }
+        for ((index, sub), value) in want {
+            let got = writes.get(&(*n, index, sub));
+            r.check(got == Some(&value), || {
+                format!(
+                    "candump {name}: node {n}: SDO write {index:04X}:{sub:02X} = {got:08X?}, expected {value:08X}"
+                )
+            });
+        }
+    }
+
+    // Touch-probe latch frames (TPDO2: status 0x60B9 + latched 0x60BA).
+    let tpdo2 = process_data::mapping(&process_data::TPDO2);
+    let mut latches: BTreeMap<u8, Vec<i32>> = BTreeMap::new();
+    for f in frames {
+        if let CobKind::Tpdo { num: 2, node } = classify(f.cob_id()) {
+            if let Ok(v) = tpdo2.unpack_frame(f) {
+                if v[0] as u16 & TouchProbeStatus::POSITIVE_EDGE_STORED != 0 {
+                    latches.entry(node).or_default().push(v[1] as u32 as i32);
+                }
+            }
+        }
+    }
+    for n in &nodes {
+        r.check(latches.get(n).is_some_and(|l| !l.is_empty()), || {
+            format!("candump {name}: no TPDO2 latch frame (edge stored) from node {n}")
+        });
+    }
+    if case.args.first().is_some_and(|a| a == "probe") {
+        // The one contact: the latched values on the bus are the reported contact.
+        if let Ok(json) = read_json(&results.join(format!("{name}.json"))) {
+            for a in &cfg.axes {
+                let reported = json["contact"][a.name.name()].as_f64().unwrap_or(f64::NAN);
+                let on_bus = latches
+                    .get(&a.node)
+                    .and_then(|l| l.last())
+                    .map(|v| *v as f64 / a.increments_per_unit);
+                r.check(
+                    on_bus.is_some_and(|b| (b - reported).abs() <= 1.0 / a.increments_per_unit + 1e-12),
+                    || format!("candump {name}: axis {} latched {on_bus:?} on the bus, the contact says {reported}", a.name),
+                );
+            }
+        }
+    }
+
+    // Replay: the master's frames into a fresh simulator give the recorded answers.
+    let mut sim = SimMachine::new(&sc);
+    let mut replayed = Vec::new();
+    for f in frames.iter().filter(|f| is_master_frame(f)) {
+        sim.on_frame(f, &mut |a| replayed.push(*a));
+    }
+    let recorded: Vec<CanFrame> = frames
+        .iter()
+        .filter(|f| is_drive_frame(f))
+        .copied()
+        .collect();
+    let first_diff = recorded
+        .iter()
+        .zip(&replayed)
+        .position(|(a, b)| a != b)
+        .or((recorded.len() != replayed.len()).then_some(recorded.len().min(replayed.len())));
+    r.check(first_diff.is_none(), || {
+        let i = first_diff.unwrap_or(0);
+        let show = |v: &[CanFrame]| {
+            v.iter()
+                .skip(i)
+                .take(3)
+                .map(|f| hal::can::candump::format_line(0, "-", f))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        format!(
+            "candump {name}: replaying the {} recorded master frames into the simulator gives {} drive frames, \
+             {} were recorded; first difference at drive frame {i}: recorded [{}], replayed [{}]",
+            frames.iter().filter(|f| is_master_frame(f)).count(),
+            replayed.len(),
+            recorded.len(),
+            show(&recorded),
+            show(&replayed)
+        )
+    });
+}
+
+fn check_candump(cases: &[Case], results: &Path, r: &mut Report) {
+    let path = results.join("candump.log");
+    let text = match read(&path) {
+        Ok(t) => t,
+        Err(e) => return r.fail(format!("candump: {e}")),
+    };
+    let log = match parse_log(&text) {
+        Ok(l) => l,
+        Err(e) => return r.fail(format!("candump: {}: {e}", path.display())),
+    };
+    r.check(log.iter().all(|(_, iface, _)| iface == "vcan0"), || {
+        "candump: frames from an interface other than vcan0".into()
+    });
+    // (Timestamps are not checked: the kernel stamps frames per CPU, and timings in
+    // the emulated VM mean nothing.)
+    // Split at the markers.
+    let mut segments: BTreeMap<u8, Vec<CanFrame>> = BTreeMap::new();
+    let mut current: Option<u8> = None;
+    for (_, _, f) in &log {
+        if f.cob_id() == MARKER && f.data().len() == 1 {
+            current = Some(f.data()[0]);
+            segments.entry(f.data()[0]).or_default();
+            continue;
+        }
+        if let Some(c) = current {
+            segments.entry(c).or_default().push(*f);
+        }
+    }
+    for case in cases.iter().filter(|c| c.moves()) {
+        match segments.get(&(case.number as u8)) {
+            Some(frames) => check_segment(case, frames, results, r),
+            None => r.fail(format!(
+                "candump: no marker 7FF#{:02X} for case {}",
+                case.number, case.name
+            )),
+        }
+    }
+    match segments.get(&CONFORMANCE_MARKER) {
+        Some(frames) => {
+            let sessions = frames
+                .iter()
+                .filter(|f| f.cob_id() == 0 && f.data() == [0x82, 0])
+                .count();
+            r.check(sessions >= CONFORMANCE_TESTS, || {
+                format!("candump conformance: {sessions} NMT resets (machine start-ups), expected at least {CONFORMANCE_TESTS}")
+            });
+        }
+        None => r.fail("candump: no marker 7FF#FF before the conformance suite".into()),
+    }
+    println!(
+        "candump: {} frames parsed, {} case segments",
+        log.len(),
+        segments.len()
+    );
+}
+
+const USAGE: &str = "usage: vcan-check --results DIR --reference DIR [--root DIR] [--configs DIR]
+  --configs DIR: the folder holding configs/scenarios and configs/machines the cases ran
+                 with (PROBEBRIDGE_VCAN_CONFIGS of run-cases.sh); default: the repository";
+
+fn main() -> ExitCode {
+    let mut results = None;
+    let mut reference = None;
+    let mut root = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
+    let mut configs = None;
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--results" => results = args.next().map(PathBuf::from),
+            "--reference" => reference = args.next().map(PathBuf::from),
+            "--root" => root = args.next().map(PathBuf::from).unwrap_or(root),
+            "--configs" => configs = args.next().map(PathBuf::from),
+            _ => {
+                eprintln!("{USAGE}");
+                return ExitCode::from(2);
+            }
+        }
+    }
+    let (Some(results), Some(reference)) = (results, reference) else {
+        eprintln!("{USAGE}");
+        return ExitCode::from(2);
+    };
+    let configs = configs.unwrap_or_else(|| root.clone());
+    let mut r = Report::default();
+
+    let cases = match read(&root.join("tests/vcan/cases")).and_then(|t| parse_cases(&configs, &t)) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("vcan-check: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+
+    // Every program that exists is run (or checked) in the VM.
+    if let Ok(dir) = std::fs::read_dir(root.join("configs/programs")) {
+        let mut programs: Vec<String> = dir
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.ends_with(".h"))
+            .collect();
+        programs.sort();
+        for p in programs {
+            let arg = format!("configs/programs/{p}");
+            r.check(cases.iter().any(|c| c.args.contains(&arg)), || {
+                format!("{arg} has no case in tests/vcan/cases: add one (run, or check for cycles that cannot run yet)")
+            });
+        }
+    }
+
+    if !results.join("vm.done").exists() {
+        r.fail(format!(
+            "the VM did not finish its script (no {}); vm.log ends with:\n    {}",
+            results.join("vm.done").display(),
+            tail(&results.join("vm.log"), 30)
+        ));
+    }
+    for case in &cases {
+        check_case(case, &results, &reference, &mut r);
+    }
+    check_conformance(&results, &mut r);
+    check_candump(&cases, &results, &mut r);
+
+    if r.failures.is_empty() {
+        println!(
+            "vcan-check: all {} checks passed ({} cases, conformance suite, candump replay)",
+            r.checks,
+            cases.len()
+        );
+        ExitCode::SUCCESS
+    } else {
+        eprintln!(
+            "vcan-check: {} of {} checks FAILED:",
+            r.failures.len(),
+            r.checks
+        );
+        for f in &r.failures {
+            eprintln!("  - {f}");
+        }
+        ExitCode::FAILURE
+    }
+}

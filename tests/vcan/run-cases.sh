@@ -1,0 +1,73 @@
+#!/usr/bin/env bash
+# Runs every case of tests/vcan/cases and leaves per case, in RESULTS:
+#   NAME.json (what probebridge wrote with --json), NAME.exit (its exit status),
+#   NAME.stdout / NAME.stderr, NAME.sim.log (the simulator process, with IFACE).
+#
+# Usage: run-cases.sh RESULTS [IFACE]
+#   without IFACE: on the host, built-in simulator on the in-process bus (the reference);
+#   with IFACE:    `probebridge sim` on IFACE in its own process, the bridge on IFACE;
+#                  before each case a marker frame 7FF#<case number> goes on the bus so
+#                  the candump log can be split per case (0x7FF is in CiA 301's
+#                  restricted range: no CANopen device uses it).
+# PROBEBRIDGE_BIN: the probebridge binary (default target/release/probebridge).
+# PROBEBRIDGE_VCAN_CONFIGS: a folder holding configs/scenarios and configs/machines to
+#   use instead of the repository's (.ci/vcan/run writes one with the bus timing
+#   relaxed for the emulated VM); programs always come from the repository.
+set -u
+ROOT=$(cd "$(dirname "$0")/../.." && pwd)
+RESULTS=$1
+IFACE=${2:-}
+BIN=${PROBEBRIDGE_BIN:-$ROOT/target/release/probebridge}
+CONFIGS=${PROBEBRIDGE_VCAN_CONFIGS:-$ROOT}
+CASE_TIMEOUT=${PROBEBRIDGE_CASE_TIMEOUT:-240}
+mkdir -p "$RESULTS"
+cd "$ROOT"
+
+trim() { local s=$1; s=${s#"${s%%[![:space:]]*}"}; s=${s%"${s##*[![:space:]]}"}; printf '%s' "$s"; }
+
+n=0
+while IFS='|' read -r name scenario args expect; do
+    name=$(trim "$name")
+    case "$name" in ''|'#'*) continue ;; esac
+    n=$((n + 1))
+    scenario=$CONFIGS/$(trim "$scenario")
+    args=$(trim "$args")
+    # shellcheck disable=SC2206 # the arguments are words without spaces
+    argv=($args)
+    extra=(--scenario "$scenario")
+    moves=
+    case "${argv[0]}" in
+        probe) moves=1; extra+=(--json "$RESULTS/$name.json" --service "pbvcan-$name") ;;
+        run) moves=1; extra+=(--json "$RESULTS/$name.json" --service "pbvcan-$name" --out "$RESULTS/$name.protocols") ;;
+        check) ;; # validation only: no bus, no JSON
+        *) echo "tests/vcan/cases: $name: unknown command ${argv[0]}" >&2 ;;
+    esac
+    rm -rf "$RESULTS/$name".*
+    sim_pid=
+    if [ -n "$IFACE" ]; then
+        cansend "$IFACE" "7FF#$(printf '%02X' "$n")"
+    fi
+    if [ -n "$IFACE" ] && [ -n "$moves" ]; then
+        extra+=(--can "$IFACE")
+        "$BIN" sim --scenario "$scenario" --can "$IFACE" > "$RESULTS/$name.sim.log" 2>&1 &
+        sim_pid=$!
+        # The simulator prints its banner once its socket is open: the bridge's NMT
+        # reset must not go out before that.
+        for _ in $(seq 100); do
+            grep -q 'probebridge sim:' "$RESULTS/$name.sim.log" 2>/dev/null && break
+            sleep 0.1
+        done
+    fi
+    echo "== case $n $name: probebridge ${argv[*]} ${extra[*]}"
+    start=$(date +%s)
+    timeout "$CASE_TIMEOUT" "$BIN" "${argv[@]}" "${extra[@]}" \
+        > "$RESULTS/$name.stdout" 2> "$RESULTS/$name.stderr" < /dev/null
+    status=$?
+    echo "$status" > "$RESULTS/$name.exit"
+    echo "   exit $status after $(( $(date +%s) - start )) s"
+    if [ -n "$sim_pid" ]; then
+        kill "$sim_pid" 2>/dev/null
+        wait "$sim_pid" 2>/dev/null
+    fi
+done < "$ROOT/tests/vcan/cases"
+echo "$n" > "$RESULTS/cases.count"
