@@ -49,6 +49,8 @@ struct Expect {
     truth_probe: bool,
     truth_431: bool,
     q: Vec<(String, f64)>,
+    /// The program run must equal this one but for its name, comments and Q253.
+    derived: Option<String>,
 }
 
 #[derive(Debug)]
@@ -89,6 +91,7 @@ fn parse_cases(configs: &Path, text: &str) -> Result<Vec<Case>, String> {
             truth_probe: false,
             truth_431: false,
             q: Vec::new(),
+            derived: None,
         };
         for word in fields[3].split_whitespace() {
             let (k, v) = word.split_once('=').ok_or_else(|| {
@@ -105,6 +108,7 @@ fn parse_cases(configs: &Path, text: &str) -> Result<Vec<Case>, String> {
                         .parse()
                         .map_err(|_| format!("line {}: tol={v:?}", i + 1))?
                 }
+                ("derived", p) => expect.derived = Some(p.to_string()),
                 ("truth", "probe") => expect.truth_probe = true,
                 ("truth", "431") => expect.truth_431 = true,
                 (q, v) if q.starts_with('Q') => expect.q.push((
@@ -167,13 +171,17 @@ fn tail(path: &Path, lines: usize) -> String {
 }
 
 /// Every number of `got` equals `want` to [`TOL`]; keys that depend on the clock or the
-/// folder (`trigger_ns`, `protocols`) are not compared.
+/// folder (`trigger_ns`, `protocols`, the clock-based `run_id`s of the estimator's
+/// sample sets) are not compared.
 fn compare_json(path: &str, got: &Value, want: &Value, out: &mut Vec<String>) {
     match (got, want) {
         (Value::Object(g), Value::Object(w)) => {
             let keys: BTreeSet<&String> = g.keys().chain(w.keys()).collect();
             for k in keys {
-                if k == "trigger_ns" || k == "protocols" {
+                if matches!(
+                    k.as_str(),
+                    "trigger_ns" | "protocols" | "run_id" | "run_ids"
+                ) {
                     continue;
                 }
                 match (g.get(k), w.get(k)) {
@@ -248,6 +256,45 @@ fn probe_truth(sc: &Scenario, start: [f64; 3], dir: [f64; 3]) -> Result<[f64; 3]
         start[1] + t * d[1],
         start[2] + t * d[2],
     ])
+}
+
+/// The lines of an NC program that matter when comparing a VM copy with its original:
+/// without the program name, `;` comment lines and the Q253 (pre-positioning feed).
+fn program_core(text: &str) -> Vec<String> {
+    text.lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with(';'))
+        .filter(|l| !l.contains(" PGM ") && !l.starts_with("Q253="))
+        .map(String::from)
+        .collect()
+}
+
+fn check_derived(case: &Case, root: &Path, r: &mut Report) {
+    let Some(original) = &case.expect.derived else {
+        return;
+    };
+    let name = &case.name;
+    let Some(program) = case.args.iter().find(|a| a.ends_with(".h")) else {
+        return r.fail(format!("{name}: derived= needs a program in ARGS"));
+    };
+    match (read(&root.join(program)), read(&root.join(original))) {
+        (Ok(a), Ok(b)) => {
+            let (a, b) = (program_core(&a), program_core(&b));
+            let diff = a.iter().zip(&b).position(|(x, y)| x != y);
+            r.check(diff.is_none() && a.len() == b.len(), || {
+                let i = diff.unwrap_or(a.len().min(b.len()));
+                format!(
+                    "{name}: {program} has drifted from {original} (beyond name, comments and Q253): {:?} vs {:?}",
+                    a.get(i),
+                    b.get(i)
+                )
+            });
+        }
+        (a, b) => r.fail(format!(
+            "{name}: {}",
+            a.err().or(b.err()).unwrap_or_default()
+        )),
+    }
 }
 
 fn check_case(case: &Case, results: &Path, reference: &Path, r: &mut Report) {
@@ -723,6 +770,7 @@ fn main() -> ExitCode {
         ));
     }
     for case in &cases {
+        check_derived(case, &root, &mut r);
         check_case(case, &results, &reference, &mut r);
     }
     check_conformance(&results, &mut r);

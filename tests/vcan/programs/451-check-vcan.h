@@ -1,0 +1,39 @@
+0 BEGIN PGM 451-check-vcan MM
+; configs/programs/451-check.h for the vcan VM (tests/vcan/cases): the same
+; cycle 451 in mode 0 with Q253 (pre-positioning feed) 5000 instead of 750, so it
+; runs in about 2 min of real time instead of 5. tests/vcan/check.rs makes sure the
+; two differ in nothing else.
+1 ; Cycle 451 MEASURE KINEMATICS, mode 0 (check), on configs/scenarios/demo-sphere.toml:
+2 ; the calibration sphere R12.5 at X+50 Y-30 Z+80 on the A/C tilting table.
+3 ; The probe goes over the sphere, 5 mm above Q320 + SET_UP over its pole; cycle 451
+4 ; finds the sphere from there. Q431=0 keeps the preset at the table origin, so
+5 ; Q147..Q149 give the sphere centre. Mode 0 reports the dispersion and what a
+6 ; position optimisation would give, and leaves the kinematics file alone.
+7 TOOL CALL "TOUCH_PROBE" Z
+8 L Z+150 R0 FMAX
+9 L X+50 Y-30 R0 FMAX
+10 L Z+102.5 R0 FMAX
+11 TCH PROBE 451 MEASURE KINEMATICS ~
+    Q406=+0        ;MODE ~
+    Q407=+12.5     ;SPHERE RADIUS ~
+    Q320=+0        ;SET-UP CLEARANCE ~
+    Q408=+0        ;RETR. HEIGHT ~
+    Q253=+5000     ;F PRE-POSITIONING ~
+    Q380=+0        ;REFERENCE ANGLE ~
+    Q411=-90       ;START ANGLE A AXIS ~
+    Q412=+90       ;END ANGLE A AXIS ~
+    Q413=+0        ;INCID. ANGLE A AXIS ~
+    Q414=+3        ;MEAS. POINTS A AXIS ~
+    Q415=+0        ;START ANGLE B AXIS ~
+    Q416=+0        ;END ANGLE B AXIS ~
+    Q417=+0        ;INCID. ANGLE B AXIS ~
+    Q418=+0        ;MEAS. POINTS B AXIS ~
+    Q419=+90       ;START ANGLE C AXIS ~
+    Q420=+270      ;END ANGLE C AXIS ~
+    Q421=+0        ;INCID. ANGLE C AXIS ~
+    Q422=+3        ;MEAS. POINTS C AXIS ~
+    Q423=+4        ;NO. OF PROBE POINTS ~
+    Q431=+0        ;PRESET ~
+    Q432=+0        ;BACKLASH, ANG. RANGE
+12 L Z+150 R0 FMAX
+13 END PGM 451-check-vcan MM
