@@ -417,6 +417,9 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
                 loop {
                     let now = monotonic_ns();
                     if now >= deadline {
+                        if now > deadline + self.cfg.period_ns / 2 {
+                            self.stats.late_cycles += 1;
+                        }
                         break;
                     }
                     if let Some(f) = self
@@ -425,17 +428,6 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
                     {
                         self.on_frame(&f);
                     }
-                }
-                // What arrived while this cycle was late still counts.
-                while let Some(f) = self.transport.receive(Duration::ZERO)? {
-                    self.on_frame(&f);
-                }
-                let now = monotonic_ns();
-                if now > deadline + self.cfg.period_ns / 2 {
-                    // Late: re-anchor the schedule at now instead of sending the missed
-                    // SYNCs back to back, which the drives would take for a short period.
-                    self.stats.late_cycles += 1;
-                    self.epoch_ns = now - (self.cycle + 1) * self.cfg.period_ns;
                 }
                 let now = monotonic_ns();
                 self.supervised_ns += (now - self.sync_ns).min(2 * self.cfg.period_ns);
