@@ -434,10 +434,10 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
         yes_no(ratio_p50 <= 2.0)
     );
     let anomalies = lost_triggers + lost_floor + missing_t0 + loop_stats.publish_failures;
-    if anomalies > 0 || loop_stats.late_cycles > 0 {
+    if anomalies > 0 || loop_stats.late_cycles > 0 || loop_stats.skipped_cycles > 0 {
         println!(
-            "lost: {lost_triggers} trigger and {lost_floor} floor samples; {missing_t0} triggers without t0; {} publish failures; {} late cycles",
-            loop_stats.publish_failures, loop_stats.late_cycles
+            "lost: {lost_triggers} trigger and {lost_floor} floor samples; {missing_t0} triggers without t0; {} publish failures; {} late cycles, {} SYNC slots skipped after stalls",
+            loop_stats.publish_failures, loop_stats.late_cycles, loop_stats.skipped_cycles
         );
     }
 
@@ -483,6 +483,7 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
                 "publish_failures": loop_stats.publish_failures,
             },
             "late_cycles": loop_stats.late_cycles,
+            "skipped_cycles": loop_stats.skipped_cycles,
             "targets": targets,
         });
         crate::output::write_json(path, &doc)?;

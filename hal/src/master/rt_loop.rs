@@ -72,6 +72,9 @@ pub struct LoopStats {
     pub publish_failures: u64,
     /// Real-time pacing: cycles whose work ended after their deadline.
     pub late_cycles: u64,
+    /// Real-time pacing: SYNC slots not sent because the loop had stalled for longer
+    /// than a whole period (sending them late would put SYNCs back to back).
+    pub skipped_cycles: u64,
     /// Latch frame received -> stop setpoint sent, of the last contact, ns.
     pub last_stop_latency_ns: u64,
     /// The same in whole cycles (the stop goes out with the next SYNC).
@@ -413,11 +416,24 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
                 self.supervised_ns += self.cfg.period_ns;
             }
             Pacing::RealTime => {
-                let deadline = self.epoch_ns + (self.cycle + 1) * self.cfg.period_ns;
+                let period = self.cfg.period_ns;
+                let mut deadline = self.epoch_ns + (self.cycle + 1) * period;
+                let now = monotonic_ns();
+                if now >= deadline + period {
+                    // Stalled past a whole slot: drop the missed slots and resume at the
+                    // next slot of the grid. Sending them now would put SYNCs back to
+                    // back, and a drive interpolating over the SYNC period would take
+                    // each setpoint step as a period's worth of motion: a velocity
+                    // spike. The profile advances per SYNC sent, so the path pauses.
+                    let missed = (now - deadline) / period + 1;
+                    self.cycle += missed;
+                    self.stats.skipped_cycles += missed;
+                    deadline += missed * period;
+                }
                 loop {
                     let now = monotonic_ns();
                     if now >= deadline {
-                        if now > deadline + self.cfg.period_ns / 2 {
+                        if now > deadline + period / 2 {
                             self.stats.late_cycles += 1;
                         }
                         break;
@@ -428,6 +444,10 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
                     {
                         self.on_frame(&f);
                     }
+                }
+                // Frames that came in while this cycle was late belong to it too.
+                while let Some(f) = self.transport.receive(Duration::ZERO)? {
+                    self.on_frame(&f);
                 }
                 let now = monotonic_ns();
                 self.supervised_ns += (now - self.sync_ns).min(2 * self.cfg.period_ns);
@@ -911,5 +931,59 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
 
     pub fn sink_mut(&mut self) -> &mut S {
         &mut self.sink
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::contact_sample::NullSink;
+    use std::path::Path;
+    use std::time::Instant;
+
+    /// Records when each SYNC went out; hears nothing.
+    struct SyncTimes(Vec<Instant>);
+
+    impl CanTransport for SyncTimes {
+        fn transmit(&mut self, frame: &CanFrame) -> Result<(), TransportError> {
+            if frame.cob_id() == sync::encode().cob_id() {
+                self.0.push(Instant::now());
+            }
+            Ok(())
+        }
+        fn receive(&mut self, timeout: Duration) -> Result<Option<CanFrame>, TransportError> {
+            std::thread::sleep(timeout);
+            Ok(None)
+        }
+    }
+
+    #[test]
+    fn a_stalled_real_time_loop_skips_the_missed_syncs_instead_of_bursting_them() {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/machines/table-ac.toml");
+        let machine = MachineConfig::load(&p).unwrap();
+        let mut cfg = LoopConfig::from_machine(&machine, Pacing::RealTime);
+        cfg.period_ns = 1_000_000;
+        let mut rt = RtLoop::new(&machine, cfg, SyncTimes(Vec::new()), NullSink);
+        for _ in 0..3 {
+            rt.cycle().unwrap();
+        }
+        // The stall being simulated: the loop does not run for 10 periods.
+        std::thread::sleep(Duration::from_millis(10));
+        let before = rt.transport_mut().0.len();
+        let resumed = Instant::now();
+        for _ in 0..3 {
+            rt.cycle().unwrap();
+        }
+        let after = &rt.transport_mut().0[before..];
+        assert_eq!(after.len(), 3);
+        // Bursting would send these three within microseconds of resuming; on the grid
+        // the first waits for the next slot and the other two follow a period apart.
+        let span = after[2] - resumed;
+        assert!(
+            span >= Duration::from_millis(2),
+            "3 SYNCs within {span:?} after a stall, period 1 ms"
+        );
+        let skipped = rt.stats().skipped_cycles;
+        assert!(skipped >= 9, "{skipped} slots skipped over a 10 ms stall");
     }
 }
