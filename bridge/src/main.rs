@@ -106,6 +106,10 @@ enum Cmd {
         program: PathBuf,
         #[command(flatten)]
         machine: MachineArgs,
+        /// Active kinematics file the program's cycle 451 would use; default:
+        /// <machine>.kinematics.toml beside the machine configuration.
+        #[arg(long)]
+        kinematics: Option<PathBuf>,
     },
     /// Run the simulated drives of a scenario alone on a SocketCAN interface.
     Sim {
@@ -217,7 +221,11 @@ fn main() -> ExitCode {
             yes,
             kinematics,
         }),
-        Cmd::Check { program, machine } => commands::check::run(&program, &machine.options()),
+        Cmd::Check {
+            program,
+            machine,
+            kinematics,
+        } => commands::check::run(&program, &machine.options(), kinematics),
         Cmd::Demo { machine } => commands::demo::run(&machine.options()).map(|()| 0),
         Cmd::Sim { scenario, can } => commands::sim::run(scenario, &can).map(|()| 0),
         Cmd::Estimator {

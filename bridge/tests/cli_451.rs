@@ -211,3 +211,62 @@ fn run_451_check_program_changes_nothing() {
     check_results_against_spec(c, &machine("table-ac"));
     assert!(dir.join("TCHPRAUTO.html").exists());
 }
+
+/// `check` runs what `run` refuses before the first move, without a bus: cycle 451's
+/// plan against the machine (software limits, Hirth axes, mode 3) and the active
+/// kinematics file. The shipped program passes; each variant fails with its reason.
+#[test]
+fn check_refuses_what_run_would_refuse_before_moving() {
+    let dir = tmpdir("check451");
+    let program = configs().join("programs/451-check.h");
+    let text = std::fs::read_to_string(&program).unwrap();
+    let scenario = configs().join("scenarios/demo-sphere.toml");
+    let check = |file: &Path, kin: Option<&Path>| {
+        let mut cmd = bin();
+        cmd.args([
+            "check",
+            file.to_str().unwrap(),
+            "--scenario",
+            scenario.to_str().unwrap(),
+        ]);
+        if let Some(k) = kin {
+            cmd.args(["--kinematics", k.to_str().unwrap()]);
+        }
+        let out = cmd.output().expect("run probebridge");
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, stderr) = check(&program, None);
+    assert_eq!(code, Some(0), "{stderr}");
+
+    // A +130 deg end angle, beyond A's software limit of +120.
+    let wide = dir.join("wide.h");
+    std::fs::write(&wide, text.replace("Q412=+90 ", "Q412=+130")).unwrap();
+    let (code, stderr) = check(&wide, None);
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(
+        stderr.contains("block 11 (cycle 451)") && stderr.contains("outside the software limits"),
+        "{stderr}"
+    );
+
+    // Mode 3 measuring A alone: nothing nearer the bed can take up A's datum.
+    let mode3 = dir.join("mode3.h");
+    let only_a = text
+        .replace("Q406=+0 ", "Q406=+3 ")
+        .replace("Q422=+3 ", "Q422=+0 ");
+    std::fs::write(&mode3, only_a).unwrap();
+    let (code, stderr) = check(&mode3, None);
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(stderr.contains("Q406=3"), "{stderr}");
+
+    // A kinematics file of another machine.
+    let kin = dir.join("other.toml");
+    std::fs::write(&kin, "machine = \"head-b-table-c\"\n[errors]\n").unwrap();
+    let (code, stderr) = check(&program, Some(&kin));
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(stderr.contains("active kinematics"), "{stderr}");
+    // Nothing was written beside the program or the kinematics file.
+    assert!(!dir.join("other.toml.prev").exists());
+}

@@ -110,6 +110,61 @@ fn preflight(
     Ok(())
 }
 
+/// Why a program cannot start on this machine.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Preflight {
+    /// A cycle's demands the machine, its configuration or its kinematics file cannot
+    /// meet.
+    Cycle {
+        block: u32,
+        cycle: u16,
+        message: String,
+    },
+    /// A positioning block (L) that cannot be carried out.
+    Positioning { line: usize, message: String },
+}
+
+impl std::fmt::Display for Preflight {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Preflight::Cycle {
+                block,
+                cycle,
+                message,
+            } => write!(f, "block {block} (cycle {cycle}): {message}"),
+            Preflight::Positioning { line, message } => write!(f, "line {line}: {message}"),
+        }
+    }
+}
+
+/// Everything `run_program` checks before the first move, without a machine: `check`
+/// runs it on the configuration's axes, `run` on the connected machine's.
+pub fn preflight_program(
+    program: &Program,
+    machine_axes: u8,
+    cfg: &MachineConfig,
+    kinematics: &std::path::Path,
+) -> Result<(), Preflight> {
+    for call in program.cycles() {
+        preflight(call, machine_axes, cfg, kinematics).map_err(|message| Preflight::Cycle {
+            block: call.block,
+            cycle: call.cycle,
+            message,
+        })?;
+    }
+    for block in &program.blocks {
+        if let Statement::Other(code) = &block.statement {
+            if let Some(Err(message)) = parse_linear(code, program.unit) {
+                return Err(Preflight::Positioning {
+                    line: block.line,
+                    message,
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
 pub fn run_program<M: Machine>(
     program: &Program,
     machine: &mut M,
@@ -117,23 +172,23 @@ pub fn run_program<M: Machine>(
     opts: &mut RunOptions,
 ) -> ProgramReport {
     let mut report = ProgramReport::default();
-    let axes = machine.axes();
     let kinematics = opts.kinematics_path(cfg);
-    for call in program.cycles() {
-        if let Err(message) = preflight(call, axes, cfg, &kinematics) {
-            report.stopped = Some(format!("block {}: {message}", call.block));
+    match preflight_program(program, machine.axes(), cfg, &kinematics) {
+        Ok(()) => {}
+        Err(Preflight::Cycle {
+            block,
+            cycle,
+            message,
+        }) => {
+            report.stopped = Some(format!("block {block}: {message}"));
             report
                 .cycles
-                .push(CycleResult::error(call.block, call.cycle, message));
+                .push(CycleResult::error(block, cycle, message));
             return report;
         }
-    }
-    for block in &program.blocks {
-        if let Statement::Other(code) = &block.statement {
-            if let Some(Err(message)) = parse_linear(code, program.unit) {
-                report.stopped = Some(format!("line {}: {message}; nothing moved", block.line));
-                return report;
-            }
+        Err(e @ Preflight::Positioning { .. }) => {
+            report.stopped = Some(format!("{e}; nothing moved"));
+            return report;
         }
     }
     // Rapid positioning: as fast as the slowest axis on the path allows.

@@ -1,27 +1,47 @@
 //! `probebridge check PROGRAM`: parse and validate a program against the machine's
-//! configuration (probe table, PREDEF values); nothing moves.
+//! configuration (probe table, PREDEF values) and run every check `run` makes before
+//! the first move (cycle 451's plan against the machine and its active kinematics);
+//! nothing moves and no bus is opened.
 
 use crate::session::{resolve_machine, MachineOptions};
+use cycles::kinematics_file::ActiveKinematics;
 use cycles::parser::check_program;
-use std::path::Path;
+use cycles::program::Program;
+use cycles::runner::preflight_program;
+use std::path::{Path, PathBuf};
 
 /// Exit status 0 when valid, 2 with every error listed.
-pub fn run(program: &Path, machine: &MachineOptions) -> Result<u8, String> {
+pub fn run(
+    program: &Path,
+    machine: &MachineOptions,
+    kinematics: Option<PathBuf>,
+) -> Result<u8, String> {
     let (cfg, _) = resolve_machine(machine).map_err(|e| e.to_string())?;
     let text = std::fs::read_to_string(program)
         .map_err(|e| format!("cannot read {}: {e}", program.display()))?;
-    let diagnostics = check_program(&text, &cfg);
-    if diagnostics.is_empty() {
+    let mut errors: Vec<String> = check_program(&text, &cfg)
+        .iter()
+        .map(|d| d.to_string())
+        .collect();
+    if errors.is_empty() {
+        // Valid text: now what only the machine can tell, as `run` checks it.
+        let parsed = Program::parse(&text, &cfg).map_err(|e| e.to_string())?;
+        let kinematics = kinematics.unwrap_or_else(|| ActiveKinematics::default_path(&cfg));
+        if let Err(e) = preflight_program(&parsed, cfg.axis_mask(), &cfg, &kinematics) {
+            errors.push(e.to_string());
+        }
+    }
+    if errors.is_empty() {
         println!("{}: ok (machine {})", program.display(), cfg.name);
         return Ok(0);
     }
-    for d in &diagnostics {
-        eprintln!("{}: {d}", program.display());
+    for e in &errors {
+        eprintln!("{}: {e}", program.display());
     }
     eprintln!(
         "{}: {} error(s); nothing was run",
         program.display(),
-        diagnostics.len()
+        errors.len()
     );
     Ok(2)
 }
