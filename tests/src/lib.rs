@@ -1,6 +1,7 @@
 //! Software-in-the-loop test support: the `Machine` conformance suite (written once,
 //! run against every backend), scenario helpers and a synchronous loopback bus.
 
+pub mod alloc_count;
 pub mod conformance;
 pub mod loopback;
 pub mod spec451;

@@ -22,60 +22,13 @@
 use hal::master::command::{Command, Reply};
 use hal::master::{startup, LoopConfig, Pacing, RtLoop};
 use probebridge::ipc::{ContactSubscriber, ForwardingSink};
+use probebridge_tests::alloc_count::{count, Counting};
 use probebridge_tests::loopback::Loopback;
 use probebridge_tests::{machine_config, scenario, unique_service};
 use sim::machine::SimMachine;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-
-struct Counting;
-
-/// This thread (the real-time path) only.
-static RT_ALLOCS: AtomicU64 = AtomicU64::new(0);
-static RT_FREES: AtomicU64 = AtomicU64::new(0);
-/// Every thread, while `WINDOW` is open.
-static ALL_ALLOCS: AtomicU64 = AtomicU64::new(0);
-static ALL_FREES: AtomicU64 = AtomicU64::new(0);
-static WINDOW: AtomicBool = AtomicBool::new(false);
-
-thread_local! {
-    // const-initialised and without a destructor: reading it never allocates.
-    static RT_THREAD: Cell<bool> = const { Cell::new(false) };
-}
-
-fn count(rt: &AtomicU64, all: &AtomicU64) {
-    if WINDOW.load(Ordering::Relaxed) {
-        all.fetch_add(1, Ordering::Relaxed);
-        // try_with: a thread being torn down has no thread-locals left.
-        if RT_THREAD.try_with(Cell::get).unwrap_or(false) {
-            rt.fetch_add(1, Ordering::Relaxed);
-        }
-    }
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count(&RT_ALLOCS, &ALL_ALLOCS);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        count(&RT_ALLOCS, &ALL_ALLOCS);
-        unsafe { System.alloc_zeroed(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        count(&RT_FREES, &ALL_FREES);
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        // A reallocation both allocates and frees.
-        count(&RT_ALLOCS, &ALL_ALLOCS);
-        count(&RT_FREES, &ALL_FREES);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -173,27 +126,19 @@ normal = [0.0, 0.0, 1.0]
 
     let published_before = rt.stats().samples_published;
     let started = Instant::now();
-    RT_THREAD.with(|c| c.set(true));
-    WINDOW.store(true, Ordering::SeqCst);
-    for n in 1..=TRIGGERS {
-        let s = trigger(&mut rt);
-        assert!(s.sequence > 0);
-        // Back-pressure without allocating: yield while the subscriber lags.
-        while n + 1 - received.load(Ordering::Acquire) > MAX_IN_FLIGHT {
-            std::thread::yield_now();
+    let ((), counts) = count(|| {
+        for n in 1..=TRIGGERS {
+            let s = trigger(&mut rt);
+            assert!(s.sequence > 0);
+            // Back-pressure without allocating: yield while the subscriber lags.
+            while n + 1 - received.load(Ordering::Acquire) > MAX_IN_FLIGHT {
+                std::thread::yield_now();
+            }
         }
-    }
-    WINDOW.store(false, Ordering::SeqCst);
-    RT_THREAD.with(|c| c.set(false));
+    });
     let elapsed = started.elapsed();
-    let (rt_allocs, rt_frees) = (
-        RT_ALLOCS.load(Ordering::SeqCst),
-        RT_FREES.load(Ordering::SeqCst),
-    );
-    let (all_allocs, all_frees) = (
-        ALL_ALLOCS.load(Ordering::SeqCst),
-        ALL_FREES.load(Ordering::SeqCst),
-    );
+    let (rt_allocs, rt_frees) = (counts.this_thread_allocs, counts.this_thread_frees);
+    let (all_allocs, all_frees) = (counts.all_allocs, counts.all_frees);
 
     let stats = rt.stats();
     // Everything queued reaches the subscriber.

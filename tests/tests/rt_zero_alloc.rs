@@ -6,42 +6,11 @@
 use hal::master::command::{Command, Reply};
 use hal::master::{startup, LoopConfig, Pacing, RtLoop};
 use hal::{ContactSample, SampleSink, SinkError};
+use probebridge_tests::alloc_count::{count, Counting};
 use probebridge_tests::loopback::Loopback;
 use probebridge_tests::{machine_config, scenario};
 use sim::machine::SimMachine;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
-
-struct Counting;
-
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-}
-
-fn counted() {
-    if COUNTING.with(Cell::get) {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    }
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        counted();
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        counted();
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        counted();
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -125,14 +94,15 @@ normal = [0.0, 0.0, 1.0]
 
     const TRIGGERS: u64 = 10_000;
     let published_before = rt.sink_mut().n;
-    COUNTING.with(|c| c.set(true));
-    let mut worst = 0.0f64;
-    for _ in 0..TRIGGERS {
-        let s = cycle_once(&mut rt);
-        worst = worst.max((s.positions[2] - 13.0).abs());
-    }
-    COUNTING.with(|c| c.set(false));
-    let allocations = ALLOCATIONS.load(Ordering::Relaxed);
+    let (worst, counts) = count(|| {
+        let mut worst = 0.0f64;
+        for _ in 0..TRIGGERS {
+            let s = cycle_once(&mut rt);
+            worst = worst.max((s.positions[2] - 13.0).abs());
+        }
+        worst
+    });
+    let allocations = counts.this_thread_allocs + counts.this_thread_frees;
 
     assert_eq!(
         rt.sink_mut().n - published_before,
