@@ -1,6 +1,6 @@
-//! Real-time scheduling of the calling thread, for threads on the hot trigger path
-//! besides the real-time loop (which sets itself up in `master`): the sample forwarder,
-//! benchmark stand-ins for hardware.
+//! Real-time settings: SCHED_FIFO for threads on the hot trigger path besides the
+//! real-time loop (which sets its own in `master`): the sample forwarder, benchmark
+//! stand-ins for hardware; and the CPU wake-up latency request the loop holds.
 
 /// Puts the calling thread under SCHED_FIFO at `priority` (1..99). `false` when not
 /// permitted (no CAP_SYS_NICE / RLIMIT_RTPRIO) or `priority` is out of range; the
@@ -14,4 +14,63 @@ pub fn set_fifo_priority(priority: i32) -> bool {
     };
     // SAFETY: plain syscall on the calling thread (pid 0) with a parameter we own.
     unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) == 0 }
+}
+
+/// A PM QoS request holding every CPU's wake-up latency at 0 µs while it lives: the
+/// kernel keeps idle CPUs out of deep C-states, whose exit takes tens to hundreds of µs
+/// on gateway-class CPUs and would land on the first frame after an idle SYNC gap.
+/// The request is the open file; dropping it releases it (as cyclictest does).
+#[derive(Debug)]
+pub struct CpuLatencyRequest {
+    _file: std::fs::File,
+}
+
+/// Where the kernel takes CPU wake-up latency requests.
+pub const CPU_DMA_LATENCY: &str = "/dev/cpu_dma_latency";
+
+/// Asks for 0 µs CPU wake-up latency; `Err` says why not (typically: not root).
+pub fn hold_cpu_latency_zero() -> Result<CpuLatencyRequest, String> {
+    use std::io::Write;
+    let mut file = std::fs::OpenOptions::new()
+        .write(true)
+        .open(CPU_DMA_LATENCY)
+        .map_err(|e| format!("{CPU_DMA_LATENCY}: {e}"))?;
+    file.write_all(&0i32.to_ne_bytes())
+        .map_err(|e| format!("{CPU_DMA_LATENCY}: {e}"))?;
+    Ok(CpuLatencyRequest { _file: file })
+}
+
+/// The kernel's cpuidle driver (`none` in VMs without one, where idle CPUs halt to the
+/// hypervisor whatever is requested); `None` when not reported.
+pub fn cpuidle_driver() -> Option<String> {
+    std::fs::read_to_string("/sys/devices/system/cpu/cpuidle/current_driver")
+        .ok()
+        .map(|s| s.trim().to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_cpu_latency_request_is_held_while_it_lives() {
+        // SAFETY: geteuid has no preconditions.
+        let root = unsafe { libc::geteuid() } == 0;
+        let present = std::path::Path::new(CPU_DMA_LATENCY).exists();
+        match hold_cpu_latency_zero() {
+            Ok(req) => {
+                // Reading the device gives the strictest request in force: ours.
+                let v = std::fs::read(CPU_DMA_LATENCY).unwrap();
+                assert_eq!(i32::from_ne_bytes(v[..4].try_into().unwrap()), 0);
+                drop(req);
+            }
+            Err(why) => {
+                assert!(
+                    !(root && present),
+                    "root and {CPU_DMA_LATENCY} exists: {why}"
+                );
+                assert!(why.starts_with(CPU_DMA_LATENCY), "{why}");
+            }
+        }
+    }
 }

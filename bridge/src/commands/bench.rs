@@ -365,8 +365,9 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
         sink_name
     );
     let granted = |b: bool| if b { "granted" } else { "NOT granted" };
+    let cpuidle = hal::rt::cpuidle_driver();
     println!(
-        "SCHED_FIFO: real-time loop {} (priority {}), simulated drives {} ({}), {}, {}; memory {}; {} CPUs",
+        "SCHED_FIFO: real-time loop {} (priority {}), simulated drives {} ({}), {}, {}; memory {}; CPU wake-up latency {} (cpuidle driver: {}); {} CPUs",
         granted(startup.realtime_priority),
         args.rt_priority,
         granted(sim_fifo),
@@ -386,6 +387,12 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
             "estimator: ordinary process".to_string()
         },
         if startup.memory_locked { "locked" } else { "NOT locked" },
+        if startup.cpu_latency_held {
+            "held at 0 us"
+        } else {
+            "NOT held"
+        },
+        cpuidle.as_deref().unwrap_or("not reported"),
         std::thread::available_parallelism().map_or(0, |n| n.get())
     );
     for n in &notes {
@@ -461,6 +468,8 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
                 "simulated_drives_priority": drive_priority,
                 "floor_sender_sched_fifo": main_fifo,
                 "memory_locked": startup.memory_locked,
+                "cpu_latency_held": startup.cpu_latency_held,
+                "cpuidle_driver": cpuidle,
                 "notes": notes,
             },
             "trigger_latency_us": trig.to_json(),

@@ -28,6 +28,9 @@ pub struct StartupReport {
     pub realtime_priority: bool,
     /// The process's memory is locked (no page faults in the loop).
     pub memory_locked: bool,
+    /// CPU wake-up latency is held at 0 µs while the loop runs (see
+    /// [`crate::rt::hold_cpu_latency_zero`]).
+    pub cpu_latency_held: bool,
     /// Each drive: axis, node and the device name it reports.
     pub drives: Vec<String>,
     pub notes: Vec<String>,
@@ -116,7 +119,7 @@ impl CanMachine {
         let (reply_tx, reply_rx) = sync_channel::<Reply>(1);
         let running = Arc::new(AtomicBool::new(true));
         let stats = Arc::new(Mutex::new(LoopStats::default()));
-        let (rt_tx, rt_rx) = sync_channel::<(bool, bool)>(1);
+        let (rt_tx, rt_rx) = sync_channel::<(bool, bool, bool, Option<String>)>(1);
         let machine_cfg = cfg.clone();
         let thread = {
             let running = running.clone();
@@ -131,7 +134,18 @@ impl CanMachine {
                     } else {
                         (false, false)
                     };
-                    let _ = rt_tx.send(got);
+                    // Held for as long as the loop runs.
+                    let latency = if realtime {
+                        Some(crate::rt::hold_cpu_latency_zero())
+                    } else {
+                        None
+                    };
+                    let latency_note = match &latency {
+                        Some(Err(why)) => Some(why.clone()),
+                        _ => None,
+                    };
+                    let held = matches!(latency, Some(Ok(_)));
+                    let _ = rt_tx.send((got.0, got.1, held, latency_note));
                     let mut rt = RtLoop::new(&machine_cfg, loop_cfg, transport, sink);
                     run_thread(&mut rt, &cmd_rx, &reply_tx, &running, &stats);
                 })
@@ -142,9 +156,15 @@ impl CanMachine {
                     )
                 })?
         };
-        let (realtime_priority, memory_locked) = rt_rx.recv().unwrap_or((false, false));
+        let (realtime_priority, memory_locked, cpu_latency_held, latency_note) =
+            rt_rx.recv().unwrap_or((false, false, false, None));
         let mut notes = Vec::new();
         if matches!(options.pacing, Pacing::RealTime) {
+            if let Some(why) = latency_note {
+                notes.push(format!(
+                    "CPU idle states not held off ({why}): the first frame after an idle gap may wait for a CPU to wake"
+                ));
+            }
             if !realtime_priority {
                 notes.push(format!(
                     "real-time loop runs without SCHED_FIFO (priority {} not permitted: run as root or grant CAP_SYS_NICE)",
@@ -182,6 +202,7 @@ impl CanMachine {
                 bus_load,
                 realtime_priority,
                 memory_locked,
+                cpu_latency_held,
                 drives,
                 notes,
             },
