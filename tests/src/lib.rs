@@ -4,6 +4,7 @@
 pub mod alloc_count;
 pub mod conformance;
 pub mod loopback;
+pub mod probing_loop;
 pub mod spec451;
 
 use sim::Scenario;

@@ -19,13 +19,10 @@
 //! seconds; the code on the hot path (`on_frame`, the latch, `transmit`, the sink) is the
 //! same under real-time pacing, which only adds clock reads and timed waits.
 
-use hal::master::command::{Command, Reply};
-use hal::master::{startup, LoopConfig, Pacing, RtLoop};
 use probebridge::ipc::{ContactSubscriber, ForwardingSink};
 use probebridge_tests::alloc_count::{count, Counting};
-use probebridge_tests::loopback::Loopback;
-use probebridge_tests::{machine_config, scenario, unique_service};
-use sim::machine::SimMachine;
+use probebridge_tests::probing_loop::{start, trigger, CONTACT_Z};
+use probebridge_tests::unique_service;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -39,29 +36,8 @@ const TRIGGERS: u64 = 100_000;
 /// buffer (1024) can overflow on a busy machine.
 const MAX_IN_FLIGHT: u64 = 256;
 
-fn until_reply(rt: &mut RtLoop<Loopback, ForwardingSink>) -> Reply {
-    for _ in 0..100_000 {
-        rt.cycle().expect("loopback does not fail");
-        if let Some(r) = rt.take_reply() {
-            return r;
-        }
-    }
-    panic!("no reply within 100 000 cycles");
-}
-
 #[test]
 fn hundred_thousand_triggers_through_the_bridge_sink_allocate_nothing_on_the_rt_thread() {
-    let sc = scenario(
-        r#"
-machine = "table-ac"
-[probe]
-ball_radius = 3.0
-[[plane]]
-point = [0.0, 0.0, 10.0]
-normal = [0.0, 0.0, 1.0]
-"#,
-    );
-    let cfg = machine_config(&sc);
     let service = unique_service("hotpath");
 
     // The estimator's side: a subscriber woken by the event, in its own thread.
@@ -77,8 +53,7 @@ normal = [0.0, 0.0, 1.0]
                     .receive_timeout(Duration::from_millis(50))
                     .expect("receive")
                 {
-                    // Z of the ball centre: plane 10 + R 3, in nm.
-                    let err_nm = ((s.positions[2] - 13.0).abs() * 1e6) as u64;
+                    let err_nm = ((s.positions[2] - CONTACT_Z).abs() * 1e6) as u64;
                     worst.fetch_max(err_nm, Ordering::Relaxed);
                     received.fetch_add(1, Ordering::Release);
                 }
@@ -86,36 +61,9 @@ normal = [0.0, 0.0, 1.0]
         })
     };
 
-    let mut bus = Loopback::new(SimMachine::new(&sc));
-    startup::boot(&mut bus, &cfg).unwrap();
-    startup::configure(&mut bus, &cfg).unwrap();
-    let pacing = Pacing::Lockstep {
-        answer_timeout: Duration::from_millis(50),
-    };
     let sink = ForwardingSink::spawn(&service).expect("forwarding sink");
-    let mut rt = RtLoop::new(&cfg, LoopConfig::from_machine(&cfg, pacing), bus, sink);
-    assert!(matches!(until_reply(&mut rt), Reply::Ready { .. }));
+    let mut rt = start(sink);
 
-    let mut above = [0.0; 6];
-    above[2] = 13.4;
-    let trigger = |rt: &mut RtLoop<Loopback, ForwardingSink>| {
-        rt.submit(Command::MoveTo {
-            target: above,
-            mask: 0b111,
-            feed: 3000.0,
-        });
-        assert!(matches!(until_reply(rt), Reply::Done { .. }));
-        rt.submit(Command::Probe {
-            direction: [0.0, 0.0, -1.0],
-            feed: 600.0,
-            max_distance: 2.0,
-            run_id: 7,
-        });
-        match until_reply(rt) {
-            Reply::Contact(s) => s,
-            other => panic!("expected a contact, got {other:?}"),
-        }
-    };
     // Warm-up outside the count: first use of thread-locals, iceoryx2 connections.
     trigger(&mut rt);
     let deadline = Instant::now() + Duration::from_secs(10);
