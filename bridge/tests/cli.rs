@@ -1,30 +1,9 @@
 //! The `probebridge` binary as a user runs it.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_probebridge"))
-}
-
-fn configs() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs")
-}
-
-fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("pb-cli-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn run(cmd: &mut Command) -> Output {
-    let out = cmd.output().expect("run probebridge");
-    if !out.status.success() {
-        eprintln!("stdout:\n{}", String::from_utf8_lossy(&out.stdout));
-        eprintln!("stderr:\n{}", String::from_utf8_lossy(&out.stderr));
-    }
-    out
-}
+use common::*;
+use std::path::Path;
 
 /// A plane `z = z0` in a scenario written by hand, probed from above with ball radius
 /// R: the JSON contact has Z = z0 + R within 1e-6 mm.
@@ -201,22 +180,14 @@ fn check_and_run_the_seed_444_example() {
     assert!(out.status.success());
 
     let dir = tmpdir("seed444");
-    let json = dir.join("r.json");
-    let out = run(bin().args([
-        "run",
-        program.to_str().unwrap(),
-        "--scenario",
-        configs().join("scenarios/seed-444.toml").to_str().unwrap(),
-        "--out",
-        dir.to_str().unwrap(),
-        "--json",
-        json.to_str().unwrap(),
-        "--service",
-        &format!("pb-cli-seed-{}", std::process::id()),
-    ]));
+    let (out, v) = run_program(
+        &program,
+        &configs().join("scenarios/seed-444.toml"),
+        &dir,
+        &[],
+    );
     assert!(out.status.success());
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v = v.unwrap();
     assert_eq!(v["cycles"][0]["block"], 11);
     assert_eq!(v["cycles"][0]["cycle"], 444);
     assert_eq!(v["cycles"][0]["status"], "ok");
@@ -242,25 +213,14 @@ fn check_and_run_the_seed_444_example() {
 #[test]
 fn run_431_on_the_tilted_plane() {
     let dir = tmpdir("p431");
-    let json = dir.join("r.json");
-    let out = run(bin().args([
-        "run",
-        configs().join("programs/431-plane.h").to_str().unwrap(),
-        "--scenario",
-        configs()
-            .join("scenarios/tilted-plane.toml")
-            .to_str()
-            .unwrap(),
-        "--out",
-        dir.to_str().unwrap(),
-        "--json",
-        json.to_str().unwrap(),
-        "--service",
-        &format!("pb-cli-431-{}", std::process::id()),
-    ]));
+    let (out, v) = run_program(
+        &configs().join("programs/431-plane.h"),
+        &configs().join("scenarios/tilted-plane.toml"),
+        &dir,
+        &[],
+    );
     assert!(out.status.success());
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v = v.unwrap();
     assert!((q(&v, 0, "Q158") - 5.0).abs() < 1e-6, "{v}");
     assert!((q(&v, 0, "Q159") + 3.0).abs() < 1e-6, "{v}");
     assert!(dir.join("TCHPR431.TXT").exists());

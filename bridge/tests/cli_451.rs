@@ -7,33 +7,11 @@
 #[allow(dead_code)]
 mod spec451;
 
+mod common;
+
+use common::*;
 use spec451::*;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_probebridge"))
-}
-
-fn configs() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs")
-}
-
-fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("pb-cli451-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn run(cmd: &mut Command) -> Output {
-    let out = cmd.output().expect("run probebridge");
-    if !out.status.success() {
-        eprintln!("stdout:\n{}", String::from_utf8_lossy(&out.stdout));
-        eprintln!("stderr:\n{}", String::from_utf8_lossy(&out.stderr));
-    }
-    out
-}
+use std::path::Path;
 
 fn machine(name: &str) -> hal::config::MachineConfig {
     hal::config::MachineConfig::load(&configs().join(format!("machines/{name}.toml"))).unwrap()
@@ -107,25 +85,17 @@ fn run_451_recovers_hand_written_errors_in_the_estimator_process() {
     .unwrap();
     let program = dir.join("k.h");
     std::fs::write(&program, PROGRAM).unwrap();
-    let json = dir.join("r.json");
     let kin = dir.join("table-ac.kinematics.toml");
-    let out = run(bin().args([
-        "run",
-        program.to_str().unwrap(),
-        "--scenario",
-        scenario.to_str().unwrap(),
-        "--json",
-        json.to_str().unwrap(),
-        "--kinematics",
-        kin.to_str().unwrap(),
-        "--service",
-        &format!("pb-cli451-{}", std::process::id()),
-    ]));
+    let (out, v) = run_program(
+        &program,
+        &scenario,
+        &dir,
+        &["--kinematics", kin.to_str().unwrap()],
+    );
     assert!(out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("started the estimator process"), "{stderr}");
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v = v.unwrap();
     let c = &v["cycles"][0];
     assert_eq!(c["status"], "ok", "{c}");
     assert!(
@@ -178,28 +148,15 @@ fn run_451_check_program_changes_nothing() {
     let kin = dir.join("k.toml");
     let text = "machine = \"table-ac\"\n[errors]\nEY0C = 0.001 # by hand\n";
     std::fs::write(&kin, text).unwrap();
-    let json = dir.join("r.json");
-    let out = run(bin().args([
-        "run",
-        configs().join("programs/451-check.h").to_str().unwrap(),
-        "--scenario",
-        configs()
-            .join("scenarios/demo-sphere.toml")
-            .to_str()
-            .unwrap(),
-        "--out",
-        dir.to_str().unwrap(),
-        "--json",
-        json.to_str().unwrap(),
-        "--kinematics",
-        kin.to_str().unwrap(),
-        "--service",
-        &format!("pb-cli451c-{}", std::process::id()),
-    ]));
+    let (out, v) = run_program(
+        &configs().join("programs/451-check.h"),
+        &configs().join("scenarios/demo-sphere.toml"),
+        &dir,
+        &["--kinematics", kin.to_str().unwrap()],
+    );
     assert!(out.status.success());
     assert_eq!(std::fs::read_to_string(&kin).unwrap(), text);
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v = v.unwrap();
     let c = &v["cycles"][0];
     assert!(c["q"]["Q143"].as_f64().unwrap() > 0.005, "{c}");
     assert_eq!(c["q"]["Q142"], -1.0);

@@ -1,0 +1,59 @@
+//! What the CLI tests share: the binary, the shipped configurations, a scratch folder
+//! per test, and `probebridge run` with its JSON.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+pub fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_probebridge"))
+}
+
+pub fn configs() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs")
+}
+
+/// An empty folder for one test of this process.
+pub fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("pb-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Runs the command; on failure prints what it said, for the test log.
+pub fn run(cmd: &mut Command) -> Output {
+    let out = cmd.output().expect("run probebridge");
+    if !out.status.success() {
+        eprintln!("stdout:\n{}", String::from_utf8_lossy(&out.stdout));
+        eprintln!("stderr:\n{}", String::from_utf8_lossy(&out.stderr));
+    }
+    out
+}
+
+/// `probebridge run PROGRAM --scenario SCENARIO --out DIR --json DIR/r.json` on an
+/// iceoryx2 service of its own, plus `extra`: the output and the JSON written
+/// (`None`: none was).
+pub fn run_program(
+    program: &Path,
+    scenario: &Path,
+    dir: &Path,
+    extra: &[&str],
+) -> (Output, Option<serde_json::Value>) {
+    let json = dir.join("r.json");
+    let service = format!(
+        "pb-cli-{}-{}",
+        dir.file_name().unwrap().to_string_lossy(),
+        std::process::id()
+    );
+    let out = run(bin()
+        .args(["run", program.to_str().unwrap()])
+        .args(["--scenario", scenario.to_str().unwrap()])
+        .args(["--out", dir.to_str().unwrap()])
+        .args(["--json", json.to_str().unwrap()])
+        .args(["--service", &service])
+        .args(extra));
+    let v = std::fs::read_to_string(&json)
+        .ok()
+        .map(|t| serde_json::from_str(&t).expect("the JSON run wrote"));
+    (out, v)
+}
