@@ -150,6 +150,13 @@ fn only_cycle(r: &Run) -> &CycleResult {
     &r.report.cycles[0]
 }
 
+/// The one cycle of the run, which must have succeeded.
+fn ok_cycle(r: &Run) -> &CycleResult {
+    let c = only_cycle(r);
+    assert_eq!(c.status, Status::Ok, "{:?}", c.message);
+    c
+}
+
 fn json(r: &Run) -> serde_json::Value {
     let v: serde_json::Value = serde_json::from_str(&r.report.to_json()).unwrap();
     v["cycles"][0].clone()
@@ -172,8 +179,7 @@ fn table_ac_mode_2_recovers_the_injected_errors_and_matches_spec() {
         ..P451::default()
     };
     let r = run(&program(&p, [50.0, -30.0, 80.0]), &sc, &dir);
-    let c = only_cycle(&r);
-    assert_eq!(c.status, Status::Ok, "{:?}", c.message);
+    ok_cycle(&r);
     let v = json(&r);
     let after = errors_of(&v["kinematics"]["errors_after"]);
     for name in all_location_errors(&['A', 'C']) {
@@ -230,8 +236,7 @@ fn head_b_table_c_mode_2_recovers_the_injected_errors_and_matches_spec() {
         ..P451::default()
     };
     let r = run(&program(&p, [40.0, 25.0, 60.0]), &sc, &dir);
-    let c = only_cycle(&r);
-    assert_eq!(c.status, Status::Ok, "{:?}", c.message);
+    ok_cycle(&r);
     let v = json(&r);
     let after = errors_of(&v["kinematics"]["errors_after"]);
     for name in all_location_errors(&['B', 'C']) {
@@ -259,12 +264,7 @@ fn with_noise_the_result_is_the_least_squares_optimum() {
         ..P451::default()
     };
     let r = run(&program(&p, [50.0, -30.0, 80.0]), &sc, &dir);
-    assert_eq!(
-        only_cycle(&r).status,
-        Status::Ok,
-        "{:?}",
-        only_cycle(&r).message
-    );
+    ok_cycle(&r);
     let v = json(&r);
     let ch = chain_of(&cfg);
     let ms = measured(&v);
@@ -309,8 +309,7 @@ fn mode_0_leaves_the_kinematics_file_byte_for_byte() {
         ..P451::default()
     };
     let r = run(&program(&p, [50.0, -30.0, 80.0]), &sc, &dir);
-    let c = only_cycle(&r);
-    assert_eq!(c.status, Status::Ok, "{:?}", c.message);
+    let c = ok_cycle(&r);
     assert_eq!(
         std::fs::read_to_string(dir.join("kinematics.toml")).unwrap(),
         HAND_WRITTEN
@@ -338,12 +337,7 @@ fn mode_1_changes_positions_only() {
         ..P451::default()
     };
     let r = run(&program(&p, [50.0, -30.0, 80.0]), &sc, &dir);
-    assert_eq!(
-        only_cycle(&r).status,
-        Status::Ok,
-        "{:?}",
-        only_cycle(&r).message
-    );
+    ok_cycle(&r);
     let cfg = machine_config(&sc);
     let path = dir.join("kinematics.toml");
     let k = cycles::kinematics_file::ActiveKinematics::load(&path, &cfg).unwrap();
@@ -407,12 +401,7 @@ fn injected_backlash_is_measured_within_ten_percent() {
         ..P451::default()
     };
     let r = run(&program(&p, [50.0, -30.0, 80.0]), &sc, &dir);
-    assert_eq!(
-        only_cycle(&r).status,
-        Status::Ok,
-        "{:?}",
-        only_cycle(&r).message
-    );
+    ok_cycle(&r);
     let v = json(&r);
     // Q431=3: preset at the sphere centre before (so Q147..Q149 are about 0) and after.
     for (i, want) in [50.0, -30.0, 80.0].into_iter().enumerate() {
@@ -455,12 +444,7 @@ fn no_backlash_on_a_measuring_circle_below_1_mm() {
         ..P451::default()
     };
     let r = run(&program(&p, [0.6, 0.0, 80.0]), &sc, &dir);
-    assert_eq!(
-        only_cycle(&r).status,
-        Status::Ok,
-        "{:?}",
-        only_cycle(&r).message
-    );
+    ok_cycle(&r);
     let v = json(&r);
     let a = &v["kinematics"]["axes"][0];
     assert!(a["circle_radius"].as_f64().unwrap() < 1.0);
@@ -512,12 +496,7 @@ fn mode_3_moves_the_tilt_of_c_into_the_machine_datum_of_a() {
         ..P451::default()
     };
     let r = run(&program(&p, [50.0, -30.0, 80.0]), &sc, &dir);
-    assert_eq!(
-        only_cycle(&r).status,
-        Status::Ok,
-        "{:?}",
-        only_cycle(&r).message
-    );
+    ok_cycle(&r);
     let cfg = machine_config(&sc);
     let k = cycles::kinematics_file::ActiveKinematics::load(&dir.join("kinematics.toml"), &cfg)
         .unwrap();
@@ -584,12 +563,7 @@ fn hirth_axis_positions_on_the_grid_and_q408_0_refused() {
     p.q408 = 150.0;
     let dir = temp_dir("hirth");
     let r = run_with(&program(&p, [50.0, -30.0, 80.0]), &sc, &cfg, &dir, true);
-    assert_eq!(
-        only_cycle(&r).status,
-        Status::Ok,
-        "{:?}",
-        only_cycle(&r).message
-    );
+    ok_cycle(&r);
     let v = json(&r);
     let got: Vec<f64> = v["kinematics"]["axes"][0]["positions"]
         .as_array()
