@@ -5,8 +5,7 @@
 
 use crate::session::{resolve_machine, MachineOptions};
 use cycles::kinematics_file::ActiveKinematics;
-use cycles::parser::check_program;
-use cycles::program::Program;
+use cycles::parser::parse_program;
 use cycles::runner::preflight_program;
 use std::path::{Path, PathBuf};
 
@@ -19,18 +18,17 @@ pub fn run(
     let (cfg, _) = resolve_machine(machine).map_err(|e| e.to_string())?;
     let text = std::fs::read_to_string(program)
         .map_err(|e| format!("cannot read {}: {e}", program.display()))?;
-    let mut errors: Vec<String> = check_program(&text, &cfg)
-        .iter()
-        .map(|d| d.to_string())
-        .collect();
-    if errors.is_empty() {
+    let errors: Vec<String> = match parse_program(&text, &cfg) {
+        Err(invalid) => invalid.0.iter().map(|d| d.to_string()).collect(),
         // Valid text: now what only the machine can tell, as `run` checks it.
-        let parsed = Program::parse(&text, &cfg).map_err(|e| e.to_string())?;
-        let kinematics = kinematics.unwrap_or_else(|| ActiveKinematics::default_path(&cfg));
-        if let Err(e) = preflight_program(&parsed, cfg.axis_mask(), &cfg, &kinematics) {
-            errors.push(e.to_string());
+        Ok(parsed) => {
+            let kinematics = kinematics.unwrap_or_else(|| ActiveKinematics::default_path(&cfg));
+            match preflight_program(&parsed, cfg.axis_mask(), &cfg, &kinematics) {
+                Ok(()) => Vec::new(),
+                Err(e) => vec![e.to_string()],
+            }
         }
-    }
+    };
     if errors.is_empty() {
         println!("{}: ok (machine {})", program.display(), cfg.name);
         return Ok(0);
