@@ -11,6 +11,7 @@
 //!   advances virtual time by one period. Runs as fast as the simulation can.
 
 use super::command::{Command, Detail, Reply, RtError};
+use super::process_data::{ProcessData, Rpdo1, Rpdo2, Tpdo1, Tpdo2};
 use crate::axis::{Axis, MAX_AXES};
 use crate::can::{CanFrame, CanTransport, TransportError};
 use crate::canopen::cob_id::{self, CobKind};
@@ -462,22 +463,26 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
     }
 
     fn on_frame(&mut self, f: &CanFrame) {
-        let data = f.data();
         match cob_id::classify(f.cob_id()) {
-            CobKind::Tpdo { num: 1, node } if data.len() >= 6 => {
-                if let Some(i) = self.drive_index(node) {
+            CobKind::Tpdo {
+                num: Tpdo1::NUMBER,
+                node,
+            } => {
+                if let (Some(i), Ok(pd)) = (self.drive_index(node), Tpdo1::decode(f)) {
                     let d = &mut self.drives[i];
-                    d.statusword = u16::from_le_bytes([data[0], data[1]]);
-                    d.actual_inc = i32::from_le_bytes([data[2], data[3], data[4], data[5]]);
+                    d.statusword = pd.statusword;
+                    d.actual_inc = pd.position_actual;
                     d.seen_tpdo1 = true;
                     d.answered = true;
                     d.silent = false;
                 }
             }
-            CobKind::Tpdo { num: 2, node } if data.len() >= 6 => {
-                if let Some(i) = self.drive_index(node) {
-                    let status = u16::from_le_bytes([data[0], data[1]]);
-                    let value = i32::from_le_bytes([data[2], data[3], data[4], data[5]]);
+            CobKind::Tpdo {
+                num: Tpdo2::NUMBER,
+                node,
+            } => {
+                if let (Some(i), Ok(pd)) = (self.drive_index(node), Tpdo2::decode(f)) {
+                    let (status, value) = (pd.touch_probe_status, pd.probe1_positive_edge);
                     let d = &mut self.drives[i];
                     d.tp_status = status;
                     d.tp_status_fresh = true;
@@ -891,20 +896,20 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
                 }
             }
             d.answered = false;
-            let mut rpdo1 = [0u8; 6];
-            rpdo1[..2].copy_from_slice(&d.controlword.to_le_bytes());
-            rpdo1[2..].copy_from_slice(&d.target_inc.to_le_bytes());
+            let rpdo1 = Rpdo1 {
+                controlword: d.controlword,
+                target_position: d.target_inc,
+            };
             let node = d.node;
             let tp = d.tp_function;
             let send_tp = d.tp_function_sent != Some(tp);
             d.tp_function_sent = Some(tp);
-            if let Some(f) = CanFrame::new(cob_id::rpdo_cob(1, node), &rpdo1) {
-                self.transport.transmit(&f)?;
-            }
+            self.transport.transmit(&rpdo1.encode(node))?;
             if send_tp {
-                if let Some(f) = CanFrame::new(cob_id::rpdo_cob(2, node), &tp.to_le_bytes()) {
-                    self.transport.transmit(&f)?;
-                }
+                let rpdo2 = Rpdo2 {
+                    touch_probe_function: tp,
+                };
+                self.transport.transmit(&rpdo2.encode(node))?;
             }
         }
         self.transport.transmit(&sync::encode())?;

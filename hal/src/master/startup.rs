@@ -4,12 +4,12 @@
 //! NMT start. Blocking, with a timeout on every answer; any refusal is an error naming
 //! the node, the object and the drive's SDO abort code.
 
-use super::process_data::{self, *};
+use super::process_data::LAYOUT;
 use crate::can::{CanFrame, CanTransport};
 use crate::canopen::cob_id::{self, CobKind};
 use crate::canopen::nmt::{self, NmtCommand};
 use crate::canopen::object;
-use crate::canopen::pdo::{configuration_writes, PdoDirection};
+use crate::canopen::pdo::configuration_writes;
 use crate::canopen::sdo::{SdoAbortCode, SdoClient, SdoClientEvent, SdoOutcome};
 use crate::cia402::mode::ModeOfOperation;
 use crate::config::{AxisConfig, MachineConfig};
@@ -231,15 +231,10 @@ pub fn configure<T: CanTransport>(
             &[ModeOfOperation::CyclicSynchronousPosition as i8 as u8],
             timeout,
         )?;
-        let pdos = [
-            (PdoDirection::Rpdo, 1u8, &RPDO1[..], RPDO1_TRANSMISSION),
-            (PdoDirection::Rpdo, 2, &RPDO2[..], RPDO2_TRANSMISSION),
-            (PdoDirection::Tpdo, 1, &TPDO1[..], TPDO1_TRANSMISSION),
-            (PdoDirection::Tpdo, 2, &TPDO2[..], TPDO2_TRANSMISSION),
-        ];
-        for (dir, num, entries, transmission) in pdos {
-            let mapping = process_data::mapping(entries);
-            for w in configuration_writes(dir, num, n, &mapping, transmission) {
+        for l in &LAYOUT {
+            for w in
+                configuration_writes(l.direction, l.number, n, &l.mapping(), l.transmission_type)
+            {
                 let bytes = w.value.to_le_bytes();
                 sdo_download(t, axis, w.index, w.sub, &bytes[..w.size as usize], timeout)?;
             }
