@@ -2,6 +2,7 @@
 //! its own thread, talked to through bounded channels (no locks shared with the loop).
 
 pub mod command;
+pub mod pacing;
 pub mod process_data;
 pub mod rt_loop;
 pub mod startup;
@@ -12,8 +13,9 @@ use crate::config::MachineConfig;
 use crate::contact_sample::SampleSink;
 use crate::machine::{Contact, ErrorKind, Machine, MachineError, ProbeMove};
 use command::{Command, Detail, Reply, RtError};
+pub use pacing::{PacedLoop, Pacing};
 pub use process_data::BusLoad;
-pub use rt_loop::{LoopConfig, LoopStats, Pacing, RtLoop};
+pub use rt_loop::{LoopConfig, LoopStats, RtLoop};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender};
 use std::sync::{Arc, Mutex};
@@ -146,7 +148,7 @@ impl CanMachine {
                     };
                     let held = matches!(latency, Some(Ok(_)));
                     let _ = rt_tx.send((got.0, got.1, held, latency_note));
-                    let mut rt = RtLoop::new(&machine_cfg, loop_cfg, transport, sink);
+                    let mut rt = PacedLoop::new(&machine_cfg, loop_cfg, transport, sink);
                     run_thread(&mut rt, &cmd_rx, &reply_tx, &running, &stats);
                 })
                 .map_err(|e| {
@@ -291,7 +293,7 @@ impl Drop for CanMachine {
 }
 
 fn run_thread<T: CanTransport, S: SampleSink>(
-    rt: &mut RtLoop<T, S>,
+    rt: &mut PacedLoop<T, S>,
     commands: &Receiver<Command>,
     replies: &SyncSender<Reply>,
     running: &AtomicBool,
