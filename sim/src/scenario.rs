@@ -514,7 +514,7 @@ impl Scenario {
 
         let mut faults = Vec::with_capacity(raw.fault.len());
         for (i, f) in raw.fault.iter().enumerate() {
-            if !machine.axes.iter().any(|a| a.node == f.node) {
+            if !machine.axes.iter().any(|a| a.node == Some(f.node)) {
                 return Err(bad(
                     &format!("fault[{i}].node"),
                     format!(

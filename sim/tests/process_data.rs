@@ -70,7 +70,7 @@ fn simulated_drives_answer_the_typed_process_data() {
     startup::boot(&mut bus, &cfg).unwrap();
     startup::configure(&mut bus, &cfg).unwrap();
     let z = cfg.axis(hal::Axis::Z).unwrap();
-    let node = z.node;
+    let node = z.canopen_node();
     let home =
         (SimMachine::home(&cfg).get(hal::Axis::Z).unwrap() * z.increments_per_unit).round() as i32;
 

@@ -484,7 +484,10 @@ fn check_segment(case: &Case, frames: &[CanFrame], results: &Path, r: &mut Repor
         Err(e) => return r.fail(format!("{name}: {e}")),
     };
     let cfg = &sc.machine;
-    let nodes: Vec<u8> = cfg.axes.iter().map(|a| a.node).collect();
+    let nodes: Vec<u8> = cfg.axes.iter().map(|a| a.canopen_node()).collect();
+    let Some(bus) = cfg.canopen_bus() else {
+        return r.fail(format!("{name}: the machine is not on CANopen"));
+    };
     if frames.is_empty() {
         return r.fail(format!("candump {name}: no frames recorded for this case"));
     }
@@ -551,13 +554,10 @@ fn check_segment(case: &Case, frames: &[CanFrame], results: &Path, r: &mut Repor
     };
     for n in &nodes {
         let mut want: Vec<((u16, u8), u32)> = vec![
-            (
-                (object::COMMUNICATION_CYCLE_PERIOD, 0),
-                cfg.bus.sync_period_us,
-            ),
+            ((object::COMMUNICATION_CYCLE_PERIOD, 0), bus.sync_period_us),
             (
                 (object::PRODUCER_HEARTBEAT_TIME, 0),
-                u32::from(cfg.bus.heartbeat_producer_ms),
+                u32::from(bus.heartbeat_producer_ms),
             ),
             ((object::MODES_OF_OPERATION, 0), 8),
         ];
@@ -609,7 +609,7 @@ fn check_segment(case: &Case, frames: &[CanFrame], results: &Path, r: &mut Repor
             for a in &cfg.axes {
                 let reported = json["contact"][a.name.name()].as_f64().unwrap_or(f64::NAN);
                 let on_bus = latches
-                    .get(&a.node)
+                    .get(&a.canopen_node())
                     .and_then(|l| l.last())
                     .map(|v| *v as f64 / a.increments_per_unit);
                 r.check(

@@ -16,7 +16,7 @@ use crate::can::CanFrame;
 use crate::canopen::object;
 use crate::canopen::pdo::{self, MapEntry, PdoDirection, PdoMapping, MAX_ENTRIES};
 use crate::canopen::{cob_id, DecodeError};
-use crate::config::MachineConfig;
+use crate::config::{CanOpenBusConfig, MachineConfig};
 
 /// One PDO of the layout the master configures: where it goes, what it maps, and the
 /// typed value it carries. The mapping is the single description of the layout: the
@@ -240,9 +240,10 @@ pub struct BusLoad {
 }
 
 impl BusLoad {
+    /// The load of `cfg`'s CANopen bus (default timing on another bus).
     pub fn of(cfg: &MachineConfig) -> Self {
         let n = cfg.axes.len();
-        let b = &cfg.bus;
+        let b = cfg.canopen_bus().unwrap_or(&CanOpenBusConfig::DEFAULT);
         let period_bits = b.bitrate as f64 * b.sync_period_us as f64 * 1e-6;
         let sync = CanFrame::wire_bits_worst_case(0) as f64;
         let per_drive = (CanFrame::wire_bits_worst_case(pdo::byte_len(Rpdo1::MAPPING))

@@ -23,10 +23,11 @@ use crate::cia402::controlword::Controlword;
 use crate::cia402::state::State;
 use crate::cia402::statusword::Statusword;
 use crate::cia402::touch_probe::{Probe, TouchProbeFunction, TouchProbeStatus};
-use crate::config::MachineConfig;
+use crate::config::{CanOpenBusConfig, MachineConfig};
 use crate::contact_sample::{ContactSample, SampleSink, FLAG_HW_LATCH};
 use crate::machine::ErrorKind;
 use crate::motion::{AxisLimits, Profile};
+use crate::motion_guard::ProbeInput;
 
 pub use super::pacing::Pacing;
 
@@ -50,15 +51,18 @@ pub struct LoopConfig {
 }
 
 impl LoopConfig {
+    /// The loop's settings for `cfg`'s CANopen bus (the defaults on another bus, which
+    /// the CANopen master refuses before it gets here).
     pub fn from_machine(cfg: &MachineConfig, pacing: Pacing) -> Self {
+        let bus = cfg.canopen_bus().unwrap_or(&CanOpenBusConfig::DEFAULT);
         Self {
-            period_ns: cfg.bus.sync_period_us as u64 * 1000,
+            period_ns: bus.sync_period_us as u64 * 1000,
             pacing,
             in_position_window: 0.001,
             settle_timeout_ns: 2_000_000_000,
             enable_timeout_ns: 2_000_000_000,
             arm_timeout_ns: 200_000_000,
-            heartbeat_timeout_ns: cfg.bus.heartbeat_timeout_ms as u64 * 1_000_000,
+            heartbeat_timeout_ns: bus.heartbeat_timeout_ms as u64 * 1_000_000,
         }
     }
 }
@@ -94,7 +98,7 @@ struct DriveLink {
     tp_status: u16,
     tp_status_fresh: bool,
     /// Probe input level last reported (bit 7 of the touch probe status).
-    probe_level: bool,
+    probe_input: ProbeInput,
     latch_inc: Option<i32>,
     last_emcy: Option<u16>,
     controlword: u16,
@@ -116,7 +120,7 @@ impl DriveLink {
             actual_inc: 0,
             tp_status: 0,
             tp_status_fresh: false,
-            probe_level: false,
+            probe_input: ProbeInput::default(),
             latch_inc: None,
             last_emcy: None,
             controlword: Controlword::SHUTDOWN,
@@ -226,11 +230,12 @@ impl<S: SampleSink> RtLoop<S> {
         let mut heartbeat = HeartbeatConsumer::new();
         for a in &machine.axes {
             // MachineConfig allows at most one entry per axis, so at most 6.
-            let _ = drives.push(DriveLink::new(a.name, a.node, a.increments_per_unit));
+            let node = a.canopen_node();
+            let _ = drives.push(DriveLink::new(a.name, node, a.increments_per_unit));
             limits.max_velocity[a.name.index()] = a.max_feed / 60.0;
             limits.max_acceleration[a.name.index()] = a.max_acceleration;
             // Node IDs were validated (1..=127) with the configuration.
-            let _ = heartbeat.watch(a.node, cfg.heartbeat_timeout_ns);
+            let _ = heartbeat.watch(node, cfg.heartbeat_timeout_ns);
         }
         Self {
             sink,
@@ -458,12 +463,9 @@ impl<S: SampleSink> RtLoop<S> {
         d.tp_status = pd.touch_probe_status;
         d.tp_status_fresh = true;
         let st = TouchProbeStatus::from_bits(pd.touch_probe_status);
-        let level = st.input_level(Probe::One);
-        let rising = level && !d.probe_level;
-        d.probe_level = level;
-        // A touch while positioning (probe not armed) is a collision: brake.
-        // Every drive sees the same probe, so no node is to blame.
-        if rising && matches!(self.activity, Activity::Moving { .. }) {
+        let rising = d.probe_input.update(st.input_level(Probe::One));
+        let positioning = matches!(self.activity, Activity::Moving { .. });
+        if ProbeInput::is_collision(rising, positioning) {
             self.abort_motion(RtError::new(ErrorKind::ProbeCollision, Detail::Collision));
             return;
         }
