@@ -75,18 +75,11 @@ pub struct CanMachine {
     position: AxisPositions,
 }
 
+/// SCHED_FIFO at `priority` for the calling thread (0: do not ask) and locked memory;
+/// what was granted.
 fn apply_rt_settings(priority: i32) -> (bool, bool) {
-    let mut fifo = false;
-    if priority > 0 {
-        let param = libc::sched_param {
-            sched_priority: priority,
-        };
-        // SAFETY: plain syscall on the calling thread with a parameter we own.
-        fifo = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } == 0;
-    }
-    // SAFETY: plain syscall; failure (no CAP_IPC_LOCK / rlimit) is reported, not fatal.
-    let locked = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) } == 0;
-    (fifo, locked)
+    let fifo = priority > 0 && crate::rt::set_fifo_priority(priority);
+    (fifo, crate::rt::lock_memory())
 }
 
 impl CanMachine {

@@ -1052,6 +1052,17 @@ mod tests {
             b
         }
 
+        /// Submits a move of `axis` (0 = X) to `to`, the other axes staying, at 3000.
+        fn move_axis(&mut self, axis: usize, to: f64) {
+            let mut target = [0.0; MAX_AXES];
+            target[axis] = to;
+            self.rt.submit(Command::MoveTo {
+                target,
+                mask: 0b111,
+                feed: 3000.0,
+            });
+        }
+
         /// The RPDO1 sent to `node` by the last tick.
         fn rpdo1(&self, node: u8) -> Rpdo1 {
             let f = self
@@ -1108,13 +1119,7 @@ mod tests {
     #[test]
     fn interpolation_reaches_the_target_within_the_feed() {
         let mut b = Bench::enabled();
-        let mut target = [0.0; MAX_AXES];
-        target[0] = 10.0;
-        b.rt.submit(Command::MoveTo {
-            target,
-            mask: 0b111,
-            feed: 3000.0,
-        });
+        b.move_axis(0, 10.0);
         let mut prev = 0;
         let mut steps = 0;
         let reply = loop {
@@ -1208,13 +1213,7 @@ mod tests {
     #[test]
     fn a_touch_while_positioning_brakes_and_fails_as_a_collision() {
         let mut b = Bench::enabled();
-        let mut target = [0.0; MAX_AXES];
-        target[2] = -20.0;
-        b.rt.submit(Command::MoveTo {
-            target,
-            mask: 0b111,
-            feed: 3000.0,
-        });
+        b.move_axis(2, -20.0);
         for _ in 0..50 {
             b.tick();
         }
@@ -1254,13 +1253,7 @@ mod tests {
     #[test]
     fn supervision_an_emcy_stops_the_move_and_names_the_node_and_code() {
         let mut b = Bench::enabled();
-        let mut target = [0.0; MAX_AXES];
-        target[0] = 50.0;
-        b.rt.submit(Command::MoveTo {
-            target,
-            mask: 0b111,
-            feed: 3000.0,
-        });
+        b.move_axis(0, 50.0);
         for _ in 0..20 {
             b.tick();
         }
