@@ -142,42 +142,7 @@ enum Cmd {
 enum BenchCmd {
     /// Latency from the drives' latch to the contact sample in the estimator process,
     /// with the bare iceoryx2 hop between the same processes as the floor.
-    Trigger {
-        /// Measured triggers (plus a warm-up of 10 %, at most 100).
-        #[arg(long, default_value_t = 10_000)]
-        triggers: u64,
-        /// SYNC period of the real-time loop, µs.
-        #[arg(long, default_value_t = 250)]
-        period_us: u32,
-        /// Run the latch over this SocketCAN interface (simulated drives on a second
-        /// socket in this process) instead of the in-process bus.
-        #[arg(long)]
-        can: Option<String>,
-        /// Write all figures as JSON.
-        #[arg(long)]
-        json: Option<PathBuf>,
-        /// Publish from the real-time thread with ContactPublisher (one heap allocation
-        /// per sample inside iceoryx2 0.10) instead of the ForwardingSink.
-        #[arg(long)]
-        direct: bool,
-        /// Warm-up triggers, not counted.
-        #[arg(long)]
-        warmup: Option<u64>,
-        /// SCHED_FIFO priority of the real-time thread (0: do not ask); the simulated
-        /// drives get one less, the forwarder two less.
-        #[arg(long, default_value_t = 80)]
-        rt_priority: i32,
-        /// Run the estimator process under SCHED_FIFO at this priority (0: an
-        /// ordinary process, as the bridge starts it). Every thread on the measured
-        /// path runs under SCHED_FIFO by default, so other load on the machine does
-        /// not decide the result.
-        #[arg(long, default_value_t = 70)]
-        estimator_priority: i32,
-        /// SCHED_FIFO priority of the simulated drives' thread (default: the real-time
-        /// loop's minus one; 0: ordinary).
-        #[arg(long)]
-        drives_priority: Option<i32>,
-    },
+    Trigger(commands::bench::BenchArgs),
 }
 
 fn main() -> ExitCode {
@@ -234,28 +199,7 @@ fn main() -> ExitCode {
             record_times,
             record_capacity,
         } => commands::estimator::run(&service, verbose, record_times, record_capacity).map(|()| 0),
-        Cmd::Bench(BenchCmd::Trigger {
-            triggers,
-            period_us,
-            can,
-            json,
-            direct,
-            warmup,
-            rt_priority,
-            estimator_priority,
-            drives_priority,
-        }) => commands::bench::run(&commands::bench::BenchArgs {
-            triggers,
-            period_us,
-            can,
-            json,
-            direct,
-            warmup,
-            rt_priority,
-            estimator_priority,
-            drives_priority,
-        })
-        .map(|()| 0),
+        Cmd::Bench(BenchCmd::Trigger(args)) => commands::bench::run(&args).map(|()| 0),
     };
     match result {
         Ok(code) => ExitCode::from(code),

@@ -8,7 +8,7 @@ use hal::can::socketcan::SocketCanTransport;
 use hal::can::CanTransport;
 use hal::config::MachineConfig;
 use hal::master::{CanMachine, MasterOptions, Pacing, StartupReport};
-use hal::MachineError;
+use hal::{Machine, MachineError};
 use sim::machine::{SimMachine, SimRunner};
 use sim::scenario::Scenario;
 use std::path::{Path, PathBuf};
@@ -33,11 +33,17 @@ pub struct MachineOptions {
     pub candump: Option<PathBuf>,
 }
 
+/// Any backend, as the commands drive it.
+pub type DynMachine = Box<dyn Machine<Error = MachineError> + Send>;
+
 pub struct Session {
-    pub machine: CanMachine,
+    /// Declared first, so dropped first: the backend stops its loop and disables the
+    /// drives before the simulator (`sim`) goes away.
+    pub machine: DynMachine,
     pub config: MachineConfig,
     /// The simulation scenario, when the machine is (or runs as) the simulator.
     pub scenario: Option<Scenario>,
+    /// What the CANopen start-up found (bus load, drives, real-time notes).
     pub startup: StartupReport,
     pub sim: Option<SimRunner>,
 }
@@ -137,18 +143,11 @@ impl Session {
         };
         let (machine, startup) = CanMachine::start(&config, transport, sink, options)?;
         Ok(Self {
-            machine,
+            machine: Box::new(machine),
             config,
             scenario,
             startup,
             sim,
         })
-    }
-}
-
-impl Drop for Session {
-    fn drop(&mut self) {
-        // Disable the drives before the simulator goes away.
-        self.machine.shutdown();
     }
 }

@@ -30,8 +30,10 @@ pub enum ConfigError {
 #[serde(deny_unknown_fields)]
 pub struct AxisConfig {
     pub name: Axis,
-    /// CANopen node ID of the drive, 1..=127.
-    pub node: u8,
+    /// CANopen node ID of the drive, 1..=127: required on a CANopen machine (see
+    /// [`BusConfig`]), meaningless on other buses.
+    #[serde(default)]
+    pub node: Option<u8>,
     /// Drive position increments per mm (linear) or per degree (rotary).
     pub increments_per_unit: f64,
     /// Software limits, mm or deg.
@@ -46,10 +48,45 @@ pub struct AxisConfig {
     pub hirth: f64,
 }
 
+impl AxisConfig {
+    /// The CANopen node ID of the drive. Present on every axis of a validated CANopen
+    /// machine; 0 (the NMT broadcast address, never a drive) otherwise, which the
+    /// CANopen master never sees: it refuses a machine on another bus.
+    pub fn canopen_node(&self) -> u8 {
+        self.node.unwrap_or(0)
+    }
+}
+
+/// The fieldbus the drives are on: `[bus]` with `kind = "canopen"` and that bus's
+/// keys. Without a `[bus]` section a machine is on CANopen with the default timing.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+#[non_exhaustive]
+pub enum BusConfig {
+    /// CiA 402 drives over CANopen; every axis names its drive's node.
+    #[serde(rename = "canopen")]
+    CanOpen(CanOpenBusConfig),
+}
+
+impl Default for BusConfig {
+    fn default() -> Self {
+        BusConfig::CanOpen(CanOpenBusConfig::default())
+    }
+}
+
+impl BusConfig {
+    /// The `kind` as written in the file.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            BusConfig::CanOpen(_) => "canopen",
+        }
+    }
+}
+
 /// CANopen bus timing.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
-pub struct BusConfig {
+pub struct CanOpenBusConfig {
     /// Bit rate in bit/s.
     #[serde(default = "default_bitrate")]
     pub bitrate: u32,
@@ -71,34 +108,39 @@ pub struct BusConfig {
 }
 
 fn default_bitrate() -> u32 {
-    1_000_000
+    CanOpenBusConfig::DEFAULT.bitrate
 }
 fn default_sync_period_us() -> u32 {
-    2000
+    CanOpenBusConfig::DEFAULT.sync_period_us
 }
 fn default_heartbeat_ms() -> u16 {
-    50
+    CanOpenBusConfig::DEFAULT.heartbeat_producer_ms
 }
 fn default_heartbeat_timeout_ms() -> u16 {
-    150
+    CanOpenBusConfig::DEFAULT.heartbeat_timeout_ms
 }
 fn default_sdo_timeout_ms() -> u16 {
-    200
+    CanOpenBusConfig::DEFAULT.sdo_timeout_ms
 }
 fn default_max_load() -> f64 {
-    70.0
+    CanOpenBusConfig::DEFAULT.max_load_percent
 }
 
-impl Default for BusConfig {
+impl CanOpenBusConfig {
+    /// The defaults of every key.
+    pub const DEFAULT: Self = Self {
+        bitrate: 1_000_000,
+        sync_period_us: 2000,
+        heartbeat_producer_ms: 50,
+        heartbeat_timeout_ms: 150,
+        sdo_timeout_ms: 200,
+        max_load_percent: 70.0,
+    };
+}
+
+impl Default for CanOpenBusConfig {
     fn default() -> Self {
-        Self {
-            bitrate: default_bitrate(),
-            sync_period_us: default_sync_period_us(),
-            heartbeat_producer_ms: default_heartbeat_ms(),
-            heartbeat_timeout_ms: default_heartbeat_timeout_ms(),
-            sdo_timeout_ms: default_sdo_timeout_ms(),
-            max_load_percent: default_max_load(),
-        }
+        Self::DEFAULT
     }
 }
 
@@ -232,6 +274,20 @@ impl MachineConfig {
         self.axes.iter().fold(0, |m, a| m | 1 << a.name.index())
     }
 
+    /// The CANopen bus section, when the machine is on CANopen.
+    pub fn canopen_bus(&self) -> Option<&CanOpenBusConfig> {
+        match &self.bus {
+            BusConfig::CanOpen(b) => Some(b),
+        }
+    }
+
+    /// [`MachineConfig::canopen_bus`], to change (tests, benchmarks).
+    pub fn canopen_bus_mut(&mut self) -> Option<&mut CanOpenBusConfig> {
+        match &mut self.bus {
+            BusConfig::CanOpen(b) => Some(b),
+        }
+    }
+
     pub fn probe(&self, name: &str) -> Option<&ProbeEntry> {
         self.probes.iter().find(|p| p.name == name)
     }
@@ -244,6 +300,49 @@ impl MachineConfig {
         }
     }
 
+    /// CANopen: a node ID per axis, each once, and timing the bus can keep.
+    fn validate_canopen(&self, b: &CanOpenBusConfig) -> Result<(), ConfigError> {
+        let mut seen_nodes = [false; 128];
+        for (i, a) in self.axes.iter().enumerate() {
+            let key = format!("axis[{i}] ({}).node", a.name);
+            let Some(node) = a.node else {
+                return Err(self.invalid(
+                    key,
+                    "missing: every axis of a CANopen machine names its drive's node ID (1..127)",
+                ));
+            };
+            if !(1..=127).contains(&node) {
+                return Err(self.invalid(key, format!("{node} is not a CANopen node ID (1..127)")));
+            }
+            if seen_nodes[node as usize] {
+                return Err(self.invalid(key, format!("node {node} used by two axes")));
+            }
+            seen_nodes[node as usize] = true;
+        }
+        if !(10_000..=1_000_000).contains(&b.bitrate) {
+            return Err(self.invalid(
+                "bus.bitrate",
+                format!(
+                    "{} is not a CAN bit rate (10 kbit/s .. 1 Mbit/s)",
+                    b.bitrate
+                ),
+            ));
+        }
+        if !(250..=100_000).contains(&b.sync_period_us) {
+            return Err(self.invalid("bus.sync_period_us", "must be 250..100000"));
+        }
+        if b.heartbeat_producer_ms == 0 || b.heartbeat_timeout_ms <= b.heartbeat_producer_ms {
+            return Err(self.invalid(
+                "bus.heartbeat_timeout_ms",
+                "must be longer than heartbeat_producer_ms, which must be > 0",
+            ));
+        }
+        if !(b.max_load_percent > 0.0 && b.max_load_percent <= 100.0) {
+            return Err(self.invalid("bus.max_load_percent", "must be in (0, 100]"));
+        }
+        Ok(())
+    }
+
     fn validate(&self) -> Result<(), ConfigError> {
         if self.axes.is_empty() {
             return Err(self.invalid("axis", "no axes configured"));
@@ -254,23 +353,12 @@ impl MachineConfig {
             }
         }
         let mut seen_axes = 0u8;
-        let mut seen_nodes = [false; 128];
         for (i, a) in self.axes.iter().enumerate() {
             let key = |f: &str| format!("axis[{i}] ({}).{f}", a.name);
             if seen_axes & (1 << a.name.index()) != 0 {
                 return Err(self.invalid(key("name"), "axis configured twice"));
             }
             seen_axes |= 1 << a.name.index();
-            if !(1..=127).contains(&a.node) {
-                return Err(self.invalid(
-                    key("node"),
-                    format!("{} is not a CANopen node ID (1..127)", a.node),
-                ));
-            }
-            if seen_nodes[a.node as usize] {
-                return Err(self.invalid(key("node"), format!("node {} used by two axes", a.node)));
-            }
-            seen_nodes[a.node as usize] = true;
             if !(a.increments_per_unit.is_finite() && a.increments_per_unit > 0.0) {
                 return Err(self.invalid(key("increments_per_unit"), "must be > 0"));
             }
@@ -301,27 +389,8 @@ impl MachineConfig {
                 ));
             }
         }
-        let b = &self.bus;
-        if !(10_000..=1_000_000).contains(&b.bitrate) {
-            return Err(self.invalid(
-                "bus.bitrate",
-                format!(
-                    "{} is not a CAN bit rate (10 kbit/s .. 1 Mbit/s)",
-                    b.bitrate
-                ),
-            ));
-        }
-        if !(250..=100_000).contains(&b.sync_period_us) {
-            return Err(self.invalid("bus.sync_period_us", "must be 250..100000"));
-        }
-        if b.heartbeat_producer_ms == 0 || b.heartbeat_timeout_ms <= b.heartbeat_producer_ms {
-            return Err(self.invalid(
-                "bus.heartbeat_timeout_ms",
-                "must be longer than heartbeat_producer_ms, which must be > 0",
-            ));
-        }
-        if !(b.max_load_percent > 0.0 && b.max_load_percent <= 100.0) {
-            return Err(self.invalid("bus.max_load_percent", "must be in (0, 100]"));
+        match &self.bus {
+            BusConfig::CanOpen(b) => self.validate_canopen(b)?,
         }
         let k = &self.kinematics;
         for (side, list) in [("table", &k.table), ("head", &k.head)] {
@@ -418,7 +487,7 @@ max_acceleration = 1000.0
     fn parses_minimal() {
         let c = MachineConfig::parse(MINI, Path::new("mini.toml")).unwrap();
         assert_eq!(c.axis_mask(), 0b111);
-        assert_eq!(c.bus.sync_period_us, 2000);
+        assert_eq!(c.canopen_bus().unwrap().sync_period_us, 2000);
     }
 
     #[test]
@@ -433,6 +502,40 @@ max_acceleration = 1000.0
         .unwrap_err()
         .to_string();
         assert!(e.contains("m.toml") && e.contains("max_fed"), "{e}");
+    }
+
+    #[test]
+    fn a_canopen_axis_without_node_is_refused() {
+        let e = MachineConfig::parse(&MINI.replace("node = 2\n", ""), Path::new("m.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("m.toml") && e.contains("axis[1] (Y).node") && e.contains("missing"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn the_bus_names_its_kind() {
+        let c = MachineConfig::parse(
+            &format!("{MINI}[bus]\nkind = \"canopen\"\nsync_period_us = 1000\n"),
+            Path::new("m.toml"),
+        )
+        .unwrap();
+        assert_eq!(c.bus.kind(), "canopen");
+        assert_eq!(c.canopen_bus().unwrap().sync_period_us, 1000);
+        for bad in [
+            "[bus]\nsync_period_us = 1000\n",
+            "[bus]\nkind = \"profibus\"\n",
+        ] {
+            let e = MachineConfig::parse(&format!("{MINI}{bad}"), Path::new("m.toml"))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("m.toml") && (e.contains("kind") || e.contains("profibus")),
+                "{e}"
+            );
+        }
     }
 
     #[test]

@@ -7,6 +7,8 @@
 //! - [`can`]: CAN frames and transports (SocketCAN, in-process bus).
 //! - [`canopen`], [`cia402`]: the CANopen master and CiA 402 drive profile as code
 //!   that does no I/O (frames in, frames out).
+//! - [`motion_guard`]: the checks every backend makes before it moves (software
+//!   limits, the probing path plus braking distance, feeds) and the collision rule.
 //! - [`config`]: the machine description (axes, bus mapping, kinematics, probe table).
 
 pub mod axis;
@@ -19,6 +21,7 @@ pub mod contact_sample;
 pub mod machine;
 pub mod master;
 pub mod motion;
+pub mod motion_guard;
 pub mod rt;
 
 pub use axis::{Axis, AxisPositions};

@@ -161,27 +161,35 @@ pub trait Machine {
 
     /// The samples of the following probing moves belong to run `run_id` (a backend
     /// that publishes [`crate::ContactSample`]s tags them with it, so that an estimator
-    /// can tell one measurement from the next). Default: nothing to tag.
-    fn set_run(&mut self, run_id: u64) {
-        let _ = run_id;
-    }
+    /// can tell one measurement from the next). No default: a wrapper that forgot to
+    /// forward it would silently drop the tag.
+    fn set_run(&mut self, run_id: u64);
 }
 
-impl<M: Machine + ?Sized> Machine for &mut M {
-    type Error = M::Error;
-    fn axes(&self) -> u8 {
-        (**self).axes()
-    }
-    fn positions(&mut self) -> Result<AxisPositions, Self::Error> {
-        (**self).positions()
-    }
-    fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), Self::Error> {
-        (**self).move_to(target, feed)
-    }
-    fn probe(&mut self, mv: &ProbeMove) -> Result<Contact, Self::Error> {
-        (**self).probe(mv)
-    }
-    fn set_run(&mut self, run_id: u64) {
-        (**self).set_run(run_id)
-    }
+/// Forwards every method to the machine behind a pointer (`**self`).
+macro_rules! forward_machine {
+    ($($pointer:ty),*) => {$(
+        impl<M: Machine + ?Sized> Machine for $pointer {
+            type Error = M::Error;
+            fn axes(&self) -> u8 {
+                (**self).axes()
+            }
+            fn positions(&mut self) -> Result<AxisPositions, Self::Error> {
+                (**self).positions()
+            }
+            fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), Self::Error> {
+                (**self).move_to(target, feed)
+            }
+            fn probe(&mut self, mv: &ProbeMove) -> Result<Contact, Self::Error> {
+                (**self).probe(mv)
+            }
+            fn set_run(&mut self, run_id: u64) {
+                (**self).set_run(run_id)
+            }
+        }
+    )*};
 }
+
+// A backend behind a box (the CLI holds whichever backend the configuration names),
+// or borrowed.
+forward_machine!(Box<M>, &mut M);

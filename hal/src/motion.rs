@@ -218,18 +218,32 @@ mod tests {
         let end = p.end();
         assert!((end[0] - 30.0).abs() < 1e-9 && (end[1] - 40.0).abs() < 1e-9);
         // Y has the larger share: 0.8 of the path; its 100/s limit caps the path at 125.
-        // Feed 6000/min = 100/s is lower, so the path runs at 100.
-        let mut prev = p.position(0.0);
+        // Feed 6000/min = 100/s is lower, so the path runs at 100. Y's 1000/s^2 caps the
+        // path's acceleration at 1250, which Y then uses in full.
         let dt = 1e-3;
-        let mut t = 0.0;
-        while t < p.duration() + dt {
+        let (mut before, mut prev) = (p.position(-dt), p.position(0.0));
+        let (mut t, mut v_max, mut a_max) = (0.0, [0.0f64; MAX_AXES], [0.0f64; MAX_AXES]);
+        while t < p.duration() + 2.0 * dt {
             t += dt;
             let q = p.position(t);
             for i in 0..MAX_AXES {
-                assert!((q[i] - prev[i]).abs() / dt <= 100.0 + 1e-6);
+                v_max[i] = v_max[i].max((q[i] - prev[i]).abs() / dt);
+                // A second difference is bounded by the largest acceleration times dt^2.
+                a_max[i] = a_max[i].max((q[i] - 2.0 * prev[i] + before[i]).abs() / (dt * dt));
             }
-            prev = q;
+            (before, prev) = (prev, q);
         }
+        for i in 0..MAX_AXES {
+            assert!(v_max[i] <= 100.0 + 1e-6, "axis {i}: velocity {}", v_max[i]);
+            assert!(
+                a_max[i] <= 1000.0 + 1e-3,
+                "axis {i}: acceleration {}",
+                a_max[i]
+            );
+        }
+        // The limits are reached, not just respected: Y cruises at 80, accelerates at 1000.
+        assert!((v_max[1] - 80.0).abs() < 1e-6, "{}", v_max[1]);
+        assert!(a_max[1] > 990.0, "{}", a_max[1]);
     }
 
     #[test]

@@ -1,6 +1,6 @@
-//! Real-time settings: SCHED_FIFO for threads on the hot trigger path besides the
-//! real-time loop (which sets its own in `master`): the sample forwarder, benchmark
-//! stand-ins for hardware; and the CPU wake-up latency request the loop holds.
+//! Real-time settings: SCHED_FIFO for the threads on the hot trigger path (the
+//! real-time loop, the sample forwarder, benchmark stand-ins for hardware), locked
+//! memory, and the CPU wake-up latency request the loop holds.
 
 /// Puts the calling thread under SCHED_FIFO at `priority` (1..99). `false` when not
 /// permitted (no CAP_SYS_NICE / RLIMIT_RTPRIO) or `priority` is out of range; the
@@ -14,6 +14,13 @@ pub fn set_fifo_priority(priority: i32) -> bool {
     };
     // SAFETY: plain syscall on the calling thread (pid 0) with a parameter we own.
     unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) == 0 }
+}
+
+/// Locks the process's memory, current and future (no page faults in a real-time
+/// loop). `false` when not permitted (no CAP_IPC_LOCK / RLIMIT_MEMLOCK too low).
+pub fn lock_memory() -> bool {
+    // SAFETY: plain syscall; failure is reported, not fatal.
+    unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) == 0 }
 }
 
 /// A PM QoS request holding every CPU's wake-up latency at 0 µs while it lives: the

@@ -71,9 +71,9 @@ impl Objects {
             tp_function: 0,
             tp_status: 0,
             tp_pos_edge: 0,
-            rpdo_comm: [0x200u16, 0x300, 0x400, 0x500].map(default_comm),
+            rpdo_comm: cob_id::RPDO_BASE.map(default_comm),
             rpdo_map: Default::default(),
-            tpdo_comm: [0x180u16, 0x280, 0x380, 0x480].map(default_comm),
+            tpdo_comm: cob_id::TPDO_BASE.map(default_comm),
             tpdo_map: Default::default(),
             tp_function_written: false,
         }

@@ -122,7 +122,10 @@ impl SimMachine {
             .map(|a| {
                 let pos = start.get(a.name).unwrap_or(0.0);
                 AxisDrive {
-                    drive: SimDrive::new(a.node, (pos * a.increments_per_unit).round() as i32),
+                    drive: SimDrive::new(
+                        a.canopen_node(),
+                        (pos * a.increments_per_unit).round() as i32,
+                    ),
                     axis: a.name,
                     scale: a.increments_per_unit,
                 }

@@ -46,19 +46,11 @@ use std::path::{Path, PathBuf};
 
 #[derive(Debug, thiserror::Error)]
 pub enum ScenarioError {
-    #[error("cannot read {path}: {source}")]
-    Read {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("{path}: {message}")]
-    Parse { path: PathBuf, message: String },
-    #[error("{path}: {key}: {message}")]
-    Invalid {
-        path: PathBuf,
-        key: String,
-        message: String,
-    },
+    /// The scenario file itself: unreadable, not TOML, or a key out of range; the
+    /// same errors as a machine configuration's, naming the scenario file.
+    #[error(transparent)]
+    File(#[from] ConfigError),
+    /// The machine configuration the scenario names.
     #[error("{path}: machine: {source}")]
     Machine { path: PathBuf, source: ConfigError },
 }
@@ -340,7 +332,7 @@ impl Scenario {
     /// `<machines_dir>/machines/NAME.toml` (so either the machines folder or the
     /// configs folder may be passed).
     pub fn load(path: &Path, machines_dir: Option<&Path>) -> Result<Self, ScenarioError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
             path: path.to_path_buf(),
             source,
         })?;
@@ -398,9 +390,12 @@ impl Scenario {
     }
 
     fn parse_raw(text: &str, path: &Path) -> Result<RawScenario, ScenarioError> {
-        toml::from_str(text).map_err(|e| ScenarioError::Parse {
-            path: path.to_path_buf(),
-            message: e.to_string().trim_end().to_string(),
+        toml::from_str(text).map_err(|e| {
+            ConfigError::Parse {
+                path: path.to_path_buf(),
+                message: e.to_string().trim_end().to_string(),
+            }
+            .into()
         })
     }
 
@@ -514,7 +509,7 @@ impl Scenario {
 
         let mut faults = Vec::with_capacity(raw.fault.len());
         for (i, f) in raw.fault.iter().enumerate() {
-            if !machine.axes.iter().any(|a| a.node == f.node) {
+            if !machine.axes.iter().any(|a| a.node == Some(f.node)) {
                 return Err(bad(
                     &format!("fault[{i}].node"),
                     format!(
@@ -570,11 +565,12 @@ pub(crate) fn effective_hirth(machine: &MachineConfig, truth: &Truth, axis: Axis
 }
 
 fn invalid(path: &Path, key: &str, message: String) -> ScenarioError {
-    ScenarioError::Invalid {
+    ConfigError::Invalid {
         path: path.to_path_buf(),
         key: key.to_string(),
         message,
     }
+    .into()
 }
 
 /// `lo < v <= hi` (or `lo <= v` when `lo_inclusive`), finite.

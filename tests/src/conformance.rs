@@ -40,6 +40,9 @@ impl<T> Machine for Held<T> {
     fn probe(&mut self, mv: &ProbeMove) -> Result<Contact, MachineError> {
         self.machine.probe(mv)
     }
+    fn set_run(&mut self, run_id: u64) {
+        self.machine.set_run(run_id)
+    }
 }
 
 /// CANopen master and simulated drives on the in-process bus, virtual clock.
@@ -116,11 +119,14 @@ impl Backend for SocketCan {
         };
         let mut cfg = crate::machine_config(scenario);
         let env = |name: &str| std::env::var(name).ok().and_then(|v| v.parse().ok());
+        let timing = cfg
+            .canopen_bus_mut()
+            .expect("the scenarios' machines are on CANopen");
         if let Some(us) = env(CAN_SYNC_US_ENV) {
-            cfg.bus.sync_period_us = us;
+            timing.sync_period_us = us;
         }
         if let Some(ms) = env(CAN_HEARTBEAT_TIMEOUT_MS_ENV) {
-            cfg.bus.heartbeat_timeout_ms = ms as u16;
+            timing.heartbeat_timeout_ms = ms as u16;
         }
         let sim = SimRunner::spawn(SimMachine::new(scenario), open("simulated drives"));
         let options = MasterOptions {

@@ -5,7 +5,7 @@
 use crate::loopback::Loopback;
 use crate::{machine_config, scenario};
 use hal::master::command::{Command, Reply};
-use hal::master::{startup, LoopConfig, Pacing, RtLoop};
+use hal::master::{startup, LoopConfig, PacedLoop, Pacing};
 use hal::{ContactSample, SampleSink};
 use sim::machine::SimMachine;
 use std::time::Duration;
@@ -15,7 +15,7 @@ pub const CONTACT_Z: f64 = 13.0;
 
 /// Boots and configures the drives, starts the loop with `sink` and waits until every
 /// drive is in Operation enabled.
-pub fn start<S: SampleSink>(sink: S) -> RtLoop<Loopback, S> {
+pub fn start<S: SampleSink>(sink: S) -> PacedLoop<Loopback, S> {
     let sc = scenario(
         r#"
 machine = "table-ac"
@@ -33,13 +33,13 @@ normal = [0.0, 0.0, 1.0]
     let pacing = Pacing::Lockstep {
         answer_timeout: Duration::from_millis(50),
     };
-    let mut rt = RtLoop::new(&cfg, LoopConfig::from_machine(&cfg, pacing), bus, sink);
+    let mut rt = PacedLoop::new(&cfg, LoopConfig::from_machine(&cfg, pacing), bus, sink);
     assert!(matches!(until_reply(&mut rt), Reply::Ready { .. }));
     rt
 }
 
 /// Cycles until the loop answers the command it is carrying out.
-pub fn until_reply<S: SampleSink>(rt: &mut RtLoop<Loopback, S>) -> Reply {
+pub fn until_reply<S: SampleSink>(rt: &mut PacedLoop<Loopback, S>) -> Reply {
     for _ in 0..100_000 {
         rt.cycle().expect("loopback does not fail");
         if let Some(r) = rt.take_reply() {
@@ -50,7 +50,7 @@ pub fn until_reply<S: SampleSink>(rt: &mut RtLoop<Loopback, S>) -> Reply {
 }
 
 /// One trigger: move 0.4 mm over the contact height, probe down, return the contact.
-pub fn trigger<S: SampleSink>(rt: &mut RtLoop<Loopback, S>) -> ContactSample {
+pub fn trigger<S: SampleSink>(rt: &mut PacedLoop<Loopback, S>) -> ContactSample {
     let mut above = [0.0; 6];
     above[2] = CONTACT_Z + 0.4;
     rt.submit(Command::MoveTo {

@@ -7,7 +7,7 @@
 use hal::can::record::{Recorder, Replay};
 use hal::can::CanTransport;
 use hal::master::command::{Command, Reply};
-use hal::master::{startup, LoopConfig, Pacing, RtLoop};
+use hal::master::{startup, LoopConfig, PacedLoop, Pacing};
 use hal::{ContactSample, NullSink};
 use probebridge_tests::loopback::Loopback;
 use probebridge_tests::{machine_config, scenario};
@@ -27,7 +27,7 @@ fn plane() -> sim::Scenario {
 }
 
 /// Start-up, enabling, one probing move down; the contact.
-fn session<T: CanTransport>(transport: T) -> (ContactSample, RtLoop<T, NullSink>) {
+fn session<T: CanTransport>(transport: T) -> (ContactSample, PacedLoop<T, NullSink>) {
     let cfg = machine_config(&plane());
     let mut t = transport;
     startup::boot(&mut t, &cfg).unwrap();
@@ -35,8 +35,8 @@ fn session<T: CanTransport>(transport: T) -> (ContactSample, RtLoop<T, NullSink>
     let pacing = Pacing::Lockstep {
         answer_timeout: Duration::from_millis(50),
     };
-    let mut rt = RtLoop::new(&cfg, LoopConfig::from_machine(&cfg, pacing), t, NullSink);
-    let next = |rt: &mut RtLoop<T, NullSink>| loop {
+    let mut rt = PacedLoop::new(&cfg, LoopConfig::from_machine(&cfg, pacing), t, NullSink);
+    let next = |rt: &mut PacedLoop<T, NullSink>| loop {
         rt.cycle().unwrap();
         if let Some(r) = rt.take_reply() {
             break r;

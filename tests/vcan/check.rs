@@ -24,8 +24,9 @@ use hal::can::candump::parse_log;
 use hal::can::CanFrame;
 use hal::canopen::cob_id::{classify, CobKind};
 use hal::canopen::object;
+use hal::canopen::pdo::mapping_index;
 use hal::cia402::touch_probe::TouchProbeStatus;
-use hal::master::process_data;
+use hal::master::process_data::{self, ProcessData, Tpdo2};
 use serde_json::Value;
 use sim::machine::SimMachine;
 use sim::Scenario;
@@ -483,7 +484,10 @@ fn check_segment(case: &Case, frames: &[CanFrame], results: &Path, r: &mut Repor
         Err(e) => return r.fail(format!("{name}: {e}")),
     };
     let cfg = &sc.machine;
-    let nodes: Vec<u8> = cfg.axes.iter().map(|a| a.node).collect();
+    let nodes: Vec<u8> = cfg.axes.iter().map(|a| a.canopen_node()).collect();
+    let Some(bus) = cfg.canopen_bus() else {
+        return r.fail(format!("{name}: the machine is not on CANopen"));
+    };
     if frames.is_empty() {
         return r.fail(format!("candump {name}: no frames recorded for this case"));
     }
@@ -550,25 +554,20 @@ fn check_segment(case: &Case, frames: &[CanFrame], results: &Path, r: &mut Repor
     };
     for n in &nodes {
         let mut want: Vec<((u16, u8), u32)> = vec![
-            (
-                (object::COMMUNICATION_CYCLE_PERIOD, 0),
-                cfg.bus.sync_period_us,
-            ),
+            ((object::COMMUNICATION_CYCLE_PERIOD, 0), bus.sync_period_us),
             (
                 (object::PRODUCER_HEARTBEAT_TIME, 0),
-                u32::from(cfg.bus.heartbeat_producer_ms),
+                u32::from(bus.heartbeat_producer_ms),
             ),
             ((object::MODES_OF_OPERATION, 0), 8),
         ];
-        for (base, num, entries) in [
-            (object::RPDO_MAPPING, 0u16, &process_data::RPDO1[..]),
-            (object::RPDO_MAPPING, 1, &process_data::RPDO2[..]),
-            (object::TPDO_MAPPING, 0, &process_data::TPDO1[..]),
-            (object::TPDO_MAPPING, 1, &process_data::TPDO2[..]),
-        ] {
-            want.push(((base + num, 0), entries.len() as u32));
-            for (i, e) in entries.iter().enumerate() {
-                want.push(((base + num, i as u8 + 1), entry(e)));
+        for l in &process_data::LAYOUT {
+            let Ok(index) = mapping_index(l.direction, l.number) else {
+                continue;
+            };
+            want.push(((index, 0), l.mapping.len() as u32));
+            for (i, e) in l.mapping.iter().enumerate() {
+                want.push(((index, i as u8 + 1), entry(e)));
             }
         }
         for ((index, sub), value) in want {
@@ -582,13 +581,19 @@ fn check_segment(case: &Case, frames: &[CanFrame], results: &Path, r: &mut Repor
     }
 
     // Touch-probe latch frames (TPDO2: status 0x60B9 + latched 0x60BA).
-    let tpdo2 = process_data::mapping(&process_data::TPDO2);
     let mut latches: BTreeMap<u8, Vec<i32>> = BTreeMap::new();
     for f in frames {
-        if let CobKind::Tpdo { num: 2, node } = classify(f.cob_id()) {
-            if let Ok(v) = tpdo2.unpack_frame(f) {
-                if v[0] as u16 & TouchProbeStatus::POSITIVE_EDGE_STORED != 0 {
-                    latches.entry(node).or_default().push(v[1] as u32 as i32);
+        if let CobKind::Tpdo {
+            num: Tpdo2::NUMBER,
+            node,
+        } = classify(f.cob_id())
+        {
+            if let Ok(v) = Tpdo2::decode(f) {
+                if v.touch_probe_status & TouchProbeStatus::POSITIVE_EDGE_STORED != 0 {
+                    latches
+                        .entry(node)
+                        .or_default()
+                        .push(v.probe1_positive_edge);
                 }
             }
         }
@@ -604,7 +609,7 @@ fn check_segment(case: &Case, frames: &[CanFrame], results: &Path, r: &mut Repor
             for a in &cfg.axes {
                 let reported = json["contact"][a.name.name()].as_f64().unwrap_or(f64::NAN);
                 let on_bus = latches
-                    .get(&a.node)
+                    .get(&a.canopen_node())
                     .and_then(|l| l.last())
                     .map(|v| *v as f64 / a.increments_per_unit);
                 r.check(

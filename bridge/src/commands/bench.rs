@@ -41,23 +41,42 @@ use std::time::{Duration, Instant};
 const TRIGGER_RUN: u64 = 1;
 const FLOOR_RUN: u64 = 2;
 
+/// The options of `probebridge bench trigger`, parsed by clap straight into this.
+#[derive(clap::Args, Clone, Debug)]
 pub struct BenchArgs {
+    /// Measured triggers (plus a warm-up of 10 %, at most 100).
+    #[arg(long, default_value_t = 10_000)]
     pub triggers: u64,
+    /// SYNC period of the real-time loop, µs.
+    #[arg(long, default_value_t = 250)]
     pub period_us: u32,
+    /// Run the latch over this SocketCAN interface (simulated drives on a second
+    /// socket in this process) instead of the in-process bus.
+    #[arg(long)]
     pub can: Option<String>,
+    /// Write all figures as JSON.
+    #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Publish from the real-time thread with `ContactPublisher` (one allocation per
-    /// sample inside iceoryx2 0.10) instead of through the `ForwardingSink`.
+    /// Publish from the real-time thread with ContactPublisher (one heap allocation
+    /// per sample inside iceoryx2 0.10) instead of the ForwardingSink.
+    #[arg(long)]
     pub direct: bool,
-    /// Triggers before the measured ones (connections, caches, page faults).
+    /// Warm-up triggers, not counted.
+    #[arg(long)]
     pub warmup: Option<u64>,
-    /// SCHED_FIFO priority of the real-time thread (0: do not ask).
+    /// SCHED_FIFO priority of the real-time thread (0: do not ask); the simulated
+    /// drives get one less, the forwarder two less.
+    #[arg(long, default_value_t = 80)]
     pub rt_priority: i32,
-    /// SCHED_FIFO priority of the estimator process (0: an ordinary process, as the
-    /// bridge starts it).
+    /// Run the estimator process under SCHED_FIFO at this priority (0: an
+    /// ordinary process, as the bridge starts it). Every thread on the measured
+    /// path runs under SCHED_FIFO by default, so other load on the machine does
+    /// not decide the result.
+    #[arg(long, default_value_t = 70)]
     pub estimator_priority: i32,
-    /// SCHED_FIFO priority of the simulated drives' thread (default: `rt_priority` - 1;
-    /// 0: ordinary).
+    /// SCHED_FIFO priority of the simulated drives' thread (default: the real-time
+    /// loop's minus one; 0: ordinary).
+    #[arg(long)]
     pub drives_priority: Option<i32>,
 }
 
@@ -101,7 +120,11 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
     )
     .map_err(|e| e.to_string())?;
     let mut cfg = crate::session::machine_config(&scenario);
-    cfg.bus.sync_period_us = args.period_us;
+    let bus = cfg
+        .canopen_bus_mut()
+        .ok_or("the bench scenario's machine is not on CANopen")?;
+    bus.sync_period_us = args.period_us;
+    let bitrate = bus.bitrate;
     // Short moves of a few µm are acceleration-bound: a stiffer machine brings a
     // trigger (probe, stop, retract) down to about a dozen SYNC periods. The hot path
     // does not depend on it.
@@ -112,11 +135,13 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
     let mut notes = Vec::new();
     if args.can.is_none() {
         // The in-process bus has no bit rate: nothing to overload.
-        cfg.bus.max_load_percent = f64::INFINITY;
+        if let Some(bus) = cfg.canopen_bus_mut() {
+            bus.max_load_percent = f64::INFINITY;
+        }
         notes.push(format!(
             "in-process bus: no bit rate, the bus-load limit does not apply (this traffic would be {:.0} % of {} kbit/s)",
             load.percent,
-            cfg.bus.bitrate / 1000
+            bitrate / 1000
         ));
     }
 

@@ -66,7 +66,7 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
         c[0], c[1], c[2], probe.radius
     );
     let run_id = hal::clock::monotonic_ns();
-    s.machine.set_run_id(run_id);
+    s.machine.set_run(run_id);
 
     // Pole from above, then four points around the equator toward the centre.
     let mut starts = vec![([c[0], c[1], c[2] + big + clearance], [0.0, 0.0, -1.0])];

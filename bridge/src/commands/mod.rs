@@ -25,7 +25,8 @@ pub fn parse_vec3(option: &str, s: &str) -> Result<[f64; 3], String> {
     Ok(v)
 }
 
-/// Unique iceoryx2 service prefix for a process that did not get one.
+/// The iceoryx2 service prefix of `--service` when none is given: the same for every
+/// bridge and estimator on a gateway, so that they find each other.
 pub fn default_service() -> String {
     "probebridge".to_string()
 }

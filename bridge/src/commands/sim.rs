@@ -13,7 +13,7 @@ pub fn run(scenario: Option<PathBuf>, iface: &str) -> Result<(), String> {
         .machine
         .axes
         .iter()
-        .map(|a| format!("{}={}", a.name, a.node))
+        .map(|a| format!("{}={}", a.name, a.canopen_node()))
         .collect();
     eprintln!(
         "probebridge sim: machine {} ({}), drives {} on {iface}; stop with Ctrl-C",

@@ -225,6 +225,9 @@ impl Machine for MockMachine {
             direction: d.into(),
         })
     }
+
+    /// The mock publishes no samples: nothing to tag.
+    fn set_run(&mut self, _run_id: u64) {}
 }
 
 /// Rotation matrices written out here, independent of the crate's.

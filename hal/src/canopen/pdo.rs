@@ -111,41 +111,14 @@ impl PdoMapping {
     /// sent as 0. Signed values go in as their two's-complement bits (`i32 as u32`).
     pub fn pack(&self, values: &[u64]) -> ([u8; 8], usize) {
         debug_assert_eq!(values.len(), self.entries.len(), "one value per entry");
-        let mut acc = 0u64;
-        let mut offset = 0u32;
-        for (i, e) in self.entries.iter().enumerate() {
-            let v = values.get(i).copied().unwrap_or(0) & mask(e.bits);
-            acc |= v << offset;
-            offset += u32::from(e.bits);
-        }
-        (acc.to_le_bytes(), self.byte_len())
+        pack(&self.entries, values)
     }
 
     /// Splits PDO data into one value per entry (zero-extended; sign-extend with
     /// [`sign_extend`]). Longer data is accepted (CiA 301: extra bytes are ignored),
     /// shorter is an error.
     pub fn unpack(&self, data: &[u8]) -> Result<Vec<u64, MAX_ENTRIES>, DecodeError> {
-        let need = self.byte_len();
-        if data.len() < need {
-            return Err(DecodeError::WrongLength {
-                service: SERVICE,
-                found: data.len(),
-                min: need,
-                max: 8,
-            });
-        }
-        let mut raw = [0u8; 8];
-        let n = data.len().min(8);
-        raw[..n].copy_from_slice(&data[..n]);
-        let acc = u64::from_le_bytes(raw);
-        let mut out = Vec::new();
-        let mut offset = 0u32;
-        for e in &self.entries {
-            // At most MAX_ENTRIES entries by construction.
-            let _ = out.push((acc >> offset) & mask(e.bits));
-            offset += u32::from(e.bits);
-        }
-        Ok(out)
+        unpack(&self.entries, data)
     }
 
     /// [`PdoMapping::unpack`] of a received frame, rejecting remote frames.
@@ -153,9 +126,67 @@ impl PdoMapping {
         &self,
         f: &crate::can::CanFrame,
     ) -> Result<Vec<u64, MAX_ENTRIES>, DecodeError> {
-        check_data(SERVICE, f, self.byte_len(), 8)?;
-        self.unpack(f.data())
+        unpack_frame(&self.entries, f)
     }
+}
+
+/// Data bytes of a PDO carrying `entries`.
+pub fn byte_len(entries: &[MapEntry]) -> usize {
+    entries
+        .iter()
+        .map(|e| u32::from(e.bits))
+        .sum::<u32>()
+        .div_ceil(8) as usize
+}
+
+/// [`PdoMapping::pack`] over a list of entries (a layout known at compile time).
+pub fn pack(entries: &[MapEntry], values: &[u64]) -> ([u8; 8], usize) {
+    let mut acc = 0u64;
+    let mut offset = 0u32;
+    for (i, e) in entries.iter().enumerate() {
+        let v = values.get(i).copied().unwrap_or(0) & mask(e.bits);
+        // A mapping of 64 bits ends at offset 64: nothing is shifted past it.
+        if offset < 64 {
+            acc |= v << offset;
+        }
+        offset += u32::from(e.bits);
+    }
+    (acc.to_le_bytes(), byte_len(entries))
+}
+
+/// [`PdoMapping::unpack`] over a list of entries.
+pub fn unpack(entries: &[MapEntry], data: &[u8]) -> Result<Vec<u64, MAX_ENTRIES>, DecodeError> {
+    let need = byte_len(entries);
+    if data.len() < need {
+        return Err(DecodeError::WrongLength {
+            service: SERVICE,
+            found: data.len(),
+            min: need,
+            max: 8,
+        });
+    }
+    let mut raw = [0u8; 8];
+    let n = data.len().min(8);
+    raw[..n].copy_from_slice(&data[..n]);
+    let acc = u64::from_le_bytes(raw);
+    let mut out = Vec::new();
+    let mut offset = 0u32;
+    for e in entries.iter().take(MAX_ENTRIES) {
+        let v = if offset < 64 { acc >> offset } else { 0 };
+        // At most MAX_ENTRIES entries: never exceeds the capacity.
+        let _ = out.push(v & mask(e.bits));
+        offset += u32::from(e.bits);
+    }
+    Ok(out)
+}
+
+/// [`unpack`] of a received frame, rejecting remote frames and short data.
+pub fn unpack_frame(
+    entries: &[MapEntry],
+    f: &crate::can::CanFrame,
+) -> Result<Vec<u64, MAX_ENTRIES>, DecodeError> {
+    check_data(SERVICE, f, byte_len(entries), 8)?;
+    unpack(entries, f.data())
 }
 
 const fn mask(bits: u8) -> u64 {

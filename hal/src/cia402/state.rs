@@ -169,6 +169,48 @@ mod tests {
         assert_eq!(State::from_statusword(0x0001), None);
     }
 
+    /// The standard's sequence with literal values (CiA 402 controlword and statusword
+    /// encodings), not this module's constants on both sides: from Switch on disabled,
+    /// Shutdown 0x0006 -> Ready to switch on (statusword 0x0021 under mask 0x006F),
+    /// Switch on 0x0007 -> Switched on (0x0023), Enable operation 0x000F -> Operation
+    /// enabled (0x0027); from Fault (0x0008 under 0x004F), Fault reset 0x0080 on its
+    /// rising edge -> Switch on disabled (0x0040 under 0x004F).
+    #[test]
+    fn the_standards_controlword_statusword_sequence() {
+        let enable: [(u16, u16, u16); 3] = [
+            (0x0006, 0x006F, 0x0021),
+            (0x0007, 0x006F, 0x0023),
+            (0x000F, 0x006F, 0x0027),
+        ];
+        let (mut s, mut prev) = (State::SwitchOnDisabled, 0x0000u16);
+        assert_eq!(s.statusword_bits() & 0x004F, 0x0040);
+        for (cw, mask, sw) in enable {
+            // The master asks for exactly the standard's command at each step.
+            assert_eq!(s.command_towards_operation_enabled(), Some(cw), "{s:?}");
+            s = s.on_controlword(cw, prev, false);
+            prev = cw;
+            assert_eq!(s.statusword_bits() & mask, sw, "after 0x{cw:04X}: {s:?}");
+            assert_eq!(State::from_statusword(sw), Some(s));
+        }
+        assert_eq!(s.command_towards_operation_enabled(), None);
+        // A drive that also sets voltage enabled (bit 4), remote (bit 9) and target
+        // reached (bit 10) still reads as Operation enabled: 0x0637.
+        assert_eq!(
+            State::from_statusword(0x0637),
+            Some(State::OperationEnabled)
+        );
+
+        let fault = State::Fault;
+        assert_eq!(fault.statusword_bits() & 0x004F, 0x0008);
+        assert_eq!(State::from_statusword(0x0218), Some(State::Fault));
+        assert_eq!(fault.command_towards_operation_enabled(), Some(0x0080));
+        // Bit 7 already high: no edge, the master first sends 0x0000.
+        assert_eq!(fault.next_controlword(0x0080), Some(0x0000));
+        assert_eq!(fault.on_controlword(0x0080, 0x0080, false), State::Fault);
+        let reset = fault.on_controlword(0x0080, 0x0000, false);
+        assert_eq!(reset.statusword_bits() & 0x004F, 0x0040);
+    }
+
     #[test]
     fn master_drives_slave_to_operation_enabled_from_fault() {
         let (mut s, mut prev_cw) = (State::Fault, 0x0080u16);

@@ -2,6 +2,7 @@
 //! its own thread, talked to through bounded channels (no locks shared with the loop).
 
 pub mod command;
+pub mod pacing;
 pub mod process_data;
 pub mod rt_loop;
 pub mod startup;
@@ -11,9 +12,11 @@ use crate::can::CanTransport;
 use crate::config::MachineConfig;
 use crate::contact_sample::SampleSink;
 use crate::machine::{Contact, ErrorKind, Machine, MachineError, ProbeMove};
+use crate::motion_guard::MotionGuard;
 use command::{Command, Detail, Reply, RtError};
+pub use pacing::{PacedLoop, Pacing};
 pub use process_data::BusLoad;
-pub use rt_loop::{LoopConfig, LoopStats, Pacing, RtLoop};
+pub use rt_loop::{LoopConfig, LoopStats, RtLoop};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender};
 use std::sync::{Arc, Mutex};
@@ -66,23 +69,17 @@ pub struct CanMachine {
     running: Arc<AtomicBool>,
     stats: Arc<Mutex<LoopStats>>,
     config: MachineConfig,
+    guard: MotionGuard,
     options: MasterOptions,
     run_id: u64,
     position: AxisPositions,
 }
 
+/// SCHED_FIFO at `priority` for the calling thread (0: do not ask) and locked memory;
+/// what was granted.
 fn apply_rt_settings(priority: i32) -> (bool, bool) {
-    let mut fifo = false;
-    if priority > 0 {
-        let param = libc::sched_param {
-            sched_priority: priority,
-        };
-        // SAFETY: plain syscall on the calling thread with a parameter we own.
-        fifo = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } == 0;
-    }
-    // SAFETY: plain syscall; failure (no CAP_IPC_LOCK / rlimit) is reported, not fatal.
-    let locked = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) } == 0;
-    (fifo, locked)
+    let fifo = priority > 0 && crate::rt::set_fifo_priority(priority);
+    (fifo, crate::rt::lock_memory())
 }
 
 impl CanMachine {
@@ -100,14 +97,15 @@ impl CanMachine {
         T: CanTransport + 'static,
         S: SampleSink + 'static,
     {
+        let bus = startup::canopen_bus(cfg)?;
         let bus_load = BusLoad::of(cfg);
-        if bus_load.percent > cfg.bus.max_load_percent {
+        if bus_load.percent > bus.max_load_percent {
             return Err(MachineError::new(
                 ErrorKind::InvalidRequest,
                 format!(
                     "{}: {bus_load}; the limit is {:.0} %: lengthen bus.sync_period_us or raise the bit rate",
                     cfg.path.display(),
-                    cfg.bus.max_load_percent
+                    bus.max_load_percent
                 ),
             ));
         }
@@ -146,7 +144,7 @@ impl CanMachine {
                     };
                     let held = matches!(latency, Some(Ok(_)));
                     let _ = rt_tx.send((got.0, got.1, held, latency_note));
-                    let mut rt = RtLoop::new(&machine_cfg, loop_cfg, transport, sink);
+                    let mut rt = PacedLoop::new(&machine_cfg, loop_cfg, transport, sink);
                     run_thread(&mut rt, &cmd_rx, &reply_tx, &running, &stats);
                 })
                 .map_err(|e| {
@@ -182,6 +180,7 @@ impl CanMachine {
             running,
             stats,
             config: cfg.clone(),
+            guard: MotionGuard::new(cfg),
             options,
             run_id: options.run_id,
             position: AxisPositions::new(),
@@ -253,27 +252,6 @@ impl CanMachine {
         }
     }
 
-    fn check_limits(&self, target: &AxisPositions, what: &str) -> Result<(), MachineError> {
-        for (axis, v) in target.iter() {
-            let Some(a) = self.config.axis(axis) else {
-                return Err(MachineError::new(
-                    ErrorKind::InvalidRequest,
-                    format!("{what}: this machine has no {axis} axis"),
-                ));
-            };
-            if !v.is_finite() || v < a.min || v > a.max {
-                return Err(MachineError::new(
-                    ErrorKind::SoftwareLimit,
-                    format!(
-                        "{what}: {axis}{v:+.4} is outside the software limits {:+.4} .. {:+.4}; nothing moved",
-                        a.min, a.max
-                    ),
-                ));
-            }
-        }
-        Ok(())
-    }
-
     /// Stops the loop and disables the drives.
     pub fn shutdown(&mut self) {
         if let Some(t) = self.thread.take() {
@@ -291,7 +269,7 @@ impl Drop for CanMachine {
 }
 
 fn run_thread<T: CanTransport, S: SampleSink>(
-    rt: &mut RtLoop<T, S>,
+    rt: &mut PacedLoop<T, S>,
     commands: &Receiver<Command>,
     replies: &SyncSender<Reply>,
     running: &AtomicBool,
@@ -358,13 +336,7 @@ impl Machine for CanMachine {
     }
 
     fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), MachineError> {
-        if !(feed.is_finite() && feed > 0.0) {
-            return Err(MachineError::new(
-                ErrorKind::InvalidRequest,
-                format!("feed {feed} must be > 0"),
-            ));
-        }
-        self.check_limits(target, "move")?;
+        self.guard.check_move(target, feed)?;
         match self.command(Command::MoveTo {
             target: target.raw(),
             mask: target.mask(),
@@ -382,43 +354,10 @@ impl Machine for CanMachine {
     }
 
     fn probe(&mut self, mv: &ProbeMove) -> Result<Contact, MachineError> {
-        let d = mv.direction;
-        let norm = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        if !(norm.is_finite() && norm > 1e-9) {
-            return Err(MachineError::new(
-                ErrorKind::InvalidRequest,
-                "probing direction is zero",
-            ));
-        }
-        let positive = |v: f64| v.is_finite() && v > 0.0;
-        if !positive(mv.feed) || !positive(mv.max_distance) {
-            return Err(MachineError::new(
-                ErrorKind::InvalidRequest,
-                format!(
-                    "probing feed {} and distance {} must be > 0",
-                    mv.feed, mv.max_distance
-                ),
-            ));
-        }
-        let dir = [d[0] / norm, d[1] / norm, d[2] / norm];
-        // The path end plus the braking distance at the probing feed must be inside
-        // the limits: the stop after a late contact runs on past the path.
+        // The request first: a bad one is refused without asking the loop anything.
+        self.guard.check_probe_request(mv)?;
         let here = self.positions()?;
-        let mut brake = 0.0f64;
-        for (i, a) in crate::Axis::LINEAR.iter().enumerate() {
-            if let Some(ac) = self.config.axis(*a) {
-                let v = mv.feed / 60.0 * dir[i].abs();
-                brake = brake.max(v * v / (2.0 * ac.max_acceleration));
-            }
-        }
-        let mut end = here;
-        for (i, a) in crate::Axis::LINEAR.iter().enumerate() {
-            end.set(
-                *a,
-                here.get(*a).unwrap_or(0.0) + dir[i] * (mv.max_distance + brake),
-            );
-        }
-        self.check_limits(&end, "probing move")?;
+        let dir = self.guard.check_probe(&here, mv)?.direction;
         match self.command(Command::Probe {
             direction: dir,
             feed: mv.feed,

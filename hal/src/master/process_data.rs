@@ -1,5 +1,7 @@
-//! The process data layout the master configures on every drive, and what it costs on
-//! the bus.
+//! The process data layout the master configures on every drive, as typed values
+//! ([`Rpdo1`], [`Tpdo1`], [`Rpdo2`], [`Tpdo2`]), and what it costs on the bus. Each
+//! type's mapping is the only description of its layout: the SDO configuration, the
+//! encoding and the decoding are derived from it, on the master and in the tests.
 //!
 //! Cyclic (every SYNC):
 //! - RPDO1: controlword 0x6040 (16) + target position 0x607A (32), applied at SYNC;
@@ -11,35 +13,216 @@
 //!   This is the latch frame: one frame carries "edge stored" and the latched value.
 
 use crate::can::CanFrame;
-use crate::canopen::pdo::{MapEntry, PdoMapping};
-use crate::config::MachineConfig;
+use crate::canopen::object;
+use crate::canopen::pdo::{self, MapEntry, PdoDirection, PdoMapping, MAX_ENTRIES};
+use crate::canopen::{cob_id, DecodeError};
+use crate::config::{CanOpenBusConfig, MachineConfig};
 
-pub const RPDO1_TRANSMISSION: u8 = 1;
-pub const RPDO2_TRANSMISSION: u8 = 255;
-pub const TPDO1_TRANSMISSION: u8 = 1;
-pub const TPDO2_TRANSMISSION: u8 = 255;
+/// One PDO of the layout the master configures: where it goes, what it maps, and the
+/// typed value it carries. The mapping is the single description of the layout: the
+/// SDO configuration, the encoding and the decoding are all derived from it.
+pub trait ProcessData: Sized + Copy {
+    const DIRECTION: PdoDirection;
+    /// PDO number, 1..=4.
+    const NUMBER: u8;
+    /// CiA 301 transmission type (1: every SYNC, 255: on change).
+    const TRANSMISSION_TYPE: u8;
+    /// The mapped objects, in frame order.
+    const MAPPING: &'static [MapEntry];
 
-const fn entry(index: u16, sub: u8, bits: u8) -> MapEntry {
-    MapEntry { index, sub, bits }
-}
+    /// One raw value per mapping entry, in order (signed values as their bits).
+    fn to_values(&self) -> [u64; MAX_ENTRIES];
 
-pub const RPDO1: [MapEntry; 2] = [entry(0x6040, 0, 16), entry(0x607A, 0, 32)];
-pub const RPDO2: [MapEntry; 1] = [entry(0x60B8, 0, 16)];
-pub const TPDO1: [MapEntry; 2] = [entry(0x6041, 0, 16), entry(0x6064, 0, 32)];
-pub const TPDO2: [MapEntry; 2] = [entry(0x60B9, 0, 16), entry(0x60BA, 0, 32)];
+    /// The inverse of [`ProcessData::to_values`]; `v` has one value per entry.
+    fn from_values(v: &[u64]) -> Self;
 
-pub fn mapping(entries: &[MapEntry]) -> PdoMapping {
-    let mut m = PdoMapping::new();
-    for e in entries {
-        // The layouts above are well within 64 bits and 8 entries.
-        m.push(*e).expect("static PDO layout fits");
+    /// The PDO's identifier for `node` (predefined connection set).
+    fn cob_id(node: u8) -> u16 {
+        match Self::DIRECTION {
+            PdoDirection::Rpdo => cob_id::rpdo_cob(Self::NUMBER, node),
+            PdoDirection::Tpdo => cob_id::tpdo_cob(Self::NUMBER, node),
+        }
     }
-    m
+
+    /// The frame `node` receives (RPDO) or sends (TPDO).
+    fn encode(&self, node: u8) -> CanFrame {
+        let (data, len) = pdo::pack(Self::MAPPING, &self.to_values()[..Self::MAPPING.len()]);
+        crate::canopen::frame(Self::cob_id(node), &data[..len])
+    }
+
+    /// The value of a received PDO (the caller matched its identifier). Longer data is
+    /// accepted (CiA 301), shorter data and remote frames are not.
+    fn decode(f: &CanFrame) -> Result<Self, DecodeError> {
+        let v = pdo::unpack_frame(Self::MAPPING, f)?;
+        Ok(Self::from_values(&v))
+    }
 }
 
-fn bytes(entries: &[MapEntry]) -> usize {
-    entries.iter().map(|e| e.bits as usize).sum::<usize>() / 8
+/// The bits of a signed mapped value.
+const fn bits_i32(v: i32) -> u64 {
+    v as u32 as u64
 }
+
+/// A signed 32-bit mapped value from its bits.
+const fn from_bits_i32(v: u64) -> i32 {
+    v as u32 as i32
+}
+
+/// RPDO1, every SYNC: controlword and target position (cyclic synchronous position).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Rpdo1 {
+    pub controlword: u16,
+    /// Increments.
+    pub target_position: i32,
+}
+
+impl ProcessData for Rpdo1 {
+    const DIRECTION: PdoDirection = PdoDirection::Rpdo;
+    const NUMBER: u8 = 1;
+    const TRANSMISSION_TYPE: u8 = 1;
+    const MAPPING: &'static [MapEntry] = &[
+        MapEntry::new(object::CONTROLWORD, 0, 16),
+        MapEntry::new(object::TARGET_POSITION, 0, 32),
+    ];
+
+    fn to_values(&self) -> [u64; MAX_ENTRIES] {
+        let mut v = [0; MAX_ENTRIES];
+        v[0] = u64::from(self.controlword);
+        v[1] = bits_i32(self.target_position);
+        v
+    }
+
+    fn from_values(v: &[u64]) -> Self {
+        Self {
+            controlword: v[0] as u16,
+            target_position: from_bits_i32(v[1]),
+        }
+    }
+}
+
+/// TPDO1, sampled at every SYNC: statusword and position actual value.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Tpdo1 {
+    pub statusword: u16,
+    /// Increments.
+    pub position_actual: i32,
+}
+
+impl ProcessData for Tpdo1 {
+    const DIRECTION: PdoDirection = PdoDirection::Tpdo;
+    const NUMBER: u8 = 1;
+    const TRANSMISSION_TYPE: u8 = 1;
+    const MAPPING: &'static [MapEntry] = &[
+        MapEntry::new(object::STATUSWORD, 0, 16),
+        MapEntry::new(object::POSITION_ACTUAL_VALUE, 0, 32),
+    ];
+
+    fn to_values(&self) -> [u64; MAX_ENTRIES] {
+        let mut v = [0; MAX_ENTRIES];
+        v[0] = u64::from(self.statusword);
+        v[1] = bits_i32(self.position_actual);
+        v
+    }
+
+    fn from_values(v: &[u64]) -> Self {
+        Self {
+            statusword: v[0] as u16,
+            position_actual: from_bits_i32(v[1]),
+        }
+    }
+}
+
+/// RPDO2, on change: the touch probe function.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Rpdo2 {
+    pub touch_probe_function: u16,
+}
+
+impl ProcessData for Rpdo2 {
+    const DIRECTION: PdoDirection = PdoDirection::Rpdo;
+    const NUMBER: u8 = 2;
+    const TRANSMISSION_TYPE: u8 = 255;
+    const MAPPING: &'static [MapEntry] = &[MapEntry::new(object::TOUCH_PROBE_FUNCTION, 0, 16)];
+
+    fn to_values(&self) -> [u64; MAX_ENTRIES] {
+        let mut v = [0; MAX_ENTRIES];
+        v[0] = u64::from(self.touch_probe_function);
+        v
+    }
+
+    fn from_values(v: &[u64]) -> Self {
+        Self {
+            touch_probe_function: v[0] as u16,
+        }
+    }
+}
+
+/// TPDO2, on change: the touch probe status and the position latched at probe 1's
+/// positive edge. The latch frame: one frame carries "edge stored" and the value.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Tpdo2 {
+    pub touch_probe_status: u16,
+    /// Increments.
+    pub probe1_positive_edge: i32,
+}
+
+impl ProcessData for Tpdo2 {
+    const DIRECTION: PdoDirection = PdoDirection::Tpdo;
+    const NUMBER: u8 = 2;
+    const TRANSMISSION_TYPE: u8 = 255;
+    const MAPPING: &'static [MapEntry] = &[
+        MapEntry::new(object::TOUCH_PROBE_STATUS, 0, 16),
+        MapEntry::new(object::TOUCH_PROBE_1_POSITIVE_EDGE, 0, 32),
+    ];
+
+    fn to_values(&self) -> [u64; MAX_ENTRIES] {
+        let mut v = [0; MAX_ENTRIES];
+        v[0] = u64::from(self.touch_probe_status);
+        v[1] = bits_i32(self.probe1_positive_edge);
+        v
+    }
+
+    fn from_values(v: &[u64]) -> Self {
+        Self {
+            touch_probe_status: v[0] as u16,
+            probe1_positive_edge: from_bits_i32(v[1]),
+        }
+    }
+}
+
+/// One PDO of the layout as the start-up configures it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PdoLayout {
+    pub direction: PdoDirection,
+    pub number: u8,
+    pub transmission_type: u8,
+    pub mapping: &'static [MapEntry],
+}
+
+impl PdoLayout {
+    /// The mapping as written to the drive over SDO.
+    pub fn mapping(&self) -> PdoMapping {
+        // Every layout here is well within 64 bits and 8 entries (tested below).
+        PdoMapping::from_entries(self.mapping).expect("static PDO layout fits")
+    }
+
+    const fn of<P: ProcessData>() -> Self {
+        Self {
+            direction: P::DIRECTION,
+            number: P::NUMBER,
+            transmission_type: P::TRANSMISSION_TYPE,
+            mapping: P::MAPPING,
+        }
+    }
+}
+
+/// Every PDO the master configures on each drive, in configuration order.
+pub const LAYOUT: [PdoLayout; 4] = [
+    PdoLayout::of::<Rpdo1>(),
+    PdoLayout::of::<Rpdo2>(),
+    PdoLayout::of::<Tpdo1>(),
+    PdoLayout::of::<Tpdo2>(),
+];
 
 /// Bus load of the cyclic traffic, worst-case bit stuffing.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -57,19 +240,22 @@ pub struct BusLoad {
 }
 
 impl BusLoad {
+    /// The load of `cfg`'s CANopen bus (default timing on another bus).
     pub fn of(cfg: &MachineConfig) -> Self {
         let n = cfg.axes.len();
-        let b = &cfg.bus;
+        let b = cfg.canopen_bus().unwrap_or(&CanOpenBusConfig::DEFAULT);
         let period_bits = b.bitrate as f64 * b.sync_period_us as f64 * 1e-6;
         let sync = CanFrame::wire_bits_worst_case(0) as f64;
-        let per_drive = (CanFrame::wire_bits_worst_case(bytes(&RPDO1))
-            + CanFrame::wire_bits_worst_case(bytes(&TPDO1))) as f64;
+        let per_drive = (CanFrame::wire_bits_worst_case(pdo::byte_len(Rpdo1::MAPPING))
+            + CanFrame::wire_bits_worst_case(pdo::byte_len(Tpdo1::MAPPING)))
+            as f64;
         let heartbeat = CanFrame::wire_bits_worst_case(1) as f64 * b.sync_period_us as f64
             / (b.heartbeat_producer_ms as f64 * 1000.0);
         let cyclic_bits = sync + n as f64 * (per_drive + heartbeat);
         let latch_burst_bits = n as f64
-            * (CanFrame::wire_bits_worst_case(bytes(&RPDO2))
-                + CanFrame::wire_bits_worst_case(bytes(&TPDO2))) as f64;
+            * (CanFrame::wire_bits_worst_case(pdo::byte_len(Rpdo2::MAPPING))
+                + CanFrame::wire_bits_worst_case(pdo::byte_len(Tpdo2::MAPPING)))
+                as f64;
         Self {
             drives: n,
             bitrate: b.bitrate,
@@ -102,6 +288,99 @@ impl core::fmt::Display for BusLoad {
 mod tests {
     use super::*;
     use std::path::Path;
+
+    fn frame(cob_id: u16, data: &[u8]) -> CanFrame {
+        CanFrame::new(cob_id, data).unwrap()
+    }
+
+    #[test]
+    fn rpdo1_golden_bytes() {
+        // Enable operation, target -2 increments, node 3: 203#0F00FEFFFFFF.
+        let f = Rpdo1 {
+            controlword: 0x000F,
+            target_position: -2,
+        }
+        .encode(3);
+        assert_eq!(f, frame(0x203, &[0x0F, 0x00, 0xFE, 0xFF, 0xFF, 0xFF]));
+        assert_eq!(
+            Rpdo1::decode(&f),
+            Ok(Rpdo1 {
+                controlword: 0x000F,
+                target_position: -2
+            })
+        );
+    }
+
+    #[test]
+    fn tpdo1_golden_bytes() {
+        // Operation enabled + remote (0x1237), actual 0x12345678, node 1: 181#3712785634 12.
+        let f = frame(0x181, &[0x37, 0x12, 0x78, 0x56, 0x34, 0x12]);
+        let t = Tpdo1::decode(&f).unwrap();
+        assert_eq!(
+            t,
+            Tpdo1 {
+                statusword: 0x1237,
+                position_actual: 0x1234_5678
+            }
+        );
+        assert_eq!(t.encode(1), f);
+        // Extra bytes are ignored (CiA 301), missing ones are an error.
+        let long = frame(0x181, &[0x37, 0x12, 0x78, 0x56, 0x34, 0x12, 0xAA, 0xBB]);
+        assert_eq!(Tpdo1::decode(&long), Ok(t));
+        assert!(matches!(
+            Tpdo1::decode(&frame(0x181, &[0x37, 0x12, 0x78, 0x56, 0x34])),
+            Err(DecodeError::WrongLength { found: 5, .. })
+        ));
+        assert!(Tpdo1::decode(&CanFrame::remote(0x181, 6).unwrap()).is_err());
+    }
+
+    #[test]
+    fn rpdo2_golden_bytes() {
+        // Probe 1 enabled, positive edge, first event (0x0011), node 5: 305#1100.
+        let f = Rpdo2 {
+            touch_probe_function: 0x0011,
+        }
+        .encode(5);
+        assert_eq!(f, frame(0x305, &[0x11, 0x00]));
+        assert_eq!(Rpdo2::decode(&f).unwrap().touch_probe_function, 0x0011);
+    }
+
+    #[test]
+    fn tpdo2_golden_bytes() {
+        // Enabled + edge stored + input high (0x0083), latched at -1000, node 2.
+        let f = frame(0x282, &[0x83, 0x00, 0x18, 0xFC, 0xFF, 0xFF]);
+        let t = Tpdo2::decode(&f).unwrap();
+        assert_eq!(
+            t,
+            Tpdo2 {
+                touch_probe_status: 0x0083,
+                probe1_positive_edge: -1000
+            }
+        );
+        assert_eq!(t.encode(2), f);
+    }
+
+    #[test]
+    fn the_layout_is_the_one_the_start_up_writes() {
+        let raw: Vec<(u8, Vec<u32>)> = LAYOUT
+            .iter()
+            .map(|l| {
+                (
+                    l.transmission_type,
+                    l.mapping.iter().map(|e| e.to_u32()).collect(),
+                )
+            })
+            .collect();
+        assert_eq!(
+            raw,
+            vec![
+                (1, vec![0x6040_0010, 0x607A_0020]),
+                (255, vec![0x60B8_0010]),
+                (1, vec![0x6041_0010, 0x6064_0020]),
+                (255, vec![0x60B9_0010, 0x60BA_0020]),
+            ]
+        );
+    }
 
     #[test]
     fn five_drives_at_2ms_fit_1mbit() {

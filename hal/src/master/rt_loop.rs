@@ -1,18 +1,20 @@
-//! The cyclic part of the CANopen master: once per SYNC period it takes in the drives'
-//! process data, advances the motion, reacts to the touch-probe latch, and sends
-//! setpoints and SYNC. It owns no thread (the caller calls [`RtLoop::cycle`]), so tests
-//! can step it, and it allocates nothing after construction.
+//! The cyclic part of the CANopen master as a protocol core: frames in
+//! ([`RtLoop::on_frame`]), frames out ([`RtLoop::tick`], once per SYNC period), time
+//! as arguments. It does no I/O, reads no clock, owns no thread and allocates nothing
+//! after construction, so tests step it with a fake clock. Pacing it (in real time, or
+//! in lockstep with the simulator's virtual clock) is the job of the thin driver in
+//! [`super::pacing`].
 //!
-//! Two pacings:
-//! - `RealTime`: cycles on CLOCK_MONOTONIC at the SYNC period; frames are handled as
-//!   they arrive, so a latch is published the moment its frame is received.
-//! - `Lockstep`: for the simulator on a virtual clock: after each SYNC the loop waits
-//!   until every drive's TPDO1 (the last frame of a drive's answer to SYNC) is in, then
-//!   advances virtual time by one period. Runs as fast as the simulation can.
+//! Each activity has its method: [`RtLoop::supervise`] (heartbeat, EMCY, fault bits),
+//! [`RtLoop::interpolate`] (enabling, moves, arming, probing, braking, settling), the
+//! latch handling of `on_latch` (publish the contact, start the stop in the same
+//! cycle), the stop (`begin_stop`, `set_fault`) and [`RtLoop::sync_frames`] (setpoints
+//! and SYNC).
 
 use super::command::{Command, Detail, Reply, RtError};
+use super::process_data::{ProcessData, Rpdo1, Rpdo2, Tpdo1, Tpdo2};
 use crate::axis::{Axis, MAX_AXES};
-use crate::can::{CanFrame, CanTransport, TransportError};
+use crate::can::CanFrame;
 use crate::canopen::cob_id::{self, CobKind};
 use crate::canopen::emcy::Emcy;
 use crate::canopen::heartbeat::{HeartbeatConsumer, HeartbeatEvent};
@@ -21,26 +23,24 @@ use crate::cia402::controlword::Controlword;
 use crate::cia402::state::State;
 use crate::cia402::statusword::Statusword;
 use crate::cia402::touch_probe::{Probe, TouchProbeFunction, TouchProbeStatus};
-use crate::clock::monotonic_ns;
-use crate::config::MachineConfig;
+use crate::config::{CanOpenBusConfig, MachineConfig};
 use crate::contact_sample::{ContactSample, SampleSink, FLAG_HW_LATCH};
 use crate::machine::ErrorKind;
 use crate::motion::{AxisLimits, Profile};
-use core::time::Duration;
+use crate::motion_guard::ProbeInput;
 
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Pacing {
-    RealTime,
-    Lockstep {
-        /// Longest wall-clock wait for the drives' answers to one SYNC; a drive that
-        /// does not answer in time is not waited for again (its heartbeat decides).
-        answer_timeout: Duration,
-    },
-}
+pub use super::pacing::Pacing;
+
+/// Most frames one tick sends: RPDO1 and RPDO2 of every drive, then SYNC.
+pub const MAX_TICK_FRAMES: usize = 2 * MAX_AXES + 1;
+
+/// The frames of one tick, in sending order (fixed capacity: no allocation).
+pub type TickFrames = heapless::Vec<CanFrame, MAX_TICK_FRAMES>;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LoopConfig {
     pub period_ns: u64,
+    /// How the driver paces the loop (the core itself takes time as arguments).
     pub pacing: Pacing,
     /// A move is done when every axis is this close to its setpoint (mm / deg).
     pub in_position_window: f64,
@@ -51,15 +51,18 @@ pub struct LoopConfig {
 }
 
 impl LoopConfig {
+    /// The loop's settings for `cfg`'s CANopen bus (the defaults on another bus, which
+    /// the CANopen master refuses before it gets here).
     pub fn from_machine(cfg: &MachineConfig, pacing: Pacing) -> Self {
+        let bus = cfg.canopen_bus().unwrap_or(&CanOpenBusConfig::DEFAULT);
         Self {
-            period_ns: cfg.bus.sync_period_us as u64 * 1000,
+            period_ns: bus.sync_period_us as u64 * 1000,
             pacing,
             in_position_window: 0.001,
             settle_timeout_ns: 2_000_000_000,
             enable_timeout_ns: 2_000_000_000,
             arm_timeout_ns: 200_000_000,
-            heartbeat_timeout_ns: cfg.bus.heartbeat_timeout_ms as u64 * 1_000_000,
+            heartbeat_timeout_ns: bus.heartbeat_timeout_ms as u64 * 1_000_000,
         }
     }
 }
@@ -94,10 +97,9 @@ struct DriveLink {
     actual_inc: i32,
     tp_status: u16,
     tp_status_fresh: bool,
-    /// Probe input level last reported (bit 7 of 0x60B9).
-    probe_level: bool,
+    /// Probe input level last reported (bit 7 of the touch probe status).
+    probe_input: ProbeInput,
     latch_inc: Option<i32>,
-    latch_rx_ns: u64,
     last_emcy: Option<u16>,
     controlword: u16,
     target_inc: i32,
@@ -106,6 +108,28 @@ struct DriveLink {
 }
 
 impl DriveLink {
+    fn new(axis: Axis, node: u8, scale: f64) -> Self {
+        Self {
+            axis,
+            node,
+            scale,
+            statusword: 0,
+            seen_tpdo1: false,
+            answered: false,
+            silent: false,
+            actual_inc: 0,
+            tp_status: 0,
+            tp_status_fresh: false,
+            probe_input: ProbeInput::default(),
+            latch_inc: None,
+            last_emcy: None,
+            controlword: Controlword::SHUTDOWN,
+            target_inc: 0,
+            tp_function: 0,
+            tp_function_sent: None,
+        }
+    }
+
     fn actual(&self) -> f64 {
         self.actual_inc as f64 / self.scale
     }
@@ -124,6 +148,15 @@ enum ArmStage {
     WaitArmed,
 }
 
+/// A probing move as commanded.
+#[derive(Clone, Copy, Debug)]
+struct ProbeRequest {
+    direction: [f64; 3],
+    feed: f64,
+    max_distance: f64,
+    run_id: u64,
+}
+
 #[derive(Clone, Copy, Debug)]
 enum Activity {
     /// Start-up: waiting for every drive's TPDO1, then walking each to Operation enabled.
@@ -138,18 +171,12 @@ enum Activity {
     Arming {
         stage: ArmStage,
         since_ns: u64,
-        direction: [f64; 3],
-        feed: f64,
-        max_distance: f64,
-        run_id: u64,
+        request: ProbeRequest,
     },
     Probing {
         profile: Profile,
         t: f64,
-        direction: [f64; 3],
-        feed: f64,
-        max_distance: f64,
-        run_id: u64,
+        request: ProbeRequest,
     },
     /// Braking along the path; then `then` is answered (after the axes settle, unless
     /// it is an error: a faulted drive would never settle).
@@ -166,20 +193,17 @@ enum Activity {
     Shutdown,
 }
 
-pub struct RtLoop<T: CanTransport, S: SampleSink> {
-    transport: T,
+pub struct RtLoop<S: SampleSink> {
     sink: S,
     cfg: LoopConfig,
     drives: heapless::Vec<DriveLink, MAX_AXES>,
     limits: AxisLimits,
     mask: u8,
     heartbeat: HeartbeatConsumer,
-    cycle: u64,
-    /// Time of the SYNC most recently sent (virtual under lockstep).
+    /// Time of the SYNC most recently sent (the `now_ns` of the last tick).
     sync_ns: u64,
-    epoch_ns: u64,
     /// Clock of the heartbeat supervision: advances with the loop but at most two
-    /// periods per cycle, so a stall of the loop itself (no SCHED_FIFO on a loaded
+    /// periods per tick, so a stall of the loop itself (no SCHED_FIFO on a loaded
     /// machine) is not taken for silent nodes: a consumer that was not running cannot
     /// judge what it missed. Real losses are still seen after the timeout of
     /// supervised time.
@@ -193,11 +217,11 @@ pub struct RtLoop<T: CanTransport, S: SampleSink> {
     stats: LoopStats,
 }
 
-impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
+impl<S: SampleSink> RtLoop<S> {
     /// A loop for the drives of `cfg`, which must already be configured and
-    /// operational (see `startup`). The first cycles walk them to Operation enabled;
-    /// [`Reply::Ready`] is answered when they are there.
-    pub fn new(machine: &MachineConfig, cfg: LoopConfig, transport: T, sink: S) -> Self {
+    /// operational (see `startup`), starting at `now_ns`. The first ticks walk them to
+    /// Operation enabled; [`Reply::Ready`] is answered when they are there.
+    pub fn new(machine: &MachineConfig, cfg: LoopConfig, sink: S, now_ns: u64) -> Self {
         let mut drives = heapless::Vec::new();
         let mut limits = AxisLimits {
             max_velocity: [0.0; MAX_AXES],
@@ -205,51 +229,25 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
         };
         let mut heartbeat = HeartbeatConsumer::new();
         for a in &machine.axes {
-            let link = DriveLink {
-                axis: a.name,
-                node: a.node,
-                scale: a.increments_per_unit,
-                statusword: 0,
-                seen_tpdo1: false,
-                answered: false,
-                silent: false,
-                actual_inc: 0,
-                tp_status: 0,
-                tp_status_fresh: false,
-                probe_level: false,
-                latch_inc: None,
-                latch_rx_ns: 0,
-                last_emcy: None,
-                controlword: Controlword::SHUTDOWN,
-                target_inc: 0,
-                tp_function: 0,
-                tp_function_sent: None,
-            };
             // MachineConfig allows at most one entry per axis, so at most 6.
-            let _ = drives.push(link);
+            let node = a.canopen_node();
+            let _ = drives.push(DriveLink::new(a.name, node, a.increments_per_unit));
             limits.max_velocity[a.name.index()] = a.max_feed / 60.0;
             limits.max_acceleration[a.name.index()] = a.max_acceleration;
             // Node IDs were validated (1..=127) with the configuration.
-            let _ = heartbeat.watch(a.node, cfg.heartbeat_timeout_ns);
+            let _ = heartbeat.watch(node, cfg.heartbeat_timeout_ns);
         }
-        let now = match cfg.pacing {
-            Pacing::RealTime => monotonic_ns(),
-            Pacing::Lockstep { .. } => 0,
-        };
         Self {
-            transport,
             sink,
             cfg,
             drives,
             limits,
             mask: machine.axis_mask(),
             heartbeat,
-            cycle: 0,
-            sync_ns: now,
-            epoch_ns: now,
+            sync_ns: now_ns,
             supervised_ns: 0,
             setpoint: [0.0; MAX_AXES],
-            activity: Activity::Enabling { since_ns: now },
+            activity: Activity::Enabling { since_ns: now_ns },
             reply: None,
             fault: None,
             sequence: 0,
@@ -258,15 +256,15 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
         }
     }
 
-    pub fn pacing(&self) -> Pacing {
-        self.cfg.pacing
+    pub fn config(&self) -> &LoopConfig {
+        &self.cfg
     }
 
     pub fn stats(&self) -> LoopStats {
         self.stats
     }
 
-    /// Current time of the loop's clock (virtual under lockstep), ns.
+    /// Time of the SYNC most recently sent (the `now_ns` of the last tick).
     pub fn now_ns(&self) -> u64 {
         self.sync_ns
     }
@@ -285,7 +283,27 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
         !matches!(self.activity, Activity::Idle | Activity::Shutdown) || self.reply.is_some()
     }
 
-    /// Accepts a command; it is carried out by the following cycles.
+    /// Does a drive that has not fallen silent still owe its answer (TPDO1) to the
+    /// last SYNC?
+    pub fn answers_pending(&self) -> bool {
+        self.drives.iter().any(|d| !d.answered && !d.silent)
+    }
+
+    /// The driver stops waiting for this SYNC's answers: drives that did not answer
+    /// are not waited for again until they do (their heartbeat decides).
+    pub fn stop_waiting_for_answers(&mut self) {
+        for d in self.drives.iter_mut() {
+            if !d.answered {
+                d.silent = true;
+            }
+        }
+    }
+
+    pub fn sink_mut(&mut self) -> &mut S {
+        &mut self.sink
+    }
+
+    /// Accepts a command; it is carried out by the following ticks.
     pub fn submit(&mut self, cmd: Command) {
         if let Command::Shutdown = cmd {
             self.hold_all();
@@ -311,7 +329,6 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
             self.reply = Some(Reply::Error(f));
             return;
         }
-        let now = self.sync_ns;
         match cmd {
             Command::MoveTo { target, mask, feed } => {
                 let from = self.setpoint;
@@ -334,11 +351,13 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
             } => {
                 self.activity = Activity::Arming {
                     stage: ArmStage::Disarm,
-                    since_ns: now,
-                    direction,
-                    feed,
-                    max_distance,
-                    run_id,
+                    since_ns: self.sync_ns,
+                    request: ProbeRequest {
+                        direction,
+                        feed,
+                        max_distance,
+                        run_id,
+                    },
                 };
             }
             Command::Positions | Command::Shutdown => {}
@@ -359,162 +378,73 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
         }
     }
 
-    /// One SYNC period: take in what the drives sent, advance, send setpoints and SYNC.
-    pub fn cycle(&mut self) -> Result<(), TransportError> {
-        self.gather()?;
-        if let Some(HeartbeatEvent::Lost {
-            node,
-            silent_for_ns,
-        }) = self.heartbeat.check(self.supervised_ns)
-        {
-            self.set_fault(
-                RtError::new(
-                    ErrorKind::NodeLost,
-                    Detail::HeartbeatLost {
-                        silent_ms: silent_for_ns as f64 / 1e6,
-                    },
-                )
-                .node(node),
-            );
+    fn disarm_all(&mut self) {
+        for d in self.drives.iter_mut() {
+            d.tp_function = 0;
         }
-        self.check_fault_bits();
-        self.step();
-        self.transmit()?;
-        self.stats.cycles += 1;
-        Ok(())
     }
 
-    fn gather(&mut self) -> Result<(), TransportError> {
-        match self.cfg.pacing {
-            Pacing::Lockstep { answer_timeout } => {
-                if self.cycle > 0 {
-                    let deadline = monotonic_ns() + answer_timeout.as_nanos() as u64;
-                    while self.drives.iter().any(|d| !d.answered && !d.silent) {
-                        let now = monotonic_ns();
-                        if now >= deadline {
-                            break;
-                        }
-                        match self
-                            .transport
-                            .receive(Duration::from_nanos(deadline - now))?
-                        {
-                            Some(f) => self.on_frame(&f),
-                            None => break,
-                        }
-                    }
-                    for d in self.drives.iter_mut() {
-                        if !d.answered {
-                            d.silent = true;
-                        }
-                    }
-                }
-                // Anything else already queued (EMCY, heartbeats) belongs to this period.
-                while let Some(f) = self.transport.receive(Duration::ZERO)? {
-                    self.on_frame(&f);
-                }
-                self.sync_ns += self.cfg.period_ns;
-                self.supervised_ns += self.cfg.period_ns;
-            }
-            Pacing::RealTime => {
-                let period = self.cfg.period_ns;
-                let mut deadline = self.epoch_ns + (self.cycle + 1) * period;
-                let now = monotonic_ns();
-                if now >= deadline + period {
-                    // Stalled past a whole slot: drop the missed slots and resume at the
-                    // next slot of the grid. Sending them now would put SYNCs back to
-                    // back, and a drive interpolating over the SYNC period would take
-                    // each setpoint step as a period's worth of motion: a velocity
-                    // spike. The profile advances per SYNC sent, so the path pauses.
-                    let missed = (now - deadline) / period + 1;
-                    self.cycle += missed;
-                    self.stats.skipped_cycles += missed;
-                    deadline += missed * period;
-                }
-                loop {
-                    let now = monotonic_ns();
-                    if now >= deadline {
-                        if now > deadline + period / 2 {
-                            self.stats.late_cycles += 1;
-                        }
-                        break;
-                    }
-                    if let Some(f) = self
-                        .transport
-                        .receive(Duration::from_nanos(deadline - now))?
-                    {
-                        self.on_frame(&f);
-                    }
-                }
-                // Frames that came in while this cycle was late belong to it too.
-                while let Some(f) = self.transport.receive(Duration::ZERO)? {
-                    self.on_frame(&f);
-                }
-                let now = monotonic_ns();
-                self.supervised_ns += (now - self.sync_ns).min(2 * self.cfg.period_ns);
-                self.sync_ns = now;
-            }
+    /// One SYNC period at `now_ns` (the time this SYNC goes out): supervise, advance
+    /// the motion, and put the setpoints and the SYNC into `out` (cleared first), to be
+    /// sent in order.
+    pub fn tick(&mut self, now_ns: u64, out: &mut TickFrames) {
+        let elapsed = now_ns.saturating_sub(self.sync_ns);
+        self.supervised_ns += elapsed.min(2 * self.cfg.period_ns);
+        self.sync_ns = now_ns;
+        self.supervise();
+        self.interpolate();
+        self.sync_frames(out);
+        self.stats.cycles += 1;
+    }
+
+    /// The driver sent the frames of the last tick at `sent_ns`: the stop latency of a
+    /// contact is measured up to here.
+    pub fn frames_sent(&mut self, sent_ns: u64) {
+        if let Some(rx) = self.stop_pending_since.take() {
+            self.stats.last_stop_latency_ns = sent_ns.saturating_sub(rx);
+            self.stats.last_stop_latency_cycles = self
+                .stats
+                .last_stop_latency_ns
+                .div_ceil(self.cfg.period_ns)
+                .max(1);
         }
-        Ok(())
     }
 
     fn drive_index(&self, node: u8) -> Option<usize> {
         self.drives.iter().position(|d| d.node == node)
     }
 
-    fn on_frame(&mut self, f: &CanFrame) {
-        let data = f.data();
+    /// A frame from the bus, received at `now_ns`.
+    pub fn on_frame(&mut self, f: &CanFrame, now_ns: u64) {
         match cob_id::classify(f.cob_id()) {
-            CobKind::Tpdo { num: 1, node } if data.len() >= 6 => {
-                if let Some(i) = self.drive_index(node) {
+            CobKind::Tpdo {
+                num: Tpdo1::NUMBER,
+                node,
+            } => {
+                if let (Some(i), Ok(pd)) = (self.drive_index(node), Tpdo1::decode(f)) {
                     let d = &mut self.drives[i];
-                    d.statusword = u16::from_le_bytes([data[0], data[1]]);
-                    d.actual_inc = i32::from_le_bytes([data[2], data[3], data[4], data[5]]);
+                    d.statusword = pd.statusword;
+                    d.actual_inc = pd.position_actual;
                     d.seen_tpdo1 = true;
                     d.answered = true;
                     d.silent = false;
                 }
             }
-            CobKind::Tpdo { num: 2, node } if data.len() >= 6 => {
-                if let Some(i) = self.drive_index(node) {
-                    let status = u16::from_le_bytes([data[0], data[1]]);
-                    let value = i32::from_le_bytes([data[2], data[3], data[4], data[5]]);
-                    let d = &mut self.drives[i];
-                    d.tp_status = status;
-                    d.tp_status_fresh = true;
-                    let st = TouchProbeStatus::from_bits(status);
-                    let level = st.input_level(Probe::One);
-                    let rising = level && !d.probe_level;
-                    d.probe_level = level;
-                    // A touch while positioning (probe not armed) is a collision: brake.
-                    // Every drive sees the same probe, so no node is to blame.
-                    if rising && matches!(self.activity, Activity::Moving { .. }) {
-                        self.abort_motion(RtError::new(
-                            ErrorKind::ProbeCollision,
-                            Detail::Collision,
-                        ));
-                        return;
-                    }
-                    if st.enabled(Probe::One)
-                        && st.positive_edge_stored(Probe::One)
-                        && d.tp_function != 0
-                        && d.latch_inc.is_none()
-                    {
-                        d.latch_inc = Some(value);
-                        d.latch_rx_ns = monotonic_ns();
-                        self.try_complete_contact();
-                    }
+            CobKind::Tpdo {
+                num: Tpdo2::NUMBER,
+                node,
+            } => {
+                if let (Some(i), Ok(pd)) = (self.drive_index(node), Tpdo2::decode(f)) {
+                    self.on_latch(i, pd, now_ns);
                 }
             }
             CobKind::Emcy { node } => {
-                if let Ok(e) = Emcy::decode(f) {
-                    if let Some(i) = self.drive_index(node) {
-                        if e.error_code != 0 {
-                            self.drives[i].last_emcy = Some(e.error_code);
-                            let mut err =
-                                RtError::new(ErrorKind::DriveFault, Detail::Emcy).node(node);
-                            err.code = Some(e.error_code);
-                            self.set_fault(err);
-                        }
+                if let (Ok(e), Some(i)) = (Emcy::decode(f), self.drive_index(node)) {
+                    if e.error_code != 0 {
+                        self.drives[i].last_emcy = Some(e.error_code);
+                        let mut err = RtError::new(ErrorKind::DriveFault, Detail::Emcy).node(node);
+                        err.code = Some(e.error_code);
+                        self.set_fault(err);
                     }
                 }
             }
@@ -525,15 +455,36 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
         }
     }
 
+    /// Latch handling: a drive's touch probe status (TPDO2). A rising probe signal
+    /// while positioning is a collision; an edge stored while probing is this drive's
+    /// latch, and the last drive's latch completes the contact.
+    fn on_latch(&mut self, i: usize, pd: Tpdo2, now_ns: u64) {
+        let d = &mut self.drives[i];
+        d.tp_status = pd.touch_probe_status;
+        d.tp_status_fresh = true;
+        let st = TouchProbeStatus::from_bits(pd.touch_probe_status);
+        let rising = d.probe_input.update(st.input_level(Probe::One));
+        let positioning = matches!(self.activity, Activity::Moving { .. });
+        if ProbeInput::is_collision(rising, positioning) {
+            self.abort_motion(RtError::new(ErrorKind::ProbeCollision, Detail::Collision));
+            return;
+        }
+        if st.enabled(Probe::One)
+            && st.positive_edge_stored(Probe::One)
+            && d.tp_function != 0
+            && d.latch_inc.is_none()
+        {
+            d.latch_inc = Some(pd.probe1_positive_edge);
+            self.try_complete_contact(now_ns);
+        }
+    }
+
     /// Every drive has reported its latch: publish the contact and brake, in this cycle.
-    fn try_complete_contact(&mut self) {
+    fn try_complete_contact(&mut self, receive_ns: u64) {
         let Activity::Probing {
             profile,
             t,
-            direction,
-            feed,
-            run_id,
-            ..
+            request,
         } = self.activity
         else {
             return;
@@ -557,19 +508,16 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
                     .clamp(0.0, 1.0);
             }
         }
-        let receive_ns = match self.cfg.pacing {
-            Pacing::RealTime => monotonic_ns(),
-            Pacing::Lockstep { .. } => self.sync_ns + self.cfg.period_ns,
-        };
         self.sequence += 1;
+        let d = request.direction;
         let sample = ContactSample {
             sequence: self.sequence,
-            run_id,
+            run_id: request.run_id,
             trigger_ns: self.sync_ns + (fraction * self.cfg.period_ns as f64) as u64,
             receive_ns,
             positions,
-            direction: [direction[0], direction[1], direction[2]],
-            feed,
+            direction: [d[0], d[1], d[2]],
+            feed: request.feed,
             axis_mask: self.mask as u32,
             flags: FLAG_HW_LATCH,
         };
@@ -577,14 +525,18 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
             Ok(()) => self.stats.samples_published += 1,
             Err(_) => self.stats.publish_failures += 1,
         }
-        for d in self.drives.iter_mut() {
-            d.tp_function = 0;
-        }
+        self.disarm_all();
         self.stop_pending_since = Some(receive_ns);
+        self.begin_stop(profile, t, Reply::Contact(sample));
+    }
+
+    /// Stop: brake along the path of `profile` from its state at `t`, then answer
+    /// `then`.
+    fn begin_stop(&mut self, profile: Profile, t: f64, then: Reply) {
         self.activity = Activity::Stopping {
             profile: profile.stop_at(t, &self.limits),
             t: 0.0,
-            then: Reply::Contact(sample),
+            then,
         };
     }
 
@@ -592,44 +544,55 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
     /// faulted (nothing is broken: the operator retracts and goes on).
     fn abort_motion(&mut self, err: RtError) {
         if let Activity::Moving { profile, t } = self.activity {
-            self.activity = Activity::Stopping {
-                profile: profile.stop_at(t, &self.limits),
-                t: 0.0,
-                then: Reply::Error(err),
-            };
+            self.begin_stop(profile, t, Reply::Error(err));
         }
     }
 
+    /// A fault stops everything: brake any motion, answer the command with `err`, and
+    /// refuse motion from now on.
     fn set_fault(&mut self, err: RtError) {
         if self.fault.is_some() {
             return;
         }
         self.fault = Some(err);
-        for d in self.drives.iter_mut() {
-            d.tp_function = 0;
-        }
-        self.activity = match self.activity {
+        self.disarm_all();
+        match self.activity {
             Activity::Moving { profile, t } | Activity::Probing { profile, t, .. } => {
-                Activity::Stopping {
-                    profile: profile.stop_at(t, &self.limits),
-                    t: 0.0,
-                    then: Reply::Error(err),
-                }
+                self.begin_stop(profile, t, Reply::Error(err));
             }
-            Activity::Stopping { profile, t, .. } => Activity::Stopping {
-                profile,
-                t,
-                then: Reply::Error(err),
-            },
+            Activity::Stopping { profile, t, .. } => {
+                self.activity = Activity::Stopping {
+                    profile,
+                    t,
+                    then: Reply::Error(err),
+                };
+            }
             Activity::Arming { .. } | Activity::Settling { .. } | Activity::Enabling { .. } => {
                 self.reply = Some(Reply::Error(err));
-                Activity::Idle
+                self.activity = Activity::Idle;
             }
-            a @ (Activity::Idle | Activity::Shutdown) => a,
-        };
+            Activity::Idle | Activity::Shutdown => {}
+        }
     }
 
-    fn check_fault_bits(&mut self) {
+    /// Supervision: a node whose heartbeat is missing, or a drive showing the fault
+    /// bit (EMCYs are handled as they arrive), faults the machine.
+    pub fn supervise(&mut self) {
+        if let Some(HeartbeatEvent::Lost {
+            node,
+            silent_for_ns,
+        }) = self.heartbeat.check(self.supervised_ns)
+        {
+            self.set_fault(
+                RtError::new(
+                    ErrorKind::NodeLost,
+                    Detail::HeartbeatLost {
+                        silent_ms: silent_for_ns as f64 / 1e6,
+                    },
+                )
+                .node(node),
+            );
+        }
         if matches!(self.activity, Activity::Enabling { .. }) {
             return;
         }
@@ -661,58 +624,13 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
         worst
     }
 
-    fn step(&mut self) {
+    /// Interpolation: advances the current activity by one period (the setpoint of
+    /// this SYNC, or the next step of enabling, arming or settling).
+    pub fn interpolate(&mut self) {
         let dt = self.cfg.period_ns as f64 * 1e-9;
         let now = self.sync_ns;
         match self.activity {
-            Activity::Enabling { since_ns } => {
-                let mut all = true;
-                for d in self.drives.iter_mut() {
-                    if !d.seen_tpdo1 {
-                        all = false;
-                        continue;
-                    }
-                    // Hold where the drive is: enabling must not move anything.
-                    d.target_inc = d.actual_inc;
-                    let state = State::from_statusword(d.statusword);
-                    match state.and_then(|s| s.command_towards_operation_enabled()) {
-                        Some(cw) => {
-                            all = false;
-                            d.controlword = cw;
-                        }
-                        None if state == Some(State::OperationEnabled) => {
-                            d.controlword = Controlword::ENABLE_OPERATION_CMD
-                        }
-                        None => all = false,
-                    }
-                }
-                if all {
-                    self.hold_all();
-                    self.activity = Activity::Idle;
-                    self.reply = Some(Reply::Ready {
-                        positions: self.actual_positions(),
-                    });
-                } else if now - since_ns > self.cfg.enable_timeout_ns {
-                    let (node, sw) = self
-                        .drives
-                        .iter()
-                        .find(|d| {
-                            State::from_statusword(d.statusword) != Some(State::OperationEnabled)
-                        })
-                        .map_or((0, 0), |d| (d.node, d.statusword));
-                    let kind = if self.drives.iter().any(|d| !d.seen_tpdo1) {
-                        ErrorKind::NodeLost
-                    } else {
-                        ErrorKind::DriveFault
-                    };
-                    self.fault =
-                        Some(RtError::new(kind, Detail::NotEnabled { state: sw }).node(node));
-                    self.reply = Some(Reply::Error(
-                        self.fault.unwrap_or(RtError::new(kind, Detail::Stopped)),
-                    ));
-                    self.activity = Activity::Idle;
-                }
-            }
+            Activity::Enabling { since_ns } => self.enable(now, since_ns),
             Activity::Idle | Activity::Shutdown => {}
             Activity::Moving { profile, t } => {
                 let t = t + dt;
@@ -731,116 +649,13 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
             Activity::Arming {
                 stage,
                 since_ns,
-                direction,
-                feed,
-                max_distance,
-                run_id,
-            } => {
-                let next = match stage {
-                    ArmStage::Disarm => {
-                        for d in self.drives.iter_mut() {
-                            d.tp_function = 0;
-                            d.latch_inc = None;
-                        }
-                        ArmStage::Enable
-                    }
-                    ArmStage::Enable => {
-                        for d in self.drives.iter_mut() {
-                            d.tp_function = TouchProbeFunction::probe1_first_positive_edge();
-                            d.tp_status_fresh = false;
-                        }
-                        ArmStage::WaitArmed
-                    }
-                    ArmStage::WaitArmed => ArmStage::WaitArmed,
-                };
-                let armed = matches!(stage, ArmStage::WaitArmed)
-                    && self.drives.iter().all(|d| {
-                        let s = TouchProbeStatus::from_bits(d.tp_status);
-                        d.tp_status_fresh
-                            && s.enabled(Probe::One)
-                            && !s.positive_edge_stored(Probe::One)
-                    });
-                if armed {
-                    if let Some(d) = self
-                        .drives
-                        .iter()
-                        .find(|d| TouchProbeStatus::from_bits(d.tp_status).input_level(Probe::One))
-                    {
-                        let err = RtError::new(ErrorKind::AlreadyDeflected, Detail::Deflected)
-                            .node(d.node);
-                        for d in self.drives.iter_mut() {
-                            d.tp_function = 0;
-                        }
-                        self.reply = Some(Reply::Error(err));
-                        self.activity = Activity::Idle;
-                        return;
-                    }
-                    let from = self.setpoint;
-                    let mut to = from;
-                    for i in 0..3 {
-                        to[i] += direction[i] * max_distance;
-                    }
-                    self.activity = Activity::Probing {
-                        profile: Profile::line(from, to, feed, &self.limits),
-                        t: 0.0,
-                        direction,
-                        feed,
-                        max_distance,
-                        run_id,
-                    };
-                } else if now - since_ns > self.cfg.arm_timeout_ns {
-                    for d in self.drives.iter_mut() {
-                        d.tp_function = 0;
-                    }
-                    self.reply = Some(Reply::Error(RtError::new(
-                        ErrorKind::Timeout,
-                        Detail::ArmTimeout,
-                    )));
-                    self.activity = Activity::Idle;
-                } else {
-                    self.activity = Activity::Arming {
-                        stage: next,
-                        since_ns,
-                        direction,
-                        feed,
-                        max_distance,
-                        run_id,
-                    };
-                }
-            }
+                request,
+            } => self.arm(stage, since_ns, request, now),
             Activity::Probing {
                 profile,
                 t,
-                direction,
-                feed,
-                max_distance,
-                run_id,
-            } => {
-                if profile.is_done(t) && self.settled().is_none() {
-                    // End of the path reached and the axes are there: no contact.
-                    for d in self.drives.iter_mut() {
-                        d.tp_function = 0;
-                    }
-                    self.reply = Some(Reply::Error(RtError::new(
-                        ErrorKind::NotTriggered,
-                        Detail::NotTriggered {
-                            distance: max_distance,
-                        },
-                    )));
-                    self.activity = Activity::Idle;
-                    return;
-                }
-                let t = t + dt;
-                self.setpoint = profile.position(t);
-                self.activity = Activity::Probing {
-                    profile,
-                    t,
-                    direction,
-                    feed,
-                    max_distance,
-                    run_id,
-                };
-            }
+                request,
+            } => self.probe(profile, t, request),
             Activity::Stopping { profile, t, then } => {
                 let t = t + dt;
                 self.setpoint = profile.position(t);
@@ -854,136 +669,609 @@ impl<T: CanTransport, S: SampleSink> RtLoop<T, S> {
                     Activity::Stopping { profile, t, then }
                 };
             }
-            Activity::Settling { since_ns, then } => match self.settled() {
-                None => {
-                    self.reply = Some(match then {
-                        Reply::Done { .. } => Reply::Done {
-                            positions: self.actual_positions(),
-                        },
-                        other => other,
-                    });
-                    self.activity = Activity::Idle;
-                }
-                Some((axis, error)) if now - since_ns > self.cfg.settle_timeout_ns => {
-                    let err = match then {
-                        // The original fault says more than the axis that then lagged.
-                        Reply::Error(e) => e,
-                        _ => {
-                            RtError::new(ErrorKind::Timeout, Detail::NotInPosition { axis, error })
-                        }
-                    };
-                    self.reply = Some(Reply::Error(err));
-                    self.activity = Activity::Idle;
-                }
-                Some(_) => {}
-            },
+            Activity::Settling { since_ns, then } => self.settle(since_ns, then, now),
         }
     }
 
-    fn transmit(&mut self) -> Result<(), TransportError> {
+    /// Start-up: walk every drive to Operation enabled, holding where it is.
+    fn enable(&mut self, now: u64, since_ns: u64) {
+        let mut all = true;
+        for d in self.drives.iter_mut() {
+            if !d.seen_tpdo1 {
+                all = false;
+                continue;
+            }
+            // Hold where the drive is: enabling must not move anything.
+            d.target_inc = d.actual_inc;
+            let state = State::from_statusword(d.statusword);
+            match state.and_then(|s| s.command_towards_operation_enabled()) {
+                Some(cw) => {
+                    all = false;
+                    d.controlword = cw;
+                }
+                None if state == Some(State::OperationEnabled) => {
+                    d.controlword = Controlword::ENABLE_OPERATION_CMD
+                }
+                None => all = false,
+            }
+        }
+        if all {
+            self.hold_all();
+            self.activity = Activity::Idle;
+            self.reply = Some(Reply::Ready {
+                positions: self.actual_positions(),
+            });
+        } else if now - since_ns > self.cfg.enable_timeout_ns {
+            let (node, sw) = self
+                .drives
+                .iter()
+                .find(|d| State::from_statusword(d.statusword) != Some(State::OperationEnabled))
+                .map_or((0, 0), |d| (d.node, d.statusword));
+            let kind = if self.drives.iter().any(|d| !d.seen_tpdo1) {
+                ErrorKind::NodeLost
+            } else {
+                ErrorKind::DriveFault
+            };
+            let err = RtError::new(kind, Detail::NotEnabled { state: sw }).node(node);
+            self.fault = Some(err);
+            self.reply = Some(Reply::Error(err));
+            self.activity = Activity::Idle;
+        }
+    }
+
+    /// Arming touch probe 1 on every drive (disarm, enable, wait until every drive
+    /// reports it enabled with no edge stored), then the probing move starts.
+    fn arm(&mut self, stage: ArmStage, since_ns: u64, request: ProbeRequest, now: u64) {
+        let next = match stage {
+            ArmStage::Disarm => {
+                for d in self.drives.iter_mut() {
+                    d.tp_function = 0;
+                    d.latch_inc = None;
+                }
+                ArmStage::Enable
+            }
+            ArmStage::Enable => {
+                for d in self.drives.iter_mut() {
+                    d.tp_function = TouchProbeFunction::probe1_first_positive_edge();
+                    d.tp_status_fresh = false;
+                }
+                ArmStage::WaitArmed
+            }
+            ArmStage::WaitArmed => ArmStage::WaitArmed,
+        };
+        let armed = matches!(stage, ArmStage::WaitArmed)
+            && self.drives.iter().all(|d| {
+                let s = TouchProbeStatus::from_bits(d.tp_status);
+                d.tp_status_fresh && s.enabled(Probe::One) && !s.positive_edge_stored(Probe::One)
+            });
+        if armed {
+            if let Some(d) = self
+                .drives
+                .iter()
+                .find(|d| TouchProbeStatus::from_bits(d.tp_status).input_level(Probe::One))
+            {
+                let err = RtError::new(ErrorKind::AlreadyDeflected, Detail::Deflected).node(d.node);
+                self.disarm_all();
+                self.reply = Some(Reply::Error(err));
+                self.activity = Activity::Idle;
+                return;
+            }
+            let from = self.setpoint;
+            let mut to = from;
+            for (to, d) in to.iter_mut().zip(request.direction) {
+                *to += d * request.max_distance;
+            }
+            self.activity = Activity::Probing {
+                profile: Profile::line(from, to, request.feed, &self.limits),
+                t: 0.0,
+                request,
+            };
+        } else if now - since_ns > self.cfg.arm_timeout_ns {
+            self.disarm_all();
+            self.reply = Some(Reply::Error(RtError::new(
+                ErrorKind::Timeout,
+                Detail::ArmTimeout,
+            )));
+            self.activity = Activity::Idle;
+        } else {
+            self.activity = Activity::Arming {
+                stage: next,
+                since_ns,
+                request,
+            };
+        }
+    }
+
+    /// The probing move, one period on from `t`; at the end of the path with the axes
+    /// there and no contact, the move fails as not triggered.
+    fn probe(&mut self, profile: Profile, t: f64, request: ProbeRequest) {
+        if profile.is_done(t) && self.settled().is_none() {
+            // End of the path reached and the axes are there: no contact.
+            self.disarm_all();
+            self.reply = Some(Reply::Error(RtError::new(
+                ErrorKind::NotTriggered,
+                Detail::NotTriggered {
+                    distance: request.max_distance,
+                },
+            )));
+            self.activity = Activity::Idle;
+            return;
+        }
+        let t = t + self.cfg.period_ns as f64 * 1e-9;
+        self.setpoint = profile.position(t);
+        self.activity = Activity::Probing {
+            profile,
+            t,
+            request,
+        };
+    }
+
+    /// Waiting for the axes to reach their setpoints, then answering `then`.
+    fn settle(&mut self, since_ns: u64, then: Reply, now: u64) {
+        match self.settled() {
+            None => {
+                self.reply = Some(match then {
+                    Reply::Done { .. } => Reply::Done {
+                        positions: self.actual_positions(),
+                    },
+                    other => other,
+                });
+                self.activity = Activity::Idle;
+            }
+            Some((axis, error)) if now - since_ns > self.cfg.settle_timeout_ns => {
+                let err = match then {
+                    // The original fault says more than the axis that then lagged.
+                    Reply::Error(e) => e,
+                    _ => RtError::new(ErrorKind::Timeout, Detail::NotInPosition { axis, error }),
+                };
+                self.reply = Some(Reply::Error(err));
+                self.activity = Activity::Idle;
+            }
+            Some(_) => {}
+        }
+    }
+
+    /// SYNC: every drive's RPDO1 (controlword, setpoint), its RPDO2 when the touch
+    /// probe function changed, then the SYNC itself, into `out`.
+    pub fn sync_frames(&mut self, out: &mut TickFrames) {
+        out.clear();
         let enabled = !matches!(self.activity, Activity::Enabling { .. });
-        for i in 0..self.drives.len() {
-            let d = &mut self.drives[i];
+        let shutdown = matches!(self.activity, Activity::Shutdown);
+        for d in self.drives.iter_mut() {
             if enabled {
                 d.target_inc = d.increments(self.setpoint[d.axis.index()]);
-                if !matches!(self.activity, Activity::Shutdown) {
+                if !shutdown {
                     d.controlword = Controlword::ENABLE_OPERATION_CMD;
                 }
             }
             d.answered = false;
-            let mut rpdo1 = [0u8; 6];
-            rpdo1[..2].copy_from_slice(&d.controlword.to_le_bytes());
-            rpdo1[2..].copy_from_slice(&d.target_inc.to_le_bytes());
-            let node = d.node;
-            let tp = d.tp_function;
-            let send_tp = d.tp_function_sent != Some(tp);
-            d.tp_function_sent = Some(tp);
-            if let Some(f) = CanFrame::new(cob_id::rpdo_cob(1, node), &rpdo1) {
-                self.transport.transmit(&f)?;
-            }
-            if send_tp {
-                if let Some(f) = CanFrame::new(cob_id::rpdo_cob(2, node), &tp.to_le_bytes()) {
-                    self.transport.transmit(&f)?;
-                }
-            }
-        }
-        self.transport.transmit(&sync::encode())?;
-        if let Some(rx) = self.stop_pending_since.take() {
-            let sent = match self.cfg.pacing {
-                Pacing::RealTime => monotonic_ns(),
-                Pacing::Lockstep { .. } => self.sync_ns + self.cfg.period_ns,
+            let rpdo1 = Rpdo1 {
+                controlword: d.controlword,
+                target_position: d.target_inc,
             };
-            self.stats.last_stop_latency_ns = sent.saturating_sub(rx);
-            self.stats.last_stop_latency_cycles = self
-                .stats
-                .last_stop_latency_ns
-                .div_ceil(self.cfg.period_ns)
-                .max(1);
+            // Capacity: two frames per drive (at most MAX_AXES) plus SYNC.
+            let _ = out.push(rpdo1.encode(d.node));
+            if d.tp_function_sent != Some(d.tp_function) {
+                d.tp_function_sent = Some(d.tp_function);
+                let rpdo2 = Rpdo2 {
+                    touch_probe_function: d.tp_function,
+                };
+                let _ = out.push(rpdo2.encode(d.node));
+            }
         }
-        self.cycle += 1;
-        Ok(())
-    }
-
-    /// Drains frames without waiting (used between cycles by tests).
-    pub fn transport_mut(&mut self) -> &mut T {
-        &mut self.transport
-    }
-
-    pub fn sink_mut(&mut self) -> &mut S {
-        &mut self.sink
+        let _ = out.push(sync::encode());
     }
 }
 
 #[cfg(test)]
 mod tests {
+    //! The core driven by a fake clock (a counter) and fake drives that answer in the
+    //! test's thread: no transport, no sleeps.
+
     use super::*;
-    use crate::contact_sample::NullSink;
+    use crate::canopen::heartbeat;
+    use crate::canopen::nmt::NmtState;
+    use crate::contact_sample::SinkError;
     use std::path::Path;
-    use std::time::Instant;
 
-    /// Records when each SYNC went out; hears nothing.
-    struct SyncTimes(Vec<Instant>);
+    const PERIOD: u64 = 2_000_000;
+    const SCALE: f64 = 1000.0;
 
-    impl CanTransport for SyncTimes {
-        fn transmit(&mut self, frame: &CanFrame) -> Result<(), TransportError> {
-            if frame.cob_id() == sync::encode().cob_id() {
-                self.0.push(Instant::now());
-            }
+    fn machine() -> MachineConfig {
+        let axis = |name: &str, node: u8| {
+            format!(
+                "[[axis]]\nname = \"{name}\"\nnode = {node}\nincrements_per_unit = {SCALE}\n\
+                 min = -500.0\nmax = 500.0\nmax_feed = 6000.0\nmax_acceleration = 1000.0\n"
+            )
+        };
+        let text = format!(
+            "name = \"fake\"\n{}{}{}",
+            axis("X", 1),
+            axis("Y", 2),
+            axis("Z", 3)
+        );
+        MachineConfig::parse(&text, Path::new("fake.toml")).unwrap()
+    }
+
+    #[derive(Default)]
+    struct Collect(Vec<ContactSample>);
+
+    impl SampleSink for Collect {
+        fn publish(&mut self, s: &ContactSample) -> Result<(), SinkError> {
+            self.0.push(*s);
             Ok(())
         }
-        fn receive(&mut self, timeout: Duration) -> Result<Option<CanFrame>, TransportError> {
-            std::thread::sleep(timeout);
-            Ok(None)
+    }
+
+    /// A CiA 402 drive reduced to what the loop sees: it follows the target at once.
+    struct FakeDrive {
+        node: u8,
+        state: State,
+        prev_cw: u16,
+        actual: i32,
+        target: i32,
+        tp_function: u16,
+        tp_status: u16,
+        latched: i32,
+        last_tpdo2: Option<Tpdo2>,
+    }
+
+    impl FakeDrive {
+        fn new(node: u8) -> Self {
+            Self {
+                node,
+                state: State::SwitchOnDisabled,
+                prev_cw: 0,
+                actual: 0,
+                target: 0,
+                tp_function: 0,
+                tp_status: 0,
+                latched: 0,
+                last_tpdo2: None,
+            }
+        }
+
+        fn on_frame(&mut self, f: &CanFrame) {
+            match cob_id::classify(f.cob_id()) {
+                CobKind::Rpdo { num: 1, node } if node == self.node => {
+                    let r = Rpdo1::decode(f).unwrap();
+                    self.state = self
+                        .state
+                        .on_controlword(r.controlword, self.prev_cw, false);
+                    self.prev_cw = r.controlword;
+                    self.target = r.target_position;
+                }
+                CobKind::Rpdo { num: 2, node } if node == self.node => {
+                    self.tp_function = Rpdo2::decode(f).unwrap().touch_probe_function;
+                    let level = self.tp_status & TouchProbeStatus::INPUT_LEVEL;
+                    self.tp_status = level
+                        | if self.tp_function & TouchProbeFunction::ENABLE != 0 {
+                            TouchProbeStatus::ENABLED
+                        } else {
+                            0
+                        };
+                }
+                _ => {}
+            }
+        }
+
+        /// The answer to SYNC: TPDO2 when it changed, then TPDO1.
+        fn answer_sync(&mut self, out: &mut Vec<CanFrame>) {
+            if self.state == State::OperationEnabled {
+                self.actual = self.target;
+            }
+            let tp2 = Tpdo2 {
+                touch_probe_status: self.tp_status,
+                probe1_positive_edge: self.latched,
+            };
+            if self.last_tpdo2 != Some(tp2) {
+                self.last_tpdo2 = Some(tp2);
+                out.push(tp2.encode(self.node));
+            }
+            let tp1 = Tpdo1 {
+                statusword: self.state.statusword_bits(),
+                position_actual: self.actual,
+            };
+            out.push(tp1.encode(self.node));
+        }
+
+        /// The probe signal rises: an armed probe 1 latches where the axis is.
+        fn touch(&mut self) {
+            if self.tp_status & TouchProbeStatus::ENABLED != 0 {
+                self.latched = self.actual;
+                self.tp_status |= TouchProbeStatus::POSITIVE_EDGE_STORED;
+            }
+            self.tp_status |= TouchProbeStatus::INPUT_LEVEL;
+        }
+    }
+
+    /// The loop, three fake drives and the fake clock.
+    struct Bench {
+        rt: RtLoop<Collect>,
+        drives: Vec<FakeDrive>,
+        now: u64,
+        sent: TickFrames,
+        heartbeats: bool,
+    }
+
+    impl Bench {
+        fn new() -> Self {
+            let m = machine();
+            let cfg = LoopConfig::from_machine(
+                &m,
+                Pacing::Lockstep {
+                    answer_timeout: core::time::Duration::ZERO,
+                },
+            );
+            Self {
+                rt: RtLoop::new(&m, cfg, Collect::default(), 0),
+                drives: (1..=3).map(FakeDrive::new).collect(),
+                now: 0,
+                sent: TickFrames::new(),
+                heartbeats: true,
+            }
+        }
+
+        /// One period: tick, the drives take the frames and answer within the period.
+        fn tick(&mut self) {
+            self.now += PERIOD;
+            self.rt.tick(self.now, &mut self.sent);
+            self.rt.frames_sent(self.now);
+            let mut answers = Vec::new();
+            for f in &self.sent {
+                for d in &mut self.drives {
+                    d.on_frame(f);
+                }
+                if f.cob_id() == sync::encode().cob_id() {
+                    for d in &mut self.drives {
+                        if self.heartbeats {
+                            answers.push(heartbeat::encode(d.node, NmtState::Operational));
+                        }
+                        d.answer_sync(&mut answers);
+                    }
+                }
+            }
+            for f in &answers {
+                self.rt.on_frame(f, self.now + PERIOD / 2);
+            }
+        }
+
+        fn until_reply(&mut self) -> Reply {
+            for _ in 0..10_000 {
+                self.tick();
+                if let Some(r) = self.rt.take_reply() {
+                    return r;
+                }
+            }
+            panic!("no reply within 10 000 periods");
+        }
+
+        fn enabled() -> Self {
+            let mut b = Self::new();
+            assert!(matches!(b.until_reply(), Reply::Ready { .. }));
+            b
+        }
+
+        /// Submits a move of `axis` (0 = X) to `to`, the other axes staying, at 3000.
+        fn move_axis(&mut self, axis: usize, to: f64) {
+            let mut target = [0.0; MAX_AXES];
+            target[axis] = to;
+            self.rt.submit(Command::MoveTo {
+                target,
+                mask: 0b111,
+                feed: 3000.0,
+            });
+        }
+
+        /// The RPDO1 sent to `node` by the last tick.
+        fn rpdo1(&self, node: u8) -> Rpdo1 {
+            let f = self
+                .sent
+                .iter()
+                .find(|f| f.cob_id() == Rpdo1::cob_id(node))
+                .expect("RPDO1 every SYNC");
+            Rpdo1::decode(f).unwrap()
         }
     }
 
     #[test]
-    fn a_stalled_real_time_loop_skips_the_missed_syncs_instead_of_bursting_them() {
-        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/machines/table-ac.toml");
-        let machine = MachineConfig::load(&p).unwrap();
-        let mut cfg = LoopConfig::from_machine(&machine, Pacing::RealTime);
-        cfg.period_ns = 1_000_000;
-        let mut rt = RtLoop::new(&machine, cfg, SyncTimes(Vec::new()), NullSink);
-        for _ in 0..3 {
-            rt.cycle().unwrap();
-        }
-        // The stall being simulated: the loop does not run for 10 periods.
-        std::thread::sleep(Duration::from_millis(10));
-        let before = rt.transport_mut().0.len();
-        let resumed = Instant::now();
-        for _ in 0..3 {
-            rt.cycle().unwrap();
-        }
-        let after = &rt.transport_mut().0[before..];
-        assert_eq!(after.len(), 3);
-        // Bursting would send these three within microseconds of resuming; on the grid
-        // the first waits for the next slot and the other two follow a period apart.
-        let span = after[2] - resumed;
-        assert!(
-            span >= Duration::from_millis(2),
-            "3 SYNCs within {span:?} after a stall, period 1 ms"
+    fn sync_sends_every_drives_rpdo1_then_sync_and_rpdo2_only_on_change() {
+        let mut b = Bench::new();
+        b.rt.tick(PERIOD, &mut b.sent);
+        let frame = |id, d: &[u8]| CanFrame::new(id, d).unwrap();
+        // Shutdown (0x0006) at target 0, the touch probe function 0, then SYNC.
+        assert_eq!(
+            b.sent.as_slice(),
+            &[
+                frame(0x201, &[0x06, 0, 0, 0, 0, 0]),
+                frame(0x301, &[0, 0]),
+                frame(0x202, &[0x06, 0, 0, 0, 0, 0]),
+                frame(0x302, &[0, 0]),
+                frame(0x203, &[0x06, 0, 0, 0, 0, 0]),
+                frame(0x303, &[0, 0]),
+                frame(0x080, &[]),
+            ]
         );
-        let skipped = rt.stats().skipped_cycles;
-        assert!(skipped >= 9, "{skipped} slots skipped over a 10 ms stall");
+        b.rt.tick(2 * PERIOD, &mut b.sent);
+        assert_eq!(b.sent.len(), 4, "RPDO2 unchanged: not sent again");
+        assert_eq!(b.rt.stats().cycles, 2);
+    }
+
+    #[test]
+    fn enabling_walks_every_drive_through_the_cia402_states() {
+        let mut b = Bench::new();
+        let mut controlwords = Vec::new();
+        let reply = loop {
+            b.tick();
+            let cw = b.rpdo1(3).controlword;
+            if controlwords.last() != Some(&cw) {
+                controlwords.push(cw);
+            }
+            if let Some(r) = b.rt.take_reply() {
+                break r;
+            }
+        };
+        assert!(matches!(reply, Reply::Ready { .. }), "{reply:?}");
+        assert_eq!(controlwords, [0x0006, 0x0007, 0x000F]);
+        assert!(b.drives.iter().all(|d| d.state == State::OperationEnabled));
+    }
+
+    #[test]
+    fn interpolation_reaches_the_target_within_the_feed() {
+        let mut b = Bench::enabled();
+        b.move_axis(0, 10.0);
+        let mut prev = 0;
+        let mut steps = 0;
+        let reply = loop {
+            b.tick();
+            let x = b.rpdo1(1).target_position;
+            // 3000 mm/min = 50 mm/s: 0.1 mm = 100 increments per 2 ms period at most.
+            assert!((0..=100).contains(&(x - prev)), "{prev} -> {x}");
+            prev = x;
+            steps += 1;
+            if let Some(r) = b.rt.take_reply() {
+                break r;
+            }
+        };
+        assert_eq!(prev, 10_000);
+        assert!(steps >= 100, "10 mm at 0.1 mm per period: {steps} periods");
+        match reply {
+            Reply::Done { positions } => assert!((positions[0] - 10.0).abs() < 1e-9),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// Probes down Z, touching after `periods` of the probing move.
+    fn probe_and_touch(b: &mut Bench, periods: usize) -> Option<Reply> {
+        b.rt.submit(Command::Probe {
+            direction: [0.0, 0.0, -1.0],
+            feed: 600.0,
+            max_distance: 5.0,
+            run_id: 9,
+        });
+        let mut moving = 0;
+        while moving < periods {
+            b.tick();
+            if b.rpdo1(3).target_position != 0 {
+                moving += 1;
+            }
+            if let Some(r) = b.rt.take_reply() {
+                return Some(r);
+            }
+        }
+        for d in &mut b.drives {
+            d.touch();
+        }
+        None
+    }
+
+    #[test]
+    fn the_last_drives_latch_publishes_one_contact_at_the_latched_positions() {
+        let mut b = Bench::enabled();
+        assert!(probe_and_touch(&mut b, 20).is_none());
+        let z_latched = b.drives[2].actual;
+        b.tick();
+        // Published while the latch frames were taken in, before the next tick.
+        assert_eq!(b.rt.sink_mut().0.len(), 1);
+        let s = b.rt.sink_mut().0[0];
+        assert_eq!(s.positions[2], z_latched as f64 / SCALE);
+        assert_eq!((s.sequence, s.run_id, s.flags), (1, 9, FLAG_HW_LATCH));
+        assert_eq!(s.receive_ns, b.now + PERIOD / 2);
+        // The probe is disarmed with the same tick that starts the stop.
+        let disarm = Rpdo2::cob_id(3);
+        b.tick();
+        assert!(b.sent.iter().any(|f| f.cob_id() == disarm));
+        match b.until_reply() {
+            Reply::Contact(c) => assert_eq!(c.sequence, 1),
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(b.rt.sink_mut().0.len(), 1, "exactly one sample");
+    }
+
+    #[test]
+    fn the_stop_brakes_within_the_acceleration_and_ends_beyond_the_contact() {
+        let mut b = Bench::enabled();
+        assert!(probe_and_touch(&mut b, 50).is_none());
+        b.tick(); // latches in: the stop starts
+        let at_contact = b.rpdo1(3).target_position;
+        let mut path = vec![at_contact];
+        let reply = loop {
+            b.tick();
+            path.push(b.rpdo1(3).target_position);
+            if let Some(r) = b.rt.take_reply() {
+                break r;
+            }
+        };
+        assert!(matches!(reply, Reply::Contact(_)), "{reply:?}");
+        let end = *path.last().unwrap();
+        // 10 mm/s at 1000 mm/s^2: 0.05 mm = 50 increments of braking, monotonic.
+        assert!(path.windows(2).all(|w| w[1] <= w[0]), "{path:?}");
+        assert!((at_contact - end - 50).abs() <= 2, "{at_contact} -> {end}");
+        assert_eq!(b.rt.stats().last_stop_latency_cycles, 1);
+    }
+
+    #[test]
+    fn a_touch_while_positioning_brakes_and_fails_as_a_collision() {
+        let mut b = Bench::enabled();
+        b.move_axis(2, -20.0);
+        for _ in 0..50 {
+            b.tick();
+        }
+        for d in &mut b.drives {
+            d.touch();
+        }
+        match b.until_reply() {
+            Reply::Error(e) => assert_eq!(e.kind, ErrorKind::ProbeCollision),
+            other => panic!("{other:?}"),
+        }
+        assert!(b.drives[2].actual > -20_000, "braked short of the target");
+        assert!(b.rt.sink_mut().0.is_empty());
+    }
+
+    #[test]
+    fn supervision_a_silent_heartbeat_faults_the_machine() {
+        let mut b = Bench::enabled();
+        b.heartbeats = false;
+        // 150 ms timeout: 75 periods of 2 ms, plus the one that notices.
+        for _ in 0..80 {
+            b.tick();
+        }
+        b.rt.submit(Command::MoveTo {
+            target: [1.0; MAX_AXES],
+            mask: 0b111,
+            feed: 3000.0,
+        });
+        match b.rt.take_reply() {
+            Some(Reply::Error(e)) => {
+                assert_eq!(e.kind, ErrorKind::NodeLost);
+                assert!(matches!(e.detail, Detail::HeartbeatLost { .. }));
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn supervision_an_emcy_stops_the_move_and_names_the_node_and_code() {
+        let mut b = Bench::enabled();
+        b.move_axis(0, 50.0);
+        for _ in 0..20 {
+            b.tick();
+        }
+        let emcy = Emcy {
+            error_code: 0x2310,
+            error_register: 1,
+            manufacturer: [0; 5],
+        };
+        b.rt.on_frame(&emcy.encode(2), b.now);
+        match b.until_reply() {
+            Reply::Error(e) => {
+                assert_eq!(
+                    (e.kind, e.node, e.code),
+                    (ErrorKind::DriveFault, Some(2), Some(0x2310))
+                );
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(b.drives[0].actual < 50_000, "stopped before the target");
     }
 }

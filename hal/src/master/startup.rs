@@ -4,15 +4,15 @@
 //! NMT start. Blocking, with a timeout on every answer; any refusal is an error naming
 //! the node, the object and the drive's SDO abort code.
 
-use super::process_data::{self, *};
+use super::process_data::LAYOUT;
 use crate::can::{CanFrame, CanTransport};
 use crate::canopen::cob_id::{self, CobKind};
 use crate::canopen::nmt::{self, NmtCommand};
 use crate::canopen::object;
-use crate::canopen::pdo::{configuration_writes, PdoDirection};
+use crate::canopen::pdo::configuration_writes;
 use crate::canopen::sdo::{SdoAbortCode, SdoClient, SdoClientEvent, SdoOutcome};
 use crate::cia402::mode::ModeOfOperation;
-use crate::config::{AxisConfig, MachineConfig};
+use crate::config::{AxisConfig, CanOpenBusConfig, MachineConfig};
 use crate::machine::{ErrorKind, MachineError};
 use std::time::{Duration, Instant};
 
@@ -23,21 +23,36 @@ fn transport_error(e: crate::can::TransportError) -> MachineError {
     MachineError::new(ErrorKind::Bus, e.to_string())
 }
 
+/// The CANopen bus of `cfg`; a machine on another bus is refused.
+pub fn canopen_bus(cfg: &MachineConfig) -> Result<&CanOpenBusConfig, MachineError> {
+    cfg.canopen_bus().ok_or_else(|| {
+        MachineError::new(
+            ErrorKind::InvalidRequest,
+            format!(
+                "{}: bus.kind = \"{}\": the CANopen master drives CANopen machines only",
+                cfg.path.display(),
+                cfg.bus.kind()
+            ),
+        )
+    })
+}
+
 /// Resets communication on all nodes and waits for the boot-up of every configured
 /// drive.
 pub fn boot<T: CanTransport>(t: &mut T, cfg: &MachineConfig) -> Result<(), MachineError> {
+    canopen_bus(cfg)?;
     t.transmit(&nmt::encode(NmtCommand::ResetCommunication, 0))
         .map_err(transport_error)?;
     let mut booted = [false; 128];
     let deadline = Instant::now() + BOOT_TIMEOUT;
-    while cfg.axes.iter().any(|a| !booted[a.node as usize]) {
+    while cfg.axes.iter().any(|a| !booted[a.canopen_node() as usize]) {
         let now = Instant::now();
         if now >= deadline {
             let missing: Vec<String> = cfg
                 .axes
                 .iter()
-                .filter(|a| !booted[a.node as usize])
-                .map(|a| format!("node {} ({})", a.node, a.name))
+                .filter(|a| !booted[a.canopen_node() as usize])
+                .map(|a| format!("node {} ({})", a.canopen_node(), a.name))
                 .collect();
             return Err(MachineError::new(
                 ErrorKind::NodeLost,
@@ -74,7 +89,7 @@ fn sdo_transfer<T: CanTransport>(
     request: Request<'_>,
     timeout: Duration,
 ) -> Result<SdoOutcome, MachineError> {
-    let mut client = SdoClient::new(axis.node);
+    let mut client = SdoClient::new(axis.canopen_node());
     let first = match request {
         Request::Download(data) => client.download(index, sub, data),
         Request::Upload => client.upload(index, sub),
@@ -84,7 +99,7 @@ fn sdo_transfer<T: CanTransport>(
             ErrorKind::Other,
             format!("SDO 0x{index:04X}:{sub:02X}: {e}"),
         )
-        .with_node(axis.node)
+        .with_node(axis.canopen_node())
     })?;
     sdo_exchange(t, &mut client, first, axis, index, sub, timeout)
 }
@@ -97,7 +112,7 @@ fn refused(axis: &AxisConfig, what: String, code: SdoAbortCode) -> MachineError 
             axis.name, code.0
         ),
     )
-    .with_node(axis.node)
+    .with_node(axis.canopen_node())
 }
 
 /// One SDO download, waiting for the answer.
@@ -163,7 +178,7 @@ fn sdo_exchange<T: CanTransport>(
                     timeout.as_millis()
                 ),
             )
-            .with_node(axis.node));
+            .with_node(axis.canopen_node()));
         }
         let Some(f) = t.receive(deadline - now).map_err(transport_error)? else {
             continue;
@@ -189,7 +204,8 @@ pub fn configure<T: CanTransport>(
     t: &mut T,
     cfg: &MachineConfig,
 ) -> Result<Vec<String>, MachineError> {
-    let timeout = Duration::from_millis(cfg.bus.sdo_timeout_ms as u64);
+    let bus = canopen_bus(cfg)?;
+    let timeout = Duration::from_millis(bus.sdo_timeout_ms as u64);
     let mut drives = Vec::new();
     for axis in &cfg.axes {
         let name = match sdo_transfer(
@@ -205,14 +221,14 @@ pub fn configure<T: CanTransport>(
                 .to_string(),
             _ => "unnamed".to_string(),
         };
-        drives.push(format!("{} = node {}: {name}", axis.name, axis.node));
-        let n = axis.node;
+        let n = axis.canopen_node();
+        drives.push(format!("{} = node {n}: {name}", axis.name));
         sdo_download(
             t,
             axis,
             object::COMMUNICATION_CYCLE_PERIOD,
             0,
-            &cfg.bus.sync_period_us.to_le_bytes(),
+            &bus.sync_period_us.to_le_bytes(),
             timeout,
         )?;
         sdo_download(
@@ -220,7 +236,7 @@ pub fn configure<T: CanTransport>(
             axis,
             object::PRODUCER_HEARTBEAT_TIME,
             0,
-            &cfg.bus.heartbeat_producer_ms.to_le_bytes(),
+            &bus.heartbeat_producer_ms.to_le_bytes(),
             timeout,
         )?;
         sdo_download(
@@ -231,15 +247,10 @@ pub fn configure<T: CanTransport>(
             &[ModeOfOperation::CyclicSynchronousPosition as i8 as u8],
             timeout,
         )?;
-        let pdos = [
-            (PdoDirection::Rpdo, 1u8, &RPDO1[..], RPDO1_TRANSMISSION),
-            (PdoDirection::Rpdo, 2, &RPDO2[..], RPDO2_TRANSMISSION),
-            (PdoDirection::Tpdo, 1, &TPDO1[..], TPDO1_TRANSMISSION),
-            (PdoDirection::Tpdo, 2, &TPDO2[..], TPDO2_TRANSMISSION),
-        ];
-        for (dir, num, entries, transmission) in pdos {
-            let mapping = process_data::mapping(entries);
-            for w in configuration_writes(dir, num, n, &mapping, transmission) {
+        for l in &LAYOUT {
+            for w in
+                configuration_writes(l.direction, l.number, n, &l.mapping(), l.transmission_type)
+            {
                 let bytes = w.value.to_le_bytes();
                 sdo_download(t, axis, w.index, w.sub, &bytes[..w.size as usize], timeout)?;
             }

@@ -1,0 +1,247 @@
+//! The checks every backend makes before it moves anything, whatever the bus: the
+//! request itself (feed, probing direction and distance), the software limits, and
+//! the probing path plus the braking distance at the probing feed. A refused move
+//! moves nothing. And the collision rule every backend applies while it moves: a probe
+//! signal that rises during a positioning move means the stylus hit something.
+//!
+//! The guard is plain data built from the machine configuration; it does no I/O.
+
+use crate::axis::{Axis, AxisPositions, MAX_AXES};
+use crate::config::MachineConfig;
+use crate::machine::{ErrorKind, MachineError, ProbeMove};
+
+/// What the guard knows of one axis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct AxisBounds {
+    min: f64,
+    max: f64,
+    /// Units/s^2.
+    max_acceleration: f64,
+}
+
+/// Software limits and braking of a machine's axes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MotionGuard {
+    axes: [Option<AxisBounds>; MAX_AXES],
+}
+
+/// A probing move the guard accepted: the direction as a unit vector, and the
+/// distance the axes may travel beyond the path's end while they brake.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CheckedProbe {
+    pub direction: [f64; 3],
+    pub braking_distance: f64,
+}
+
+impl MotionGuard {
+    pub fn new(cfg: &MachineConfig) -> Self {
+        let mut axes = [None; MAX_AXES];
+        for a in &cfg.axes {
+            axes[a.name.index()] = Some(AxisBounds {
+                min: a.min,
+                max: a.max,
+                max_acceleration: a.max_acceleration,
+            });
+        }
+        Self { axes }
+    }
+
+    /// A feed (mm/min, deg/min) must be finite and > 0.
+    pub fn check_feed(&self, feed: f64) -> Result<(), MachineError> {
+        if feed.is_finite() && feed > 0.0 {
+            Ok(())
+        } else {
+            Err(MachineError::new(
+                ErrorKind::InvalidRequest,
+                format!("feed {feed} must be > 0"),
+            ))
+        }
+    }
+
+    /// Every axis of `target` exists and is inside its software limits. `what` names
+    /// the move in the error ("move", "probing move").
+    pub fn check_target(&self, target: &AxisPositions, what: &str) -> Result<(), MachineError> {
+        for (axis, v) in target.iter() {
+            let Some(a) = self.axes[axis.index()] else {
+                return Err(MachineError::new(
+                    ErrorKind::InvalidRequest,
+                    format!("{what}: this machine has no {axis} axis"),
+                ));
+            };
+            if !v.is_finite() || v < a.min || v > a.max {
+                return Err(MachineError::new(
+                    ErrorKind::SoftwareLimit,
+                    format!(
+                        "{what}: {axis}{v:+.4} is outside the software limits {:+.4} .. {:+.4}; nothing moved",
+                        a.min, a.max
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// A straight move to `target` at `feed`: the feed and the target's limits.
+    pub fn check_move(&self, target: &AxisPositions, feed: f64) -> Result<(), MachineError> {
+        self.check_feed(feed)?;
+        self.check_target(target, "move")
+    }
+
+    /// The distance the linear axes need to stop from `feed` (mm/min) along the unit
+    /// vector `direction`, at the acceleration of the axis that needs longest.
+    pub fn braking_distance(&self, direction: [f64; 3], feed: f64) -> f64 {
+        let mut brake = 0.0f64;
+        for (i, a) in Axis::LINEAR.iter().enumerate() {
+            if let Some(b) = self.axes[a.index()] {
+                let v = feed / 60.0 * direction[i].abs();
+                brake = brake.max(v * v / (2.0 * b.max_acceleration));
+            }
+        }
+        brake
+    }
+
+    /// The request of a probing move, before asking where the axes are: a non-zero
+    /// direction (returned as a unit vector), feed and distance > 0.
+    pub fn check_probe_request(&self, mv: &ProbeMove) -> Result<[f64; 3], MachineError> {
+        let d = mv.direction;
+        let norm = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        if !(norm.is_finite() && norm > 1e-9) {
+            return Err(MachineError::new(
+                ErrorKind::InvalidRequest,
+                "probing direction is zero",
+            ));
+        }
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        if !positive(mv.feed) || !positive(mv.max_distance) {
+            return Err(MachineError::new(
+                ErrorKind::InvalidRequest,
+                format!(
+                    "probing feed {} and distance {} must be > 0",
+                    mv.feed, mv.max_distance
+                ),
+            ));
+        }
+        Ok([d[0] / norm, d[1] / norm, d[2] / norm])
+    }
+
+    /// A probing move from `here`: [`MotionGuard::check_probe_request`], and the path's
+    /// end plus the braking distance inside the limits (the stop after a late contact
+    /// runs on past the path).
+    pub fn check_probe(
+        &self,
+        here: &AxisPositions,
+        mv: &ProbeMove,
+    ) -> Result<CheckedProbe, MachineError> {
+        let direction = self.check_probe_request(mv)?;
+        let braking_distance = self.braking_distance(direction, mv.feed);
+        let mut end = *here;
+        for (i, a) in Axis::LINEAR.iter().enumerate() {
+            end.set(
+                *a,
+                here.get(*a).unwrap_or(0.0) + direction[i] * (mv.max_distance + braking_distance),
+            );
+        }
+        self.check_target(&end, "probing move")?;
+        Ok(CheckedProbe {
+            direction,
+            braking_distance,
+        })
+    }
+}
+
+/// The probe input as a backend sees it cycle by cycle: tells a rising edge, which
+/// during a positioning move (probe not armed) is a collision: brake all axes and
+/// fail the move with [`ErrorKind::ProbeCollision`], without faulting the machine
+/// (the operator retracts and goes on). Every axis sees the same probe, so no drive is
+/// to blame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ProbeInput {
+    level: bool,
+}
+
+impl ProbeInput {
+    /// Takes the input level; `true` when it just rose.
+    pub fn update(&mut self, level: bool) -> bool {
+        let rising = level && !self.level;
+        self.level = level;
+        rising
+    }
+
+    /// Is a rising input at this point a collision? Yes while positioning.
+    pub fn is_collision(rising: bool, positioning: bool) -> bool {
+        rising && positioning
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    fn guard() -> MotionGuard {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/machines/table-ac.toml");
+        MotionGuard::new(&MachineConfig::load(&p).unwrap())
+    }
+
+    #[test]
+    fn targets_outside_the_limits_or_on_missing_axes_are_refused() {
+        let g = guard();
+        let e = g
+            .check_target(&AxisPositions::linear([0.0, 0.0, 1.0e6]), "move")
+            .unwrap_err();
+        assert_eq!(e.kind, ErrorKind::SoftwareLimit);
+        assert!(e.message.contains("nothing moved"), "{e}");
+        let e = g
+            .check_target(&AxisPositions::new().with(Axis::B, 0.0), "move")
+            .unwrap_err();
+        assert_eq!(e.kind, ErrorKind::InvalidRequest, "table-ac has no B: {e}");
+        assert!(g.check_move(&AxisPositions::linear([0.0; 3]), 0.0).is_err());
+        assert!(g
+            .check_move(&AxisPositions::linear([0.0; 3]), 100.0)
+            .is_ok());
+    }
+
+    #[test]
+    fn the_probing_path_plus_the_braking_distance_must_fit() {
+        let g = guard();
+        let a = 2000.0; // table-ac's Z acceleration, mm/s^2
+        let brake = g.braking_distance([0.0, 0.0, -1.0], 6000.0);
+        // 100 mm/s: v^2 / 2a.
+        assert!((brake - 100.0 * 100.0 / (2.0 * a)).abs() < 1e-9, "{brake}");
+        let mv = |dist| ProbeMove {
+            direction: [0.0, 0.0, -2.0],
+            feed: 6000.0,
+            max_distance: dist,
+        };
+        let p = guard()
+            .check_probe(&AxisPositions::linear([0.0, 0.0, 100.0]), &mv(10.0))
+            .unwrap();
+        assert_eq!(p.direction, [0.0, 0.0, -1.0]);
+        assert_eq!(p.braking_distance, brake);
+        let e = g
+            .check_probe(&AxisPositions::linear([0.0, 0.0, 0.0]), &mv(1.0e4))
+            .unwrap_err();
+        assert_eq!(e.kind, ErrorKind::SoftwareLimit);
+        assert!(e.message.starts_with("probing move"), "{e}");
+        let zero = ProbeMove {
+            direction: [0.0; 3],
+            ..mv(1.0)
+        };
+        assert_eq!(
+            g.check_probe(&AxisPositions::linear([0.0; 3]), &zero)
+                .unwrap_err()
+                .kind,
+            ErrorKind::InvalidRequest
+        );
+    }
+
+    #[test]
+    fn a_rising_probe_input_while_positioning_is_a_collision() {
+        let mut p = ProbeInput::default();
+        assert!(!p.update(false));
+        assert!(p.update(true));
+        assert!(!p.update(true), "a level, not an edge");
+        assert!(ProbeInput::is_collision(true, true));
+        assert!(!ProbeInput::is_collision(true, false), "probing: a contact");
+    }
+}
