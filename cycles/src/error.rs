@@ -1,5 +1,5 @@
 //! Why a cycle stopped while running (validation problems are
-//! [`crate::program::Diagnostic`]s and never get this far).
+//! [`crate::diagnostic::Diagnostic`]s and never get this far).
 
 use hal::ErrorKind;
 
@@ -18,9 +18,9 @@ pub enum CycleError {
     /// The cycle cannot run with this program and machine (nothing moved).
     #[error("{0}")]
     Plan(String),
-    /// Writing a protocol failed.
+    /// Writing a measuring log failed.
     #[error("protocol {path}: {message}")]
-    Protocol { path: String, message: String },
+    MeasuringLog { path: String, message: String },
 }
 
 impl CycleError {

@@ -5,7 +5,7 @@
 //! else in an `L` block (incremental `IX`, radius compensation `RL`/`RR`, polar or
 //! circular moves) is refused before anything moves.
 
-use crate::program::LengthUnit;
+use crate::length_unit::LengthUnit;
 use hal::{Axis, AxisPositions};
 
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -4,14 +4,40 @@
 //! parameter against its table. All problems of a program are collected, each with
 //! its line, so `check` shows them at once.
 
+use crate::cycle431::PlaneParams;
+use crate::cycle444::Probing3dParams;
+use crate::cycle450::SaveParams;
+use crate::cycle451::KinematicsParams;
+use crate::cycle_block::{CycleBlock, Origin, Param, ToolCall, Value};
+use crate::diagnostic::{Diagnostic, ProgramErrors};
+use crate::length_unit::LengthUnit;
 use crate::params::{self, CycleTable, Default as ParamDefault, Kind, ParamSpec};
-use crate::program::{
-    Block, CycleCall, CycleKind, Diagnostic, LengthUnit, Origin, Param, ProbeAxis, Program,
-    ProgramErrors, Statement, ToolCall, Value,
-};
-use crate::{cycle431, cycle444};
+use crate::probe_axis::ProbeAxis;
+use crate::program::{Block, CycleCall, CycleKind, Program, ProgramError, Statement};
 use hal::config::MachineConfig;
 use std::collections::BTreeMap;
+use std::path::Path;
+
+impl Program {
+    /// Parses and validates program text against a machine (probe table, PREDEF).
+    pub fn parse(text: &str, cfg: &MachineConfig) -> Result<Program, ProgramErrors> {
+        parse_program(text, cfg)
+    }
+
+    /// Reads, parses and validates a `.h` file.
+    pub fn load(path: &Path, cfg: &MachineConfig) -> Result<Program, ProgramError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ProgramError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let mut program = Program::parse(&text, cfg).map_err(|errors| ProgramError::Invalid {
+            path: path.to_path_buf(),
+            errors,
+        })?;
+        program.path = Some(path.to_path_buf());
+        Ok(program)
+    }
+}
 
 /// Parses and validates `text`; `Err` holds every problem found.
 pub fn parse_program(text: &str, cfg: &MachineConfig) -> Result<Program, ProgramErrors> {
@@ -824,19 +850,21 @@ fn cycle(
         return Statement::Other(rb.head.code.to_string());
     }
     let kind = match table.number {
-        431 => cycle431::PlaneParams::from_params(&params, st.unit).map(CycleKind::MeasurePlane),
-        444 => cycle444::Probing3dParams::from_params(&params, st.unit).map(CycleKind::Probing3d),
-        451 => Ok(CycleKind::MeasureKinematics),
-        _ => Ok(CycleKind::SaveKinematics),
+        431 => PlaneParams::from_params(&params, st.unit).map(CycleKind::MeasurePlane),
+        444 => Probing3dParams::from_params(&params, st.unit).map(CycleKind::Probing3d),
+        451 => KinematicsParams::from_params(&params, st.unit).map(CycleKind::MeasureKinematics),
+        _ => SaveParams::from_params(&params, st.unit).map(CycleKind::SaveKinematics),
     };
     match kind {
         Ok(kind) => Statement::Cycle(Box::new(CycleCall {
-            cycle: table.number,
-            title,
-            line,
-            block: rb.head.number.unwrap_or(line as u32),
-            params,
-            tool,
+            head: CycleBlock {
+                cycle: table.number,
+                title,
+                line,
+                block: rb.head.number.unwrap_or(line as u32),
+                params,
+                tool,
+            },
             kind,
         })),
         Err(problems) => {

@@ -12,7 +12,8 @@ use crate::ipc::{EstimatorChild, IpcEstimator};
 use crate::session::{MachineOptions, Session};
 use cycles::kinematics_file::ActiveKinematics;
 use cycles::program::Program;
-use cycles::runner::{run_program, ProgressEvent, RunOptions};
+use cycles::progress::ProgressEvent;
+use cycles::runner::{run_program, RunOptions};
 use hal::{Axis, AxisPositions, Machine, ProbeMove};
 use std::time::Duration;
 
@@ -266,7 +267,7 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
     );
     println!("  error       before       after    injected (scenario truth)");
     for a in &measured {
-        for name in cycles::kinematics_file::error_names(*a) {
+        for name in cycles::iso230_7::error_names(*a) {
             let b = before.error(name);
             let after = k.errors_after.get(*name).copied().unwrap_or(b);
             let truth = scenario.truth.get(name).unwrap_or(0.0);

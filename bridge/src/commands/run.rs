@@ -6,7 +6,8 @@ use crate::ipc::{EstimatorChild, EstimatorClient, IpcEstimator};
 use crate::output::write_atomic;
 use crate::session::{resolve_machine, MachineOptions, Session};
 use cycles::program::{Program, ProgramError};
-use cycles::runner::{run_program, ProgressEvent, RunOptions};
+use cycles::progress::ProgressEvent;
+use cycles::runner::{run_program, RunOptions};
 use std::io::{BufRead, IsTerminal, Write};
 use std::path::PathBuf;
 use std::time::Duration;
@@ -56,7 +57,7 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     // Cycle 451 fits its spheres and solves its identification in the estimator
     // process: use the one serving this prefix, or start one. It must subscribe before
     // the first contact is published.
-    let estimator = if program.cycles().any(|c| c.cycle == 451) {
+    let estimator = if program.cycles().any(|c| c.head.cycle == 451) {
         estimator_link(&args.machine.service)
     } else {
         None
@@ -79,7 +80,7 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
             );
         }
         ProgressEvent::Note { text, .. } => eprintln!("    {text}"),
-        ProgressEvent::Protocol { path, .. } => eprintln!("    protocol {}", path.display()),
+        ProgressEvent::MeasuringLog { path, .. } => eprintln!("    protocol {}", path.display()),
         ProgressEvent::CycleFinished { status, .. } => eprintln!("    {status:?}"),
         _ => {}
     };
