@@ -6,7 +6,9 @@ use crate::cycle::{CycleContext, MeasuringCycle};
 use crate::cycle_block::{CycleBlock, Param, ParamReader};
 use crate::diagnostic::Diagnostic;
 use crate::error::CycleError;
-use crate::kinematics_file::{write_atomic, write_error, ActiveKinematics, KinematicsFileError};
+use crate::kinematics_file::{
+    write_atomic, write_error, ActiveKinematics, KinematicsFileError, KinematicsFileErrorKind,
+};
 use crate::length_unit::LengthUnit;
 use crate::results::CycleOutput;
 use hal::config::MachineConfig;
@@ -104,6 +106,7 @@ pub fn save_kinematics(
     let path = save_path(active, designation);
     let missing = |what: &str| KinematicsFileError::Invalid {
         path: path.clone(),
+        kind: KinematicsFileErrorKind::NothingSaved,
         message: format!("nothing is saved under designation {designation}; nothing was {what}"),
     };
     match mode {
@@ -222,10 +225,8 @@ mod tests {
             0.5
         );
         save_kinematics(SaveMode::Delete, 7, &path, &c).unwrap();
-        let e = save_kinematics(SaveMode::Restore, 7, &path, &c)
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("nothing is saved under designation 7"), "{e}");
+        let e = save_kinematics(SaveMode::Restore, 7, &path, &c).unwrap_err();
+        assert_eq!(e.kind(), KinematicsFileErrorKind::NothingSaved, "{e}");
         assert_eq!(
             ActiveKinematics::load(&path, &c).unwrap().error("EY0C"),
             0.02

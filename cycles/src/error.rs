@@ -3,6 +3,17 @@
 
 use hal::ErrorKind;
 
+/// What kind of problem stopped a cycle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum CycleErrorKind {
+    /// The machine refused or failed a move (its own kind).
+    Machine(ErrorKind),
+    Geometry,
+    Plan,
+    MeasuringLog,
+}
+
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum CycleError {
     /// The machine refused or failed a move or a probing move.
@@ -32,11 +43,12 @@ impl CycleError {
         }
     }
 
-    /// The machine error kind, if the machine caused it.
-    pub fn kind(&self) -> Option<ErrorKind> {
+    pub fn kind(&self) -> CycleErrorKind {
         match self {
-            CycleError::Machine { kind, .. } => Some(*kind),
-            _ => None,
+            CycleError::Machine { kind, .. } => CycleErrorKind::Machine(*kind),
+            CycleError::Geometry(_) => CycleErrorKind::Geometry,
+            CycleError::Plan(_) => CycleErrorKind::Plan,
+            CycleError::MeasuringLog { .. } => CycleErrorKind::MeasuringLog,
         }
     }
 }

@@ -23,6 +23,24 @@ use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+/// What went wrong with a kinematics file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum KinematicsFileErrorKind {
+    Read,
+    /// Not TOML of the expected form.
+    Syntax,
+    /// Written for another machine.
+    OtherMachine,
+    /// An error name that is not one of the machine's rotary axes.
+    UnknownError,
+    /// A value that is not a finite number.
+    NotANumber,
+    /// Cycle 450: nothing saved under the designation.
+    NothingSaved,
+    Write,
+}
+
 #[derive(Debug, thiserror::Error)]
 pub enum KinematicsFileError {
     #[error("cannot read {path}: {source}")]
@@ -31,12 +49,26 @@ pub enum KinematicsFileError {
         source: std::io::Error,
     },
     #[error("{path}: {message}")]
-    Invalid { path: PathBuf, message: String },
+    Invalid {
+        path: PathBuf,
+        kind: KinematicsFileErrorKind,
+        message: String,
+    },
     #[error("cannot write {path}: {source}")]
     Write {
         path: PathBuf,
         source: std::io::Error,
     },
+}
+
+impl KinematicsFileError {
+    pub fn kind(&self) -> KinematicsFileErrorKind {
+        match self {
+            KinematicsFileError::Read { .. } => KinematicsFileErrorKind::Read,
+            KinematicsFileError::Invalid { kind, .. } => *kind,
+            KinematicsFileError::Write { .. } => KinematicsFileErrorKind::Write,
+        }
+    }
 }
 
 #[derive(Debug, Deserialize, Serialize)]
@@ -85,16 +117,21 @@ impl ActiveKinematics {
     }
 
     fn parse(text: &str, path: &Path, cfg: &MachineConfig) -> Result<Self, KinematicsFileError> {
-        let invalid = |message: String| KinematicsFileError::Invalid {
+        use KinematicsFileErrorKind as K;
+        let invalid = |kind, message: String| KinematicsFileError::Invalid {
             path: path.to_path_buf(),
+            kind,
             message,
         };
-        let f: FileFormat = toml::from_str(text).map_err(|e| invalid(e.to_string()))?;
+        let f: FileFormat = toml::from_str(text).map_err(|e| invalid(K::Syntax, e.to_string()))?;
         if f.machine != cfg.name {
-            return Err(invalid(format!(
-                "written for machine {:?}, but the machine is {:?}",
-                f.machine, cfg.name
-            )));
+            return Err(invalid(
+                K::OtherMachine,
+                format!(
+                    "written for machine {:?}, but the machine is {:?}",
+                    f.machine, cfg.name
+                ),
+            ));
         }
         for (name, v) in &f.errors {
             let known = cfg
@@ -103,13 +140,19 @@ impl ActiveKinematics {
                 .filter(|a| a.name.is_rotary())
                 .any(|a| error_names(a.name).contains(&name.as_str()));
             if !known {
-                return Err(invalid(format!(
-                    "errors.{name}: not an error of a rotary axis of machine {}",
-                    cfg.name
-                )));
+                return Err(invalid(
+                    K::UnknownError,
+                    format!(
+                        "errors.{name}: not an error of a rotary axis of machine {}",
+                        cfg.name
+                    ),
+                ));
             }
             if !v.is_finite() {
-                return Err(invalid(format!("errors.{name}: {v} is not a number")));
+                return Err(invalid(
+                    K::NotANumber,
+                    format!("errors.{name}: {v} is not a number"),
+                ));
             }
         }
         Ok(Self {
@@ -252,13 +295,14 @@ mod tests {
         let c = cfg(&d);
         let path = d.join("k.toml");
         std::fs::write(&path, "machine = \"table-ac\"\n[errors]\nEX0B = 0.1\n").unwrap();
-        let e = ActiveKinematics::load(&path, &c).unwrap_err().to_string();
-        assert!(
-            e.contains("errors.EX0B") && e.contains("not an error of a rotary axis"),
-            "{e}"
-        );
+        let e = ActiveKinematics::load(&path, &c).unwrap_err();
+        assert_eq!(e.kind(), KinematicsFileErrorKind::UnknownError, "{e}");
+        assert!(e.to_string().contains("errors.EX0B"), "names the key: {e}");
         std::fs::write(&path, "machine = \"other\"\n").unwrap();
-        let e = ActiveKinematics::load(&path, &c).unwrap_err().to_string();
-        assert!(e.contains("written for machine \"other\""), "{e}");
+        let e = ActiveKinematics::load(&path, &c).unwrap_err();
+        assert_eq!(e.kind(), KinematicsFileErrorKind::OtherMachine, "{e}");
+        std::fs::write(&path, "machine = \"table-ac\"\nerror = 1\n").unwrap();
+        let e = ActiveKinematics::load(&path, &c).unwrap_err();
+        assert_eq!(e.kind(), KinematicsFileErrorKind::Syntax, "{e}");
     }
 }

@@ -79,6 +79,14 @@ impl Program {
     }
 }
 
+/// Why a program file cannot be used.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum ProgramErrorKind {
+    Read,
+    Invalid,
+}
+
 #[derive(Debug, thiserror::Error)]
 pub enum ProgramError {
     #[error("cannot read {path}: {source}")]
@@ -91,4 +99,13 @@ pub enum ProgramError {
         path: PathBuf,
         errors: ProgramErrors,
     },
+}
+
+impl ProgramError {
+    pub fn kind(&self) -> ProgramErrorKind {
+        match self {
+            ProgramError::Read { .. } => ProgramErrorKind::Read,
+            ProgramError::Invalid { .. } => ProgramErrorKind::Invalid,
+        }
+    }
 }

@@ -4,10 +4,11 @@
 
 use crate::cycle::{CycleContext, MeasuringCycle};
 use crate::cycle451;
+use crate::cycle451::PlanErrorKind;
 use crate::error::CycleError;
 use crate::kinematics::{Estimator, LocalEstimator};
 use crate::kinematics_file::ActiveKinematics;
-use crate::linear::{parse_linear, MoveFeed};
+use crate::linear::{parse_linear, LinearBlockError, LinearBlockErrorKind, MoveFeed};
 use crate::program::{CycleCall, CycleKind, Program, Statement};
 use crate::progress::{ProgressEvent, ProgressSink};
 use crate::results::{CycleOutput, CycleResult, ProgramReport, Status};
@@ -37,6 +38,22 @@ impl RunOptions<'_> {
     }
 }
 
+/// Why a program cannot start on this machine.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum PreflightKind {
+    /// Cycle 451 cannot be planned on this machine.
+    Plan(PlanErrorKind),
+    /// The active kinematics file cannot be read.
+    ActiveKinematics,
+    /// The probe of a TOOL CALL is not in the probe table.
+    ProbeNotInTable,
+    /// The machine lacks a linear axis.
+    MissingAxis,
+    /// A positioning block (L) cannot run.
+    Positioning(LinearBlockErrorKind),
+}
+
 /// Checks, before anything moves, what only the machine and its configuration can
 /// tell: the probe of each cycle is still in the probe table, the machine has X, Y, Z,
 /// and this build can run the cycle.
@@ -45,55 +62,68 @@ fn preflight(
     machine_axes: u8,
     cfg: &MachineConfig,
     kinematics: &std::path::Path,
-) -> Result<(), String> {
+) -> Result<(), (PreflightKind, String)> {
     let tool = &call.head.tool;
     match &call.kind {
         CycleKind::MeasurePlane(_) | CycleKind::Probing3d(_) => {}
         // Works on files only: no probe, no motion.
         CycleKind::SaveKinematics(_) => return Ok(()),
         CycleKind::MeasureKinematics(p) => {
-            cycle451::plan(p, &tool.probe, cfg).map_err(|e| format!("{e}; nothing moved"))?;
-            ActiveKinematics::load(kinematics, cfg)
-                .map_err(|e| format!("active kinematics: {e}; nothing moved"))?;
+            cycle451::plan(p, &tool.probe, cfg)
+                .map_err(|e| (PreflightKind::Plan(e.kind()), format!("{e}; nothing moved")))?;
+            ActiveKinematics::load(kinematics, cfg).map_err(|e| {
+                (
+                    PreflightKind::ActiveKinematics,
+                    format!("active kinematics: {e}; nothing moved"),
+                )
+            })?;
         }
     }
     if cfg.probe(&tool.probe.name).is_none() {
-        return Err(format!(
-            "probe \"{}\" (TOOL CALL line {}) is not in the probe table of machine {}",
-            tool.probe.name, tool.line, cfg.name
+        return Err((
+            PreflightKind::ProbeNotInTable,
+            format!(
+                "probe \"{}\" (TOOL CALL line {}) is not in the probe table of machine {}",
+                tool.probe.name, tool.line, cfg.name
+            ),
         ));
     }
     for a in Axis::LINEAR {
         if machine_axes & (1 << a.index()) == 0 {
-            return Err(format!("the machine has no {a} axis"));
+            return Err((
+                PreflightKind::MissingAxis,
+                format!("the machine has no {a} axis"),
+            ));
         }
     }
     Ok(())
 }
 
 /// Why a program cannot start on this machine.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum Preflight {
     /// A cycle's demands the machine, its configuration or its kinematics file cannot
     /// meet.
+    #[error("block {block} (cycle {cycle}): {message}")]
     Cycle {
         block: u32,
         cycle: u16,
+        kind: PreflightKind,
         message: String,
     },
     /// A positioning block (L) that cannot be carried out.
-    Positioning { line: usize, message: String },
+    #[error("line {line}: {error}")]
+    Positioning {
+        line: usize,
+        error: LinearBlockError,
+    },
 }
 
-impl std::fmt::Display for Preflight {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+impl Preflight {
+    pub fn kind(&self) -> PreflightKind {
         match self {
-            Preflight::Cycle {
-                block,
-                cycle,
-                message,
-            } => write!(f, "block {block} (cycle {cycle}): {message}"),
-            Preflight::Positioning { line, message } => write!(f, "line {line}: {message}"),
+            Preflight::Cycle { kind, .. } => *kind,
+            Preflight::Positioning { error, .. } => PreflightKind::Positioning(error.kind()),
         }
     }
 }
@@ -107,18 +137,21 @@ pub fn preflight_program(
     kinematics: &std::path::Path,
 ) -> Result<(), Preflight> {
     for call in program.cycles() {
-        preflight(call, machine_axes, cfg, kinematics).map_err(|message| Preflight::Cycle {
-            block: call.head.block,
-            cycle: call.head.cycle,
-            message,
+        preflight(call, machine_axes, cfg, kinematics).map_err(|(kind, message)| {
+            Preflight::Cycle {
+                block: call.head.block,
+                cycle: call.head.cycle,
+                kind,
+                message,
+            }
         })?;
     }
     for block in &program.blocks {
         if let Statement::Other(code) = &block.statement {
-            if let Some(Err(message)) = parse_linear(code, program.unit) {
+            if let Some(Err(error)) = parse_linear(code, program.unit) {
                 return Err(Preflight::Positioning {
                     line: block.line,
-                    message,
+                    error,
                 });
             }
         }
@@ -140,6 +173,7 @@ pub fn run_program<M: Machine>(
             block,
             cycle,
             message,
+            ..
         }) => {
             report.stopped = Some(format!("block {block}: {message}"));
             report

@@ -60,6 +60,13 @@ pub struct MeasuringLogError {
     pub source: std::io::Error,
 }
 
+impl MeasuringLogError {
+    /// The operating system's reason (full disk, no permission, ...).
+    pub fn kind(&self) -> std::io::ErrorKind {
+        self.source.kind()
+    }
+}
+
 /// Writes `text` to `dir/name` (creating `dir`); the path written.
 pub fn write(dir: &Path, name: &str, text: &str) -> Result<PathBuf, MeasuringLogError> {
     let path = dir.join(name);
