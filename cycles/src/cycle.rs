@@ -2,18 +2,18 @@
 //! ([`CycleContext`]) and the one signature all of them have ([`MeasuringCycle`]).
 
 use crate::cycle_block::CycleBlock;
+use crate::cycles_config::CyclesConfig;
 use crate::error::CycleError;
 use crate::kinematics::Estimator;
 use crate::measuring_log::probing3d::Probing3dRecord;
 use crate::progress::{ProgressEvent, ProgressSink};
 use crate::results::CycleOutput;
-use hal::config::MachineConfig;
 use hal::Machine;
 use std::path::{Path, PathBuf};
 
 /// What a cycle needs besides the machine; one per program run.
 pub struct CycleContext<'a> {
-    pub cfg: &'a MachineConfig,
+    pub cfg: &'a CyclesConfig,
     /// The machine's active kinematics file (cycles 450, 451).
     pub kinematics: PathBuf,
     /// Where cycle 451 fits its spheres and solves its identification.

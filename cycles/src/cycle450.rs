@@ -53,8 +53,13 @@ impl MeasuringCycle for SaveParams {
         _machine: &mut M,
         ctx: &mut CycleContext<'_>,
     ) -> Result<CycleOutput, CycleError> {
-        let message = save_kinematics(self.mode, self.designation, &ctx.kinematics, ctx.cfg)
-            .map_err(|e| CycleError::Plan(e.to_string()))?;
+        let message = save_kinematics(
+            self.mode,
+            self.designation,
+            &ctx.kinematics,
+            &ctx.cfg.machine,
+        )
+        .map_err(|e| CycleError::Plan(e.to_string()))?;
         ctx.note(call.block, message);
         Ok(CycleOutput::default())
     }

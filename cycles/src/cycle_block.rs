@@ -3,7 +3,7 @@
 
 use crate::diagnostic::Diagnostic;
 use crate::probe_axis::ProbeAxis;
-use hal::config::ProbeEntry;
+use crate::probe_table::ProbeEntry;
 use std::collections::BTreeMap;
 
 /// The active touch probe: the probe table entry and the probe axis.

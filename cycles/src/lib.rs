@@ -3,8 +3,10 @@
 //! and measuring logs.
 //!
 //! - [`Program::parse`] / [`Program::load`] / [`parser::check_program`]: read and
-//!   validate a program against a [`hal::config::MachineConfig`] (all errors, with
-//!   lines);
+//!   validate a program against a machine's probe table and PREDEF values
+//!   ([`cycles_config::CyclesConfig`]: hal's [`hal::config::MachineConfig`] with the
+//!   [`probe_table`] and the cycles' [`machine_parameters`] of the same file; all
+//!   errors, with lines);
 //! - [`run_program`]: run its cycles ([`cycle431`], [`cycle444`], [`cycle450`],
 //!   [`cycle451`], each a [`cycle::MeasuringCycle`] with its typed parameters) and `L`
 //!   positioning blocks ([`linear`]) over a machine, reporting [`ProgressEvent`]s;
@@ -22,6 +24,7 @@ pub mod cycle444;
 pub mod cycle450;
 pub mod cycle451;
 pub mod cycle_block;
+pub mod cycles_config;
 pub mod diagnostic;
 pub mod error;
 pub mod geometry;
@@ -30,18 +33,21 @@ pub mod kinematics;
 pub mod kinematics_file;
 pub mod length_unit;
 pub mod linear;
+pub mod machine_parameters;
 pub mod measuring_log;
 pub mod params;
 pub mod parser;
 pub mod plane;
 mod positioning;
 pub mod probe_axis;
+pub mod probe_table;
 pub mod program;
 pub mod progress;
 pub mod results;
 pub mod runner;
 pub mod tolerance;
 
+pub use cycles_config::CyclesConfig;
 pub use diagnostic::{Diagnostic, ProgramErrors};
 pub use error::CycleError;
 pub use geometry::{fit_plane, fit_sphere, FitError, PlaneFit, SphereFit};

@@ -9,23 +9,23 @@ use crate::cycle444::Probing3dParams;
 use crate::cycle450::SaveParams;
 use crate::cycle451::KinematicsParams;
 use crate::cycle_block::{CycleBlock, Origin, Param, ToolCall, Value};
+use crate::cycles_config::CyclesConfig;
 use crate::diagnostic::{Diagnostic, ProgramErrors};
 use crate::length_unit::LengthUnit;
 use crate::params::{self, CycleTable, Default as ParamDefault, Kind, ParamSpec};
 use crate::probe_axis::ProbeAxis;
 use crate::program::{Block, CycleCall, CycleKind, Program, ProgramError, Statement};
-use hal::config::MachineConfig;
 use std::collections::BTreeMap;
 use std::path::Path;
 
 impl Program {
     /// Parses and validates program text against a machine (probe table, PREDEF).
-    pub fn parse(text: &str, cfg: &MachineConfig) -> Result<Program, ProgramErrors> {
+    pub fn parse(text: &str, cfg: &CyclesConfig) -> Result<Program, ProgramErrors> {
         parse_program(text, cfg)
     }
 
     /// Reads, parses and validates a `.h` file.
-    pub fn load(path: &Path, cfg: &MachineConfig) -> Result<Program, ProgramError> {
+    pub fn load(path: &Path, cfg: &CyclesConfig) -> Result<Program, ProgramError> {
         let text = std::fs::read_to_string(path).map_err(|source| ProgramError::Read {
             path: path.to_path_buf(),
             source,
@@ -40,7 +40,7 @@ impl Program {
 }
 
 /// Parses and validates `text`; `Err` holds every problem found.
-pub fn parse_program(text: &str, cfg: &MachineConfig) -> Result<Program, ProgramErrors> {
+pub fn parse_program(text: &str, cfg: &CyclesConfig) -> Result<Program, ProgramErrors> {
     let (program, diagnostics) = analyse(text, cfg);
     if diagnostics.is_empty() {
         Ok(program)
@@ -50,7 +50,7 @@ pub fn parse_program(text: &str, cfg: &MachineConfig) -> Result<Program, Program
 }
 
 /// Every problem of `text`, sorted by line; empty when the program is valid.
-pub fn check_program(text: &str, cfg: &MachineConfig) -> Vec<Diagnostic> {
+pub fn check_program(text: &str, cfg: &CyclesConfig) -> Vec<Diagnostic> {
     analyse(text, cfg).1
 }
 
@@ -296,7 +296,7 @@ struct State {
     tool: Option<ToolCall>,
 }
 
-fn analyse(text: &str, cfg: &MachineConfig) -> (Program, Vec<Diagnostic>) {
+fn analyse(text: &str, cfg: &CyclesConfig) -> (Program, Vec<Diagnostic>) {
     let mut diags = Vec::new();
     let raw_blocks = group(text, &mut diags);
     let mut st = State {
@@ -353,7 +353,7 @@ fn statement(
     rb: &RawBlock,
     index: usize,
     st: &mut State,
-    cfg: &MachineConfig,
+    cfg: &CyclesConfig,
     diags: &mut Vec<Diagnostic>,
 ) -> Statement {
     let code = rb.head.code;
@@ -527,7 +527,7 @@ fn tool_call(
     iso: bool,
     line: usize,
     st: &mut State,
-    cfg: &MachineConfig,
+    cfg: &CyclesConfig,
     diags: &mut Vec<Diagnostic>,
 ) -> Option<ToolCall> {
     let (tool, after) = if let Some(q) = rest.strip_prefix('"') {
@@ -746,7 +746,7 @@ fn cycle(
     title: String,
     inline: Option<&str>,
     st: &State,
-    cfg: &MachineConfig,
+    cfg: &CyclesConfig,
     diags: &mut Vec<Diagnostic>,
 ) -> Statement {
     let line = rb.head.no;
@@ -878,7 +878,7 @@ fn resolve(
     spec: &ParamSpec,
     a: &Assignment,
     unit: LengthUnit,
-    cfg: &MachineConfig,
+    cfg: &CyclesConfig,
     diags: &mut Vec<Diagnostic>,
 ) -> Option<Param> {
     let shown = format!("{}={}", a.name, a.raw);
@@ -935,7 +935,7 @@ fn resolve(
                         "FAUTO" => Some(param(Value::Fauto, Origin::Written)),
                         _ => {
                             // PREDEF values come from the machine configuration, in mm.
-                            let Some(&v) = cfg.cycles.predef.get(spec.name) else {
+                            let Some(&v) = cfg.parameters.predef.get(spec.name) else {
                                 return fail(
                                     diags,
                                     format!(

@@ -5,6 +5,7 @@
 use crate::cycle::{CycleContext, MeasuringCycle};
 use crate::cycle451;
 use crate::cycle451::PlanErrorKind;
+use crate::cycles_config::CyclesConfig;
 use crate::error::CycleError;
 use crate::kinematics::{Estimator, LocalEstimator};
 use crate::kinematics_file::ActiveKinematics;
@@ -60,7 +61,7 @@ pub enum PreflightKind {
 fn preflight(
     call: &CycleCall,
     machine_axes: u8,
-    cfg: &MachineConfig,
+    cfg: &CyclesConfig,
     kinematics: &std::path::Path,
 ) -> Result<(), (PreflightKind, String)> {
     let tool = &call.head.tool;
@@ -69,9 +70,9 @@ fn preflight(
         // Works on files only: no probe, no motion.
         CycleKind::SaveKinematics(_) => return Ok(()),
         CycleKind::MeasureKinematics(p) => {
-            cycle451::plan(p, &tool.probe, cfg)
+            cycle451::plan(p, &tool.probe, &cfg.machine)
                 .map_err(|e| (PreflightKind::Plan(e.kind()), format!("{e}; nothing moved")))?;
-            ActiveKinematics::load(kinematics, cfg).map_err(|e| {
+            ActiveKinematics::load(kinematics, &cfg.machine).map_err(|e| {
                 (
                     PreflightKind::ActiveKinematics,
                     format!("active kinematics: {e}; nothing moved"),
@@ -84,7 +85,7 @@ fn preflight(
             PreflightKind::ProbeNotInTable,
             format!(
                 "probe \"{}\" (TOOL CALL line {}) is not in the probe table of machine {}",
-                tool.probe.name, tool.line, cfg.name
+                tool.probe.name, tool.line, cfg.machine.name
             ),
         ));
     }
@@ -133,7 +134,7 @@ impl Preflight {
 pub fn preflight_program(
     program: &Program,
     machine_axes: u8,
-    cfg: &MachineConfig,
+    cfg: &CyclesConfig,
     kinematics: &std::path::Path,
 ) -> Result<(), Preflight> {
     for call in program.cycles() {
@@ -162,11 +163,11 @@ pub fn preflight_program(
 pub fn run_program<M: Machine>(
     program: &Program,
     machine: &mut M,
-    cfg: &MachineConfig,
+    cfg: &CyclesConfig,
     opts: &mut RunOptions,
 ) -> ProgramReport {
     let mut report = ProgramReport::default();
-    let kinematics = opts.kinematics_path(cfg);
+    let kinematics = opts.kinematics_path(&cfg.machine);
     match preflight_program(program, machine.axes(), cfg, &kinematics) {
         Ok(()) => {}
         Err(Preflight::Cycle {
@@ -187,7 +188,12 @@ pub fn run_program<M: Machine>(
         }
     }
     // Rapid positioning: as fast as the slowest axis on the path allows.
-    let rapid = cfg.axes.iter().map(|a| a.max_feed).fold(0.0, f64::max);
+    let rapid = cfg
+        .machine
+        .axes
+        .iter()
+        .map(|a| a.max_feed)
+        .fold(0.0, f64::max);
     let mut local = LocalEstimator;
     let estimator: &mut dyn Estimator = match opts.estimator.as_deref_mut() {
         Some(e) => e,

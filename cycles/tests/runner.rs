@@ -130,7 +130,13 @@ fn nothing_moves_when_validation_fails() {
     let report = probebridge_cycles::run_program(&program, &mut m, &other, &mut opts);
     assert_eq!(m.motion_count(), 0);
     assert_eq!(report.cycles[0].status, Status::Error);
-    let e = preflight_program(&program, 0b111, &other, &opts.kinematics_path(&other)).unwrap_err();
+    let e = preflight_program(
+        &program,
+        0b111,
+        &other,
+        &opts.kinematics_path(&other.machine),
+    )
+    .unwrap_err();
     assert_eq!(e.kind(), PreflightKind::ProbeNotInTable, "{e}");
     assert_eq!(
         report.cycles[0].message.as_deref(),

@@ -265,7 +265,7 @@ fn keywords_only_where_the_table_allows_them() {
     assert!(d[0].contains("does not take FMAX"), "{d:?}");
     // PREDEF needs a value in the configuration.
     let mut cfg = common::config();
-    cfg.cycles.predef.remove("Q260");
+    cfg.parameters.predef.remove("Q260");
     let d = check_program(&format!("{HEAD}{base}"), &cfg);
     assert_eq!(d.len(), 1);
     assert_eq!(d[0].line, 10);

@@ -13,8 +13,8 @@ use crate::cycle_block::CycleBlock;
 use crate::error::CycleError;
 use crate::kinematics::model::{angles_of, rotary_slot, Angles, KinematicModel};
 use crate::probe_axis::ProbeAxis;
+use crate::probe_table::ProbeEntry;
 use crate::progress::ProgressEvent;
-use hal::config::ProbeEntry;
 use hal::{Axis, AxisPositions, Contact, Machine, ProbeMove};
 use nalgebra::Vector3;
 use std::collections::BTreeMap;
@@ -362,10 +362,10 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
                 continue;
             }
             let dev = radius - p.sphere_radius;
-            if dev.abs() > self.ctx.cfg.cycles.max_dev_cal_ball {
+            if dev.abs() > self.ctx.cfg.parameters.max_dev_cal_ball {
                 return Err(CycleError::Geometry(format!(
                     "{what}: the fitted sphere radius {radius:.4} mm differs from Q407 = {:.4} mm by {dev:+.4} mm, more than maxDevCalBall = {} mm; wrong sphere, or a probe that is not calibrated; nothing was changed",
-                    p.sphere_radius, self.ctx.cfg.cycles.max_dev_cal_ball
+                    p.sphere_radius, self.ctx.cfg.parameters.max_dev_cal_ball
                 )));
             }
             let n_c = contacts.len() as f64;

@@ -66,9 +66,9 @@ impl MeasuringCycle for KinematicsParams {
         ctx: &mut CycleContext<'_>,
     ) -> Result<CycleOutput, CycleError> {
         let cfg = ctx.cfg;
-        let plan =
-            plan::plan(self, &call.tool.probe, cfg).map_err(|e| CycleError::Plan(e.to_string()))?;
-        let active = ActiveKinematics::load(&ctx.kinematics, cfg)
+        let plan = plan::plan(self, &call.tool.probe, &cfg.machine)
+            .map_err(|e| CycleError::Plan(e.to_string()))?;
+        let active = ActiveKinematics::load(&ctx.kinematics, &cfg.machine)
             .map_err(|e| CycleError::Plan(format!("active kinematics: {e}")))?;
         let active_set = ErrorSet::from_map(&active.errors);
         let model = KinematicModel::new(&plan.chain, &active_set);
@@ -119,7 +119,7 @@ impl MeasuringCycle for KinematicsParams {
             call.block,
             p.mode,
             &result,
-            cfg.cycles.max_modification,
+            cfg.parameters.max_modification,
             ctx,
         );
         if !p.mode.writes() {
@@ -128,7 +128,7 @@ impl MeasuringCycle for KinematicsParams {
         let preset_before = Vector3::zeros();
         let mut report = KinematicsReport {
             mode: p.mode.q406(),
-            machine: cfg.name.clone(),
+            machine: cfg.machine.name.clone(),
             kinematics_file: ctx.kinematics.clone(),
             estimator,
             probe: call.tool.probe.name.clone(),

@@ -5,7 +5,8 @@ use super::parameters::{AxisRange, Feed, KinematicsParams};
 use crate::kinematics::identification::{machine_datum_targets, Mode};
 use crate::kinematics::model::{rotary_slot, Angles, ChainSpec};
 use crate::kinematics::positions::{measuring_positions, on_grid};
-use hal::config::{MachineConfig, ProbeEntry};
+use crate::probe_table::ProbeEntry;
+use hal::config::MachineConfig;
 use hal::Axis;
 
 /// Why a 451 block cannot run on this machine (nothing moved).
