@@ -3,6 +3,7 @@
 
 use crate::configs;
 use crate::ipc::ForwardingSink;
+use cycles::CyclesConfig;
 use hal::can::inproc::InprocBus;
 use hal::can::socketcan::SocketCanTransport;
 use hal::can::CanTransport;
@@ -64,15 +65,25 @@ pub fn load_scenario(path: Option<&Path>) -> Result<Scenario, SessionError> {
         .map_err(|e| SessionError::Scenario(e.to_string()))
 }
 
-/// The machine configuration as the bridge uses it with a scenario: on the simulator
-/// the probe table's R is the scenario's (a perfectly calibrated probe unless the
-/// scenario says otherwise).
+/// The machine configuration of a scenario.
 pub fn machine_config(scenario: &Scenario) -> MachineConfig {
-    let mut cfg = scenario.machine.clone();
-    for p in &mut cfg.probes {
-        p.radius = scenario.probe_table_radius();
+    scenario.machine.clone()
+}
+
+/// The machine as the cycles see it: `cfg` with the probe table and the cycles'
+/// machine parameters of the same file. On the simulator the probe table's R is the
+/// scenario's (a perfectly calibrated probe unless the scenario says otherwise).
+pub fn cycles_config(
+    cfg: &MachineConfig,
+    scenario: Option<&Scenario>,
+) -> Result<CyclesConfig, SessionError> {
+    let mut c = CyclesConfig::of(cfg.clone()).map_err(|e| SessionError::Scenario(e.to_string()))?;
+    if let Some(sc) = scenario {
+        for p in &mut c.probes {
+            p.radius = sc.probe_table_radius();
+        }
     }
-    cfg
+    Ok(c)
 }
 
 /// The machine configuration a command works with: `--machine` when given (real

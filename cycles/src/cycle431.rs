@@ -1,11 +1,16 @@
 //! Cycle 431 MEASURE PLANE: three points probed along the probe axis, the plane's
 //! spatial angles (for PLANE SPATIAL) and projection angles.
 
+use crate::cycle::{CycleContext, MeasuringCycle};
+use crate::cycle_block::{CycleBlock, Param, ParamReader};
+use crate::diagnostic::Diagnostic;
 use crate::error::CycleError;
-use crate::plane::{plane_angles, PlaneAngles, COLLINEAR_SIN};
+use crate::length_unit::LengthUnit;
+use crate::measuring_log::plane::{plane_log_text, write_plane_log, PlaneRecord, PLANE_LOG};
+use crate::measuring_log::{timestamp_utc, MeasuringLogError};
+use crate::plane::{plane_angles, COLLINEAR_SIN};
 use crate::positioning::Positioner;
-use crate::program::{CycleCall, Diagnostic, LengthUnit, Param, ParamReader};
-use crate::runner::ProgressEvent;
+use crate::results::CycleOutput;
 use hal::Machine;
 use nalgebra::Vector3;
 use std::collections::BTreeMap;
@@ -56,30 +61,67 @@ impl PlaneParams {
     }
 }
 
-#[derive(Clone, Debug, PartialEq)]
-pub struct PlaneRecord {
-    pub block: u32,
-    pub line: usize,
-    pub probe: String,
-    pub axis: crate::program::ProbeAxis,
-    pub nominal: [[f64; 3]; 3],
-    /// Measured points (main, minor, Q173..Q175).
-    pub measured: [[f64; 3]; 3],
-    pub angles: PlaneAngles,
+impl MeasuringCycle for PlaneParams {
+    fn run<M: Machine>(
+        &self,
+        call: &CycleBlock,
+        machine: &mut M,
+        ctx: &mut CycleContext<'_>,
+    ) -> Result<CycleOutput, CycleError> {
+        let record = measure(call, self, machine, ctx)?;
+        let q = results(&record);
+        let mut out = CycleOutput::new(q, None);
+        // Q281: 1 writes TCHPR431.TXT; 2 shows it and goes on only when confirmed.
+        match self.protocol {
+            1 => out
+                .logs
+                .push(write_plane_log(ctx.out_dir, &record, ctx.program).map_err(log_error(ctx))?),
+            2 => {
+                let text = plane_log_text(&record, ctx.program, &timestamp_utc());
+                if !(ctx.confirm)(&text) {
+                    out.stop = Some(
+                        "the cycle 431 protocol was not confirmed (Q281=2); program stopped"
+                            .to_string(),
+                    );
+                }
+            }
+            _ => {}
+        }
+        Ok(out)
+    }
 }
 
-#[derive(Clone, Debug, PartialEq)]
-pub struct PlaneOutcome {
-    pub q: BTreeMap<String, f64>,
-    pub record: PlaneRecord,
+fn log_error(ctx: &CycleContext<'_>) -> impl Fn(MeasuringLogError) -> CycleError {
+    let path = ctx.out_dir.join(PLANE_LOG).display().to_string();
+    move |e| CycleError::MeasuringLog {
+        path: path.clone(),
+        message: e.source.to_string(),
+    }
 }
 
-pub fn run<M: Machine>(
-    call: &CycleCall,
+/// Q158, Q159 (projection angles), Q170..Q172 (spatial angles), Q173..Q175 (measured
+/// tool-axis coordinates).
+fn results(r: &PlaneRecord) -> BTreeMap<String, f64> {
+    let angles = &r.angles;
+    let mut q = BTreeMap::new();
+    q.insert("Q158".to_string(), angles.proj_a);
+    q.insert("Q159".to_string(), angles.proj_b);
+    q.insert("Q170".to_string(), angles.spa);
+    q.insert("Q171".to_string(), angles.spb);
+    q.insert("Q172".to_string(), angles.spc);
+    for (i, name) in ["Q173", "Q174", "Q175"].into_iter().enumerate() {
+        q.insert(name.to_string(), r.measured[i][2]);
+    }
+    q
+}
+
+/// Probes the three points and computes the plane's angles.
+fn measure<M: Machine>(
+    call: &CycleBlock,
     p: &PlaneParams,
     machine: &mut M,
-    progress: &mut dyn FnMut(ProgressEvent),
-) -> Result<PlaneOutcome, CycleError> {
+    ctx: &mut CycleContext<'_>,
+) -> Result<PlaneRecord, CycleError> {
     let probe = &call.tool.probe;
     let axis = call.tool.axis;
     let t = axis.tool_index();
@@ -104,16 +146,13 @@ pub fn run<M: Machine>(
             s[t]
         )));
     }
-    progress(ProgressEvent::Note {
-        block: call.block,
-        text: "basic rotation reset".into(),
-    });
+    ctx.note(call.block, "basic rotation reset");
     let mut pos = Positioner {
         machine,
         axis,
         fmax: probe.fmax,
         block: call.block,
-        progress,
+        progress: &mut *ctx.progress,
     };
     let mut measured = p.points;
     pos.safe_height(p.safe_height)?;
@@ -134,26 +173,13 @@ pub fn run<M: Machine>(
     }
     let angles = plane_angles(measured[0].into(), measured[1].into(), measured[2].into())
         .map_err(|e| CycleError::Geometry(e.to_string()))?;
-
-    let mut q = BTreeMap::new();
-    q.insert("Q158".to_string(), angles.proj_a);
-    q.insert("Q159".to_string(), angles.proj_b);
-    q.insert("Q170".to_string(), angles.spa);
-    q.insert("Q171".to_string(), angles.spb);
-    q.insert("Q172".to_string(), angles.spc);
-    for (i, name) in ["Q173", "Q174", "Q175"].into_iter().enumerate() {
-        q.insert(name.to_string(), measured[i][2]);
-    }
-    Ok(PlaneOutcome {
-        q,
-        record: PlaneRecord {
-            block: call.block,
-            line: call.line,
-            probe: probe.name.clone(),
-            axis,
-            nominal: p.points,
-            measured,
-            angles,
-        },
+    Ok(PlaneRecord {
+        block: call.block,
+        line: call.line,
+        probe: probe.name.clone(),
+        axis,
+        nominal: p.points,
+        measured,
+        angles,
     })
 }

@@ -2,10 +2,15 @@
 //! normal, compared with the nominal point along that normal (QS400 tolerance, Q309
 //! reaction, Q183 status).
 
+use crate::cycle::{CycleContext, MeasuringCycle};
+use crate::cycle_block::{CycleBlock, Param, ParamReader};
+use crate::diagnostic::Diagnostic;
 use crate::error::CycleError;
+use crate::length_unit::LengthUnit;
+use crate::measuring_log::probing3d::{write_probing3d_log, Probing3dRecord, PROBING_3D_LOG};
 use crate::positioning::Positioner;
-use crate::program::{CycleCall, Diagnostic, LengthUnit, Param, ParamReader, ProbeAxis};
-use crate::runner::ProgressEvent;
+use crate::progress::ProgressSink;
+use crate::results::CycleOutput;
 use crate::tolerance::{Tolerance, WorkpieceStatus};
 use hal::Machine;
 use nalgebra::Vector3;
@@ -72,36 +77,6 @@ impl Probing3dParams {
     }
 }
 
-/// What the protocol shows of one probed point; vectors as (main, minor, tool).
-#[derive(Clone, Debug, PartialEq)]
-pub struct Probing3dRecord {
-    pub block: u32,
-    pub line: usize,
-    pub probe: String,
-    pub axis: ProbeAxis,
-    /// Probing direction scaled to the configured probing path.
-    pub direction: [f64; 3],
-    pub path_length: f64,
-    pub nominal: [f64; 3],
-    /// Unit surface normal.
-    pub normal: [f64; 3],
-    pub actual: [f64; 3],
-    /// Q161..Q163.
-    pub deviation: [f64; 3],
-    /// Q164.
-    pub deviation_3d: f64,
-    pub tolerance: Option<Tolerance>,
-    pub status: WorkpieceStatus,
-}
-
-#[derive(Clone, Debug, PartialEq)]
-pub struct Probing3dOutcome {
-    pub q: BTreeMap<String, f64>,
-    pub record: Probing3dRecord,
-    /// Q309 asks to stop the program, with this message.
-    pub stop: Option<String>,
-}
-
 /// Q309 decision. 1: out of tolerance (rework or scrap). 2: the actual point lies below
 /// the nominal along the normal (Q164 < 0), as the seed words it, whatever the
 /// tolerance; never for material left.
@@ -117,12 +92,37 @@ pub fn stop_message(reaction: u8, status: WorkpieceStatus, deviation_3d: f64) ->
     }
 }
 
-pub fn run<M: Machine>(
-    call: &CycleCall,
+impl MeasuringCycle for Probing3dParams {
+    /// Probes the point, then rewrites TCHPR444.html with every point of the run so
+    /// far (complete even if a later cycle fails).
+    fn run<M: Machine>(
+        &self,
+        call: &CycleBlock,
+        machine: &mut M,
+        ctx: &mut CycleContext<'_>,
+    ) -> Result<CycleOutput, CycleError> {
+        let (q, record) = measure(call, self, machine, &mut *ctx.progress)?;
+        let stop = stop_message(self.reaction, record.status, record.deviation_3d);
+        ctx.probing3d.push(record);
+        let log = write_probing3d_log(ctx.out_dir, &ctx.probing3d, ctx.program).map_err(|e| {
+            CycleError::MeasuringLog {
+                path: ctx.out_dir.join(PROBING_3D_LOG).display().to_string(),
+                message: e.source.to_string(),
+            }
+        })?;
+        let mut out = CycleOutput::new(q, stop);
+        out.logs.push(log);
+        Ok(out)
+    }
+}
+
+/// Probes the point; its result parameters and what the log shows of it.
+fn measure<M: Machine>(
+    call: &CycleBlock,
     p: &Probing3dParams,
     machine: &mut M,
-    progress: &mut dyn FnMut(ProgressEvent),
-) -> Result<Probing3dOutcome, CycleError> {
+    progress: &mut ProgressSink<'_>,
+) -> Result<(BTreeMap<String, f64>, Probing3dRecord), CycleError> {
     let probe = &call.tool.probe;
     let axis = call.tool.axis;
     let n_cycle = Vector3::from(p.normal);
@@ -181,9 +181,5 @@ pub fn run<M: Machine>(
         tolerance: p.tolerance,
         status,
     };
-    Ok(Probing3dOutcome {
-        q,
-        stop: stop_message(p.reaction, status, deviation_3d),
-        record,
-    })
+    Ok((q, record))
 }

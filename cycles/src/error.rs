@@ -1,7 +1,18 @@
 //! Why a cycle stopped while running (validation problems are
-//! [`crate::program::Diagnostic`]s and never get this far).
+//! [`crate::diagnostic::Diagnostic`]s and never get this far).
 
 use hal::ErrorKind;
+
+/// What kind of problem stopped a cycle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum CycleErrorKind {
+    /// The machine refused or failed a move (its own kind).
+    Machine(ErrorKind),
+    Geometry,
+    Plan,
+    MeasuringLog,
+}
 
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum CycleError {
@@ -18,9 +29,9 @@ pub enum CycleError {
     /// The cycle cannot run with this program and machine (nothing moved).
     #[error("{0}")]
     Plan(String),
-    /// Writing a protocol failed.
+    /// Writing a measuring log failed.
     #[error("protocol {path}: {message}")]
-    Protocol { path: String, message: String },
+    MeasuringLog { path: String, message: String },
 }
 
 impl CycleError {
@@ -32,11 +43,12 @@ impl CycleError {
         }
     }
 
-    /// The machine error kind, if the machine caused it.
-    pub fn kind(&self) -> Option<ErrorKind> {
+    pub fn kind(&self) -> CycleErrorKind {
         match self {
-            CycleError::Machine { kind, .. } => Some(*kind),
-            _ => None,
+            CycleError::Machine { kind, .. } => CycleErrorKind::Machine(*kind),
+            CycleError::Geometry(_) => CycleErrorKind::Geometry,
+            CycleError::Plan(_) => CycleErrorKind::Plan,
+            CycleError::MeasuringLog { .. } => CycleErrorKind::MeasuringLog,
         }
     }
 }

@@ -1,4 +1,4 @@
-//! The machine's active kinematics corrections on disk, and cycle 450 SAVE KINEMATICS.
+//! The machine's active kinematics corrections on disk.
 //!
 //! The nominal chain lives in the machine configuration; what cycle 451 measures and
 //! corrects (ISO 230-7 location errors and zero errors of the rotary axes) lives in a
@@ -13,24 +13,32 @@
 //!
 //! Every write is atomic (temporary file, fsync, rename, fsync of the folder) and keeps
 //! the version it replaces as `<file>.prev`, so a power cut never leaves a half-written
-//! model and the operator can always go back one step. Cycle 450 keeps its saves in
-//! `<file stem>.saved/<designation>.toml` beside it.
+//! model and the operator can always go back one step. Cycle 450 ([`crate::cycle450`])
+//! keeps its saves beside it.
 
+use crate::iso230_7::error_names;
 use hal::config::MachineConfig;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-/// ISO 230-7 names of the errors a rotary axis can carry: location errors in QS order,
-/// then the zero error.
-pub fn error_names(axis: hal::Axis) -> &'static [&'static str] {
-    match axis {
-        hal::Axis::A => &["EY0A", "EZ0A", "EB0A", "EC0A", "EA0A"],
-        hal::Axis::B => &["EZ0B", "EX0B", "EC0B", "EA0B", "EB0B"],
-        hal::Axis::C => &["EX0C", "EY0C", "EA0C", "EB0C", "EC0C"],
-        _ => &[],
-    }
+/// What went wrong with a kinematics file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum KinematicsFileErrorKind {
+    Read,
+    /// Not TOML of the expected form.
+    Syntax,
+    /// Written for another machine.
+    OtherMachine,
+    /// An error name that is not one of the machine's rotary axes.
+    UnknownError,
+    /// A value that is not a finite number.
+    NotANumber,
+    /// Cycle 450: nothing saved under the designation.
+    NothingSaved,
+    Write,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -41,12 +49,26 @@ pub enum KinematicsFileError {
         source: std::io::Error,
     },
     #[error("{path}: {message}")]
-    Invalid { path: PathBuf, message: String },
+    Invalid {
+        path: PathBuf,
+        kind: KinematicsFileErrorKind,
+        message: String,
+    },
     #[error("cannot write {path}: {source}")]
     Write {
         path: PathBuf,
         source: std::io::Error,
     },
+}
+
+impl KinematicsFileError {
+    pub fn kind(&self) -> KinematicsFileErrorKind {
+        match self {
+            KinematicsFileError::Read { .. } => KinematicsFileErrorKind::Read,
+            KinematicsFileError::Invalid { kind, .. } => *kind,
+            KinematicsFileError::Write { .. } => KinematicsFileErrorKind::Write,
+        }
+    }
 }
 
 #[derive(Debug, Deserialize, Serialize)]
@@ -95,16 +117,21 @@ impl ActiveKinematics {
     }
 
     fn parse(text: &str, path: &Path, cfg: &MachineConfig) -> Result<Self, KinematicsFileError> {
-        let invalid = |message: String| KinematicsFileError::Invalid {
+        use KinematicsFileErrorKind as K;
+        let invalid = |kind, message: String| KinematicsFileError::Invalid {
             path: path.to_path_buf(),
+            kind,
             message,
         };
-        let f: FileFormat = toml::from_str(text).map_err(|e| invalid(e.to_string()))?;
+        let f: FileFormat = toml::from_str(text).map_err(|e| invalid(K::Syntax, e.to_string()))?;
         if f.machine != cfg.name {
-            return Err(invalid(format!(
-                "written for machine {:?}, but the machine is {:?}",
-                f.machine, cfg.name
-            )));
+            return Err(invalid(
+                K::OtherMachine,
+                format!(
+                    "written for machine {:?}, but the machine is {:?}",
+                    f.machine, cfg.name
+                ),
+            ));
         }
         for (name, v) in &f.errors {
             let known = cfg
@@ -113,13 +140,19 @@ impl ActiveKinematics {
                 .filter(|a| a.name.is_rotary())
                 .any(|a| error_names(a.name).contains(&name.as_str()));
             if !known {
-                return Err(invalid(format!(
-                    "errors.{name}: not an error of a rotary axis of machine {}",
-                    cfg.name
-                )));
+                return Err(invalid(
+                    K::UnknownError,
+                    format!(
+                        "errors.{name}: not an error of a rotary axis of machine {}",
+                        cfg.name
+                    ),
+                ));
             }
             if !v.is_finite() {
-                return Err(invalid(format!("errors.{name}: {v} is not a number")));
+                return Err(invalid(
+                    K::NotANumber,
+                    format!("errors.{name}: {v} is not a number"),
+                ));
             }
         }
         Ok(Self {
@@ -134,7 +167,7 @@ impl ActiveKinematics {
         self.errors.get(name).copied().unwrap_or(0.0)
     }
 
-    fn render(&self) -> String {
+    pub(crate) fn render(&self) -> String {
         let f = FileFormat {
             machine: self.machine.clone(),
             errors: self.errors.clone(),
@@ -162,13 +195,13 @@ impl ActiveKinematics {
     }
 }
 
-fn prev_path(path: &Path) -> PathBuf {
+pub(crate) fn prev_path(path: &Path) -> PathBuf {
     let mut s = path.as_os_str().to_owned();
     s.push(".prev");
     PathBuf::from(s)
 }
 
-fn write_error(path: &Path) -> impl Fn(std::io::Error) -> KinematicsFileError + '_ {
+pub(crate) fn write_error(path: &Path) -> impl Fn(std::io::Error) -> KinematicsFileError + '_ {
     move |source| KinematicsFileError::Write {
         path: path.to_path_buf(),
         source,
@@ -207,126 +240,6 @@ fn copy_atomic(from: &Path, to: &Path) -> Result<(), KinematicsFileError> {
         source,
     })?;
     write_atomic(to, &bytes)
-}
-
-/// Where cycle 450 keeps its saves for the kinematics file `active`.
-pub fn saves_dir(active: &Path) -> PathBuf {
-    let stem = active
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "kinematics".into());
-    active.with_file_name(format!("{stem}.saved"))
-}
-
-fn save_path(active: &Path, designation: u32) -> PathBuf {
-    saves_dir(active).join(format!("{designation}.toml"))
-}
-
-/// Cycle 450's Q410.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum SaveMode {
-    Save,
-    Restore,
-    Show,
-    Delete,
-}
-
-impl SaveMode {
-    pub fn from_q410(v: f64) -> Option<Self> {
-        match v as i64 {
-            0 => Some(Self::Save),
-            1 => Some(Self::Restore),
-            2 => Some(Self::Show),
-            3 => Some(Self::Delete),
-            _ => None,
-        }
-    }
-}
-
-/// Cycle 450 SAVE KINEMATICS on the kinematics file `active` of `cfg`. Returns what to
-/// tell the operator. A restore validates the save against the machine before
-/// replacing the active file atomically.
-pub fn save_kinematics(
-    mode: SaveMode,
-    designation: u32,
-    active: &Path,
-    cfg: &MachineConfig,
-) -> Result<String, KinematicsFileError> {
-    let path = save_path(active, designation);
-    let missing = |what: &str| KinematicsFileError::Invalid {
-        path: path.clone(),
-        message: format!("nothing is saved under designation {designation}; nothing was {what}"),
-    };
-    match mode {
-        SaveMode::Save => {
-            let current = ActiveKinematics::load(active, cfg)?;
-            let existed = path.exists();
-            let mut saved = current.clone();
-            saved.path = path.clone();
-            write_atomic(&path, saved.render().as_bytes())?;
-            Ok(format!(
-                "active kinematics saved under {designation}{} ({})",
-                if existed {
-                    ", replacing the earlier save"
-                } else {
-                    ""
-                },
-                path.display()
-            ))
-        }
-        SaveMode::Restore => {
-            if !path.exists() {
-                return Err(missing("restored"));
-            }
-            let mut saved = ActiveKinematics::load(&path, cfg)?;
-            saved.path = active.to_path_buf();
-            saved.write()?;
-            Ok(format!(
-                "kinematics {designation} restored into {} (previous version kept as .prev)",
-                active.display()
-            ))
-        }
-        SaveMode::Show => {
-            let mut lines = Vec::new();
-            let dir = saves_dir(active);
-            let mut names: Vec<u32> = std::fs::read_dir(&dir)
-                .map(|rd| {
-                    rd.filter_map(|e| e.ok())
-                        .filter_map(|e| e.path().file_stem()?.to_str()?.parse().ok())
-                        .collect()
-                })
-                .unwrap_or_default();
-            names.sort_unstable();
-            if names.is_empty() {
-                return Ok(format!("no kinematics saved in {}", dir.display()));
-            }
-            for n in names {
-                let k = ActiveKinematics::load(&save_path(active, n), cfg)?;
-                let errors: Vec<String> = k
-                    .errors
-                    .iter()
-                    .map(|(k, v)| format!("{k}={v:+.6}"))
-                    .collect();
-                let mark = if n == designation { " <-" } else { "" };
-                lines.push(format!(
-                    "{n}: {}{mark}",
-                    if errors.is_empty() {
-                        "nominal".into()
-                    } else {
-                        errors.join(" ")
-                    }
-                ));
-            }
-            Ok(lines.join("\n"))
-        }
-        SaveMode::Delete => {
-            if !path.exists() {
-                return Err(missing("deleted"));
-            }
-            std::fs::remove_file(&path).map_err(write_error(&path))?;
-            Ok(format!("saved kinematics {designation} deleted"))
-        }
-    }
 }
 
 #[cfg(test)]
@@ -382,49 +295,14 @@ mod tests {
         let c = cfg(&d);
         let path = d.join("k.toml");
         std::fs::write(&path, "machine = \"table-ac\"\n[errors]\nEX0B = 0.1\n").unwrap();
-        let e = ActiveKinematics::load(&path, &c).unwrap_err().to_string();
-        assert!(
-            e.contains("errors.EX0B") && e.contains("not an error of a rotary axis"),
-            "{e}"
-        );
+        let e = ActiveKinematics::load(&path, &c).unwrap_err();
+        assert_eq!(e.kind(), KinematicsFileErrorKind::UnknownError, "{e}");
+        assert!(e.to_string().contains("errors.EX0B"), "names the key: {e}");
         std::fs::write(&path, "machine = \"other\"\n").unwrap();
-        let e = ActiveKinematics::load(&path, &c).unwrap_err().to_string();
-        assert!(e.contains("written for machine \"other\""), "{e}");
-    }
-
-    #[test]
-    fn cycle_450_save_show_restore_delete() {
-        let d = tmp("450");
-        let c = cfg(&d);
-        let path = ActiveKinematics::default_path(&c);
-        let mut k = ActiveKinematics::load(&path, &c).unwrap();
-        k.errors.insert("EY0C".into(), 0.02);
-        k.write().unwrap();
-        save_kinematics(SaveMode::Save, 7, &path, &c).unwrap();
-        k.errors.insert("EY0C".into(), 0.5);
-        k.write().unwrap();
-        let shown = save_kinematics(SaveMode::Show, 7, &path, &c).unwrap();
-        assert!(shown.contains("7: EY0C=+0.020000 <-"), "{shown}");
-        save_kinematics(SaveMode::Restore, 7, &path, &c).unwrap();
-        assert_eq!(
-            ActiveKinematics::load(&path, &c).unwrap().error("EY0C"),
-            0.02
-        );
-        // The version the restore replaced is kept.
-        assert_eq!(
-            ActiveKinematics::load(&prev_path(&path), &c)
-                .unwrap()
-                .error("EY0C"),
-            0.5
-        );
-        save_kinematics(SaveMode::Delete, 7, &path, &c).unwrap();
-        let e = save_kinematics(SaveMode::Restore, 7, &path, &c)
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("nothing is saved under designation 7"), "{e}");
-        assert_eq!(
-            ActiveKinematics::load(&path, &c).unwrap().error("EY0C"),
-            0.02
-        );
+        let e = ActiveKinematics::load(&path, &c).unwrap_err();
+        assert_eq!(e.kind(), KinematicsFileErrorKind::OtherMachine, "{e}");
+        std::fs::write(&path, "machine = \"table-ac\"\nerror = 1\n").unwrap();
+        let e = ActiveKinematics::load(&path, &c).unwrap_err();
+        assert_eq!(e.kind(), KinematicsFileErrorKind::Syntax, "{e}");
     }
 }

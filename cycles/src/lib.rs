@@ -1,39 +1,58 @@
 //! probebridge-cycles: NC programs with HEIDENHAIN touch-probe cycles, their parameter
 //! tables and validation, the cycles run over [`hal::Machine`], geometry fits, results
-//! and protocols.
+//! and measuring logs.
 //!
 //! - [`Program::parse`] / [`Program::load`] / [`parser::check_program`]: read and
-//!   validate a program against a [`hal::config::MachineConfig`] (all errors, with
-//!   lines);
-//! - [`run_program`]: run its cycles ([`cycle431`], [`cycle444`], [`cycle451`], 450 in
-//!   [`kinematics_file`]) and `L` positioning blocks ([`linear`]) over a machine;
+//!   validate a program against a machine's probe table and PREDEF values
+//!   ([`cycles_config::CyclesConfig`]: hal's [`hal::config::MachineConfig`] with the
+//!   [`probe_table`] and the cycles' [`machine_parameters`] of the same file; all
+//!   errors, with lines);
+//! - [`run_program`]: run its cycles ([`cycle431`], [`cycle444`], [`cycle450`],
+//!   [`cycle451`], each a [`cycle::MeasuringCycle`] with its typed parameters) and `L`
+//!   positioning blocks ([`linear`]) over a machine, reporting [`ProgressEvent`]s;
 //! - [`kinematics`]: cycle 451's kinematic model, measuring positions and ISO 230-7
-//!   identification, and the [`kinematics::Estimator`] it runs in;
-//! - [`ProgramReport`]: the results (JSON and text); [`protocol`]: TXT/HTML protocols;
+//!   identification ([`iso230_7`] names the errors), and the
+//!   [`kinematics::Estimator`] it runs in;
+//! - [`ProgramReport`]: the results (JSON and text); [`measuring_log`]: the TNC's
+//!   measuring logs (TCHPR431.TXT, TCHPR444.html; TCHPRAUTO.html is
+//!   [`cycle451::measuring_log`]);
 //! - [`geometry`]: sphere and plane fits.
 
+pub mod cycle;
 pub mod cycle431;
 pub mod cycle444;
+pub mod cycle450;
 pub mod cycle451;
+pub mod cycle_block;
+pub mod cycles_config;
+pub mod diagnostic;
 pub mod error;
 pub mod geometry;
+pub mod iso230_7;
 pub mod kinematics;
 pub mod kinematics_file;
+pub mod length_unit;
 pub mod linear;
+pub mod machine_parameters;
+pub mod measuring_log;
 pub mod params;
 pub mod parser;
 pub mod plane;
 mod positioning;
+pub mod probe_axis;
+pub mod probe_table;
 pub mod program;
-pub mod protocol;
-pub mod protocol451;
+pub mod progress;
 pub mod results;
 pub mod runner;
 pub mod tolerance;
 
+pub use cycles_config::CyclesConfig;
+pub use diagnostic::{Diagnostic, ProgramErrors};
 pub use error::CycleError;
 pub use geometry::{fit_plane, fit_sphere, FitError, PlaneFit, SphereFit};
 pub use parser::{check_program, parse_program};
-pub use program::{CycleCall, Diagnostic, Program, ProgramError, ProgramErrors};
+pub use program::{CycleCall, Program, ProgramError};
+pub use progress::ProgressEvent;
 pub use results::{CycleResult, ProgramReport, Status};
-pub use runner::{run_program, ProgressEvent, RunOptions};
+pub use runner::{run_program, RunOptions};

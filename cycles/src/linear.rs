@@ -5,7 +5,7 @@
 //! else in an `L` block (incremental `IX`, radius compensation `RL`/`RR`, polar or
 //! circular moves) is refused before anything moves.
 
-use crate::program::LengthUnit;
+use crate::length_unit::LengthUnit;
 use hal::{Axis, AxisPositions};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -22,13 +22,51 @@ pub struct LinearMove {
     pub feed: MoveFeed,
 }
 
+/// Why an `L` block cannot run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum LinearBlockErrorKind {
+    /// `F` without a number > 0.
+    Feed,
+    /// A word that cannot run here (`IX`, `RL`, polar, ...).
+    UnsupportedWord,
+    /// An axis word without a number.
+    Coordinate,
+    /// The same axis twice.
+    AxisTwice,
+    /// No axis at all.
+    NoCoordinate,
+}
+
+/// An `L` block that cannot run; the message names the word.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{message}")]
+pub struct LinearBlockError {
+    kind: LinearBlockErrorKind,
+    message: String,
+}
+
+impl LinearBlockError {
+    fn new(kind: LinearBlockErrorKind, message: impl Into<String>) -> Self {
+        Self {
+            kind,
+            message: message.into(),
+        }
+    }
+
+    pub fn kind(&self) -> LinearBlockErrorKind {
+        self.kind
+    }
+}
+
 fn number(s: &str) -> Option<f64> {
     let v: f64 = s.parse().ok()?;
     v.is_finite().then_some(v)
 }
 
 /// `None` when `code` is not an `L` block; otherwise the move or why it cannot run.
-pub fn parse_linear(code: &str, unit: LengthUnit) -> Option<Result<LinearMove, String>> {
+pub fn parse_linear(code: &str, unit: LengthUnit) -> Option<Result<LinearMove, LinearBlockError>> {
+    use LinearBlockErrorKind as K;
     let mut words = code.split_whitespace();
     if !words.next()?.eq_ignore_ascii_case("L") {
         return None;
@@ -50,19 +88,31 @@ pub fn parse_linear(code: &str, unit: LengthUnit) -> Option<Result<LinearMove, S
                     feed = MoveFeed::Feed(if inch { f * 2.54 } else { f });
                     continue;
                 }
-                _ => return Some(Err(format!("L block: {w}: the feed must be a number > 0"))),
+                _ => {
+                    return Some(Err(LinearBlockError::new(
+                        K::Feed,
+                        format!("L block: {w}: the feed must be a number > 0"),
+                    )))
+                }
             }
         }
         let Some(axis) = u.get(..1).and_then(Axis::from_name) else {
-            return Some(Err(format!(
-                "L block: {w}: only absolute X/Y/Z/A/B/C, R0, F and M words can run here"
+            return Some(Err(LinearBlockError::new(
+                K::UnsupportedWord,
+                format!("L block: {w}: only absolute X/Y/Z/A/B/C, R0, F and M words can run here"),
             )));
         };
         let Some(v) = number(&u[1..]) else {
-            return Some(Err(format!("L block: {w}: not a coordinate")));
+            return Some(Err(LinearBlockError::new(
+                K::Coordinate,
+                format!("L block: {w}: not a coordinate"),
+            )));
         };
         if target.contains(axis) {
-            return Some(Err(format!("L block: {axis} given twice")));
+            return Some(Err(LinearBlockError::new(
+                K::AxisTwice,
+                format!("L block: {axis} given twice"),
+            )));
         }
         let v = if inch && !axis.is_rotary() {
             v * 25.4
@@ -72,7 +122,10 @@ pub fn parse_linear(code: &str, unit: LengthUnit) -> Option<Result<LinearMove, S
         target.set(axis, v);
     }
     if target.mask() == 0 {
-        return Some(Err("L block without a coordinate".into()));
+        return Some(Err(LinearBlockError::new(
+            K::NoCoordinate,
+            "L block without a coordinate",
+        )));
     }
     Some(Ok(LinearMove { target, feed }))
 }
@@ -99,8 +152,17 @@ mod tests {
         assert_eq!(m.target.get(Axis::Z), Some(25.4));
         assert!(parse_linear("CYCL DEF 200", LengthUnit::Mm).is_none());
         assert!(parse_linear("LBL 1", LengthUnit::Mm).is_none());
-        for bad in ["L IX+5", "L X+5 RL", "L", "L X+1 X+2", "L Xabc"] {
-            assert!(parse_linear(bad, LengthUnit::Mm).unwrap().is_err(), "{bad}");
+        use LinearBlockErrorKind as K;
+        for (bad, kind) in [
+            ("L IX+5", K::UnsupportedWord),
+            ("L X+5 RL", K::UnsupportedWord),
+            ("L", K::NoCoordinate),
+            ("L X+1 X+2", K::AxisTwice),
+            ("L Xabc", K::Coordinate),
+            ("L X+1 F0", K::Feed),
+        ] {
+            let e = parse_linear(bad, LengthUnit::Mm).unwrap().unwrap_err();
+            assert_eq!(e.kind(), kind, "{bad}: {e}");
         }
     }
 }

@@ -4,17 +4,43 @@
 //! parameter against its table. All problems of a program are collected, each with
 //! its line, so `check` shows them at once.
 
+use crate::cycle431::PlaneParams;
+use crate::cycle444::Probing3dParams;
+use crate::cycle450::SaveParams;
+use crate::cycle451::KinematicsParams;
+use crate::cycle_block::{CycleBlock, Origin, Param, ToolCall, Value};
+use crate::cycles_config::CyclesConfig;
+use crate::diagnostic::{Diagnostic, ProgramErrors};
+use crate::length_unit::LengthUnit;
 use crate::params::{self, CycleTable, Default as ParamDefault, Kind, ParamSpec};
-use crate::program::{
-    Block, CycleCall, CycleKind, Diagnostic, LengthUnit, Origin, Param, ProbeAxis, Program,
-    ProgramErrors, Statement, ToolCall, Value,
-};
-use crate::{cycle431, cycle444};
-use hal::config::MachineConfig;
+use crate::probe_axis::ProbeAxis;
+use crate::program::{Block, CycleCall, CycleKind, Program, ProgramError, Statement};
 use std::collections::BTreeMap;
+use std::path::Path;
+
+impl Program {
+    /// Parses and validates program text against a machine (probe table, PREDEF).
+    pub fn parse(text: &str, cfg: &CyclesConfig) -> Result<Program, ProgramErrors> {
+        parse_program(text, cfg)
+    }
+
+    /// Reads, parses and validates a `.h` file.
+    pub fn load(path: &Path, cfg: &CyclesConfig) -> Result<Program, ProgramError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ProgramError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let mut program = Program::parse(&text, cfg).map_err(|errors| ProgramError::Invalid {
+            path: path.to_path_buf(),
+            errors,
+        })?;
+        program.path = Some(path.to_path_buf());
+        Ok(program)
+    }
+}
 
 /// Parses and validates `text`; `Err` holds every problem found.
-pub fn parse_program(text: &str, cfg: &MachineConfig) -> Result<Program, ProgramErrors> {
+pub fn parse_program(text: &str, cfg: &CyclesConfig) -> Result<Program, ProgramErrors> {
     let (program, diagnostics) = analyse(text, cfg);
     if diagnostics.is_empty() {
         Ok(program)
@@ -24,7 +50,7 @@ pub fn parse_program(text: &str, cfg: &MachineConfig) -> Result<Program, Program
 }
 
 /// Every problem of `text`, sorted by line; empty when the program is valid.
-pub fn check_program(text: &str, cfg: &MachineConfig) -> Vec<Diagnostic> {
+pub fn check_program(text: &str, cfg: &CyclesConfig) -> Vec<Diagnostic> {
     analyse(text, cfg).1
 }
 
@@ -270,7 +296,7 @@ struct State {
     tool: Option<ToolCall>,
 }
 
-fn analyse(text: &str, cfg: &MachineConfig) -> (Program, Vec<Diagnostic>) {
+fn analyse(text: &str, cfg: &CyclesConfig) -> (Program, Vec<Diagnostic>) {
     let mut diags = Vec::new();
     let raw_blocks = group(text, &mut diags);
     let mut st = State {
@@ -327,7 +353,7 @@ fn statement(
     rb: &RawBlock,
     index: usize,
     st: &mut State,
-    cfg: &MachineConfig,
+    cfg: &CyclesConfig,
     diags: &mut Vec<Diagnostic>,
 ) -> Statement {
     let code = rb.head.code;
@@ -501,7 +527,7 @@ fn tool_call(
     iso: bool,
     line: usize,
     st: &mut State,
-    cfg: &MachineConfig,
+    cfg: &CyclesConfig,
     diags: &mut Vec<Diagnostic>,
 ) -> Option<ToolCall> {
     let (tool, after) = if let Some(q) = rest.strip_prefix('"') {
@@ -720,7 +746,7 @@ fn cycle(
     title: String,
     inline: Option<&str>,
     st: &State,
-    cfg: &MachineConfig,
+    cfg: &CyclesConfig,
     diags: &mut Vec<Diagnostic>,
 ) -> Statement {
     let line = rb.head.no;
@@ -824,19 +850,21 @@ fn cycle(
         return Statement::Other(rb.head.code.to_string());
     }
     let kind = match table.number {
-        431 => cycle431::PlaneParams::from_params(&params, st.unit).map(CycleKind::MeasurePlane),
-        444 => cycle444::Probing3dParams::from_params(&params, st.unit).map(CycleKind::Probing3d),
-        451 => Ok(CycleKind::MeasureKinematics),
-        _ => Ok(CycleKind::SaveKinematics),
+        431 => PlaneParams::from_params(&params, st.unit).map(CycleKind::MeasurePlane),
+        444 => Probing3dParams::from_params(&params, st.unit).map(CycleKind::Probing3d),
+        451 => KinematicsParams::from_params(&params, st.unit).map(CycleKind::MeasureKinematics),
+        _ => SaveParams::from_params(&params, st.unit).map(CycleKind::SaveKinematics),
     };
     match kind {
         Ok(kind) => Statement::Cycle(Box::new(CycleCall {
-            cycle: table.number,
-            title,
-            line,
-            block: rb.head.number.unwrap_or(line as u32),
-            params,
-            tool,
+            head: CycleBlock {
+                cycle: table.number,
+                title,
+                line,
+                block: rb.head.number.unwrap_or(line as u32),
+                params,
+                tool,
+            },
             kind,
         })),
         Err(problems) => {
@@ -850,7 +878,7 @@ fn resolve(
     spec: &ParamSpec,
     a: &Assignment,
     unit: LengthUnit,
-    cfg: &MachineConfig,
+    cfg: &CyclesConfig,
     diags: &mut Vec<Diagnostic>,
 ) -> Option<Param> {
     let shown = format!("{}={}", a.name, a.raw);
@@ -907,7 +935,7 @@ fn resolve(
                         "FAUTO" => Some(param(Value::Fauto, Origin::Written)),
                         _ => {
                             // PREDEF values come from the machine configuration, in mm.
-                            let Some(&v) = cfg.cycles.predef.get(spec.name) else {
+                            let Some(&v) = cfg.parameters.predef.get(spec.name) else {
                                 return fail(
                                     diags,
                                     format!(

@@ -3,8 +3,8 @@
 //! Every machine call reports a progress event and maps errors to [`CycleError`].
 
 use crate::error::CycleError;
-use crate::program::ProbeAxis;
-use crate::runner::ProgressEvent;
+use crate::probe_axis::ProbeAxis;
+use crate::progress::{ProgressEvent, ProgressSink};
 use hal::{AxisPositions, Contact, Machine, ProbeMove};
 
 pub(crate) struct Positioner<'a, M: Machine> {
@@ -13,7 +13,7 @@ pub(crate) struct Positioner<'a, M: Machine> {
     /// Positioning feed (the probe table's FMAX), mm/min.
     pub fmax: f64,
     pub block: u32,
-    pub progress: &'a mut dyn FnMut(ProgressEvent),
+    pub progress: &'a mut ProgressSink<'a>,
 }
 
 impl<M: Machine> Positioner<'_, M> {

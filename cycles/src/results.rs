@@ -2,6 +2,7 @@
 //! `{"cycles": [{"block": 13, "cycle": 444, "q": {"Q151": 0.0}, "qs": {}, "status": "ok",
 //! "message": null}]}`.
 
+use crate::cycle451::report::KinematicsReport;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -26,7 +27,7 @@ pub struct CycleResult {
     pub message: Option<String>,
     /// Cycle 451: every measuring position, its sphere, the errors before and after.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub kinematics: Option<Box<crate::cycle451::KinematicsReport>>,
+    pub kinematics: Option<Box<KinematicsReport>>,
 }
 
 impl CycleResult {
@@ -43,13 +44,36 @@ impl CycleResult {
     }
 }
 
+/// What a cycle gives the report.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CycleOutput {
+    pub q: BTreeMap<String, f64>,
+    pub qs: BTreeMap<String, String>,
+    /// The program stops after this cycle, with this message (Q309, no confirmation).
+    pub stop: Option<String>,
+    /// Cycle 451's report.
+    pub kinematics: Option<Box<KinematicsReport>>,
+    /// Measuring logs written.
+    pub logs: Vec<PathBuf>,
+}
+
+impl CycleOutput {
+    pub fn new(q: BTreeMap<String, f64>, stop: Option<String>) -> Self {
+        Self {
+            q,
+            stop,
+            ..Self::default()
+        }
+    }
+}
+
 /// All cycles that ran, in order; `stopped` says why the program ended early.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ProgramReport {
     pub cycles: Vec<CycleResult>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stopped: Option<String>,
-    /// Protocol files written.
+    /// Measuring logs written.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub protocols: Vec<PathBuf>,
 }

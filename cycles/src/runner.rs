@@ -2,65 +2,27 @@
 //! error, a Q309 stop or a refused confirmation ends the program; later cycles do not
 //! run.
 
-use crate::cycle431::PlaneRecord;
-use crate::cycle444::Probing3dRecord;
-use crate::cycle451::KinematicsReport;
+use crate::cycle::{CycleContext, MeasuringCycle};
+use crate::cycle451;
+use crate::cycle451::PlanErrorKind;
+use crate::cycles_config::CyclesConfig;
 use crate::error::CycleError;
 use crate::kinematics::{Estimator, LocalEstimator};
-use crate::linear::{parse_linear, MoveFeed};
+use crate::kinematics_file::ActiveKinematics;
+use crate::linear::{parse_linear, LinearBlockError, LinearBlockErrorKind, MoveFeed};
 use crate::program::{CycleCall, CycleKind, Program, Statement};
-use crate::protocol;
-use crate::results::{CycleResult, ProgramReport, Status};
-use crate::{cycle431, cycle444};
+use crate::progress::{ProgressEvent, ProgressSink};
+use crate::results::{CycleOutput, CycleResult, ProgramReport, Status};
 use hal::config::MachineConfig;
-use hal::{Axis, AxisPositions, Machine};
-use std::collections::BTreeMap;
+use hal::{Axis, Machine};
 use std::path::PathBuf;
-
-/// What the runner reports while it works (for a console or a UI).
-#[derive(Clone, Debug, PartialEq)]
-pub enum ProgressEvent {
-    CycleStarted {
-        block: u32,
-        cycle: u16,
-        line: usize,
-    },
-    Move {
-        block: u32,
-        target: AxisPositions,
-        feed: f64,
-    },
-    Probe {
-        block: u32,
-        direction: [f64; 3],
-        max_distance: f64,
-    },
-    /// Latched stylus ball centre, machine XYZ.
-    Contact {
-        block: u32,
-        centre: [f64; 3],
-    },
-    Note {
-        block: u32,
-        text: String,
-    },
-    Protocol {
-        block: u32,
-        path: PathBuf,
-    },
-    CycleFinished {
-        block: u32,
-        cycle: u16,
-        status: Status,
-    },
-}
 
 pub struct RunOptions<'a> {
     /// Where protocols are written (the TNC writes them next to the program).
     pub out_dir: PathBuf,
     /// Shows a text (the 431 protocol with Q281=2) and returns whether to go on.
     pub confirm: &'a mut dyn FnMut(&str) -> bool,
-    pub progress: &'a mut dyn FnMut(ProgressEvent),
+    pub progress: &'a mut ProgressSink<'a>,
     /// The machine's active kinematics file (cycles 450, 451); `None`: the default
     /// beside the machine configuration.
     pub kinematics: Option<PathBuf>,
@@ -73,8 +35,24 @@ impl RunOptions<'_> {
     pub fn kinematics_path(&self, cfg: &MachineConfig) -> PathBuf {
         self.kinematics
             .clone()
-            .unwrap_or_else(|| crate::kinematics_file::ActiveKinematics::default_path(cfg))
+            .unwrap_or_else(|| ActiveKinematics::default_path(cfg))
     }
+}
+
+/// Why a program cannot start on this machine.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum PreflightKind {
+    /// Cycle 451 cannot be planned on this machine.
+    Plan(PlanErrorKind),
+    /// The active kinematics file cannot be read.
+    ActiveKinematics,
+    /// The probe of a TOOL CALL is not in the probe table.
+    ProbeNotInTable,
+    /// The machine lacks a linear axis.
+    MissingAxis,
+    /// A positioning block (L) cannot run.
+    Positioning(LinearBlockErrorKind),
 }
 
 /// Checks, before anything moves, what only the machine and its configuration can
@@ -83,56 +61,70 @@ impl RunOptions<'_> {
 fn preflight(
     call: &CycleCall,
     machine_axes: u8,
-    cfg: &MachineConfig,
+    cfg: &CyclesConfig,
     kinematics: &std::path::Path,
-) -> Result<(), String> {
-    match call.kind {
+) -> Result<(), (PreflightKind, String)> {
+    let tool = &call.head.tool;
+    match &call.kind {
         CycleKind::MeasurePlane(_) | CycleKind::Probing3d(_) => {}
         // Works on files only: no probe, no motion.
-        CycleKind::SaveKinematics => return Ok(()),
-        CycleKind::MeasureKinematics => {
-            crate::cycle451::plan(call, cfg).map_err(|e| format!("{e}; nothing moved"))?;
-            crate::kinematics_file::ActiveKinematics::load(kinematics, cfg)
-                .map_err(|e| format!("active kinematics: {e}; nothing moved"))?;
+        CycleKind::SaveKinematics(_) => return Ok(()),
+        CycleKind::MeasureKinematics(p) => {
+            cycle451::plan(p, &tool.probe, &cfg.machine)
+                .map_err(|e| (PreflightKind::Plan(e.kind()), format!("{e}; nothing moved")))?;
+            ActiveKinematics::load(kinematics, &cfg.machine).map_err(|e| {
+                (
+                    PreflightKind::ActiveKinematics,
+                    format!("active kinematics: {e}; nothing moved"),
+                )
+            })?;
         }
     }
-    if cfg.probe(&call.tool.probe.name).is_none() {
-        return Err(format!(
-            "probe \"{}\" (TOOL CALL line {}) is not in the probe table of machine {}",
-            call.tool.probe.name, call.tool.line, cfg.name
+    if cfg.probe(&tool.probe.name).is_none() {
+        return Err((
+            PreflightKind::ProbeNotInTable,
+            format!(
+                "probe \"{}\" (TOOL CALL line {}) is not in the probe table of machine {}",
+                tool.probe.name, tool.line, cfg.machine.name
+            ),
         ));
     }
     for a in Axis::LINEAR {
         if machine_axes & (1 << a.index()) == 0 {
-            return Err(format!("the machine has no {a} axis"));
+            return Err((
+                PreflightKind::MissingAxis,
+                format!("the machine has no {a} axis"),
+            ));
         }
     }
     Ok(())
 }
 
 /// Why a program cannot start on this machine.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum Preflight {
     /// A cycle's demands the machine, its configuration or its kinematics file cannot
     /// meet.
+    #[error("block {block} (cycle {cycle}): {message}")]
     Cycle {
         block: u32,
         cycle: u16,
+        kind: PreflightKind,
         message: String,
     },
     /// A positioning block (L) that cannot be carried out.
-    Positioning { line: usize, message: String },
+    #[error("line {line}: {error}")]
+    Positioning {
+        line: usize,
+        error: LinearBlockError,
+    },
 }
 
-impl std::fmt::Display for Preflight {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+impl Preflight {
+    pub fn kind(&self) -> PreflightKind {
         match self {
-            Preflight::Cycle {
-                block,
-                cycle,
-                message,
-            } => write!(f, "block {block} (cycle {cycle}): {message}"),
-            Preflight::Positioning { line, message } => write!(f, "line {line}: {message}"),
+            Preflight::Cycle { kind, .. } => *kind,
+            Preflight::Positioning { error, .. } => PreflightKind::Positioning(error.kind()),
         }
     }
 }
@@ -142,22 +134,25 @@ impl std::fmt::Display for Preflight {
 pub fn preflight_program(
     program: &Program,
     machine_axes: u8,
-    cfg: &MachineConfig,
+    cfg: &CyclesConfig,
     kinematics: &std::path::Path,
 ) -> Result<(), Preflight> {
     for call in program.cycles() {
-        preflight(call, machine_axes, cfg, kinematics).map_err(|message| Preflight::Cycle {
-            block: call.block,
-            cycle: call.cycle,
-            message,
+        preflight(call, machine_axes, cfg, kinematics).map_err(|(kind, message)| {
+            Preflight::Cycle {
+                block: call.head.block,
+                cycle: call.head.cycle,
+                kind,
+                message,
+            }
         })?;
     }
     for block in &program.blocks {
         if let Statement::Other(code) = &block.statement {
-            if let Some(Err(message)) = parse_linear(code, program.unit) {
+            if let Some(Err(error)) = parse_linear(code, program.unit) {
                 return Err(Preflight::Positioning {
                     line: block.line,
-                    message,
+                    error,
                 });
             }
         }
@@ -168,17 +163,18 @@ pub fn preflight_program(
 pub fn run_program<M: Machine>(
     program: &Program,
     machine: &mut M,
-    cfg: &MachineConfig,
+    cfg: &CyclesConfig,
     opts: &mut RunOptions,
 ) -> ProgramReport {
     let mut report = ProgramReport::default();
-    let kinematics = opts.kinematics_path(cfg);
+    let kinematics = opts.kinematics_path(&cfg.machine);
     match preflight_program(program, machine.axes(), cfg, &kinematics) {
         Ok(()) => {}
         Err(Preflight::Cycle {
             block,
             cycle,
             message,
+            ..
         }) => {
             report.stopped = Some(format!("block {block}: {message}"));
             report
@@ -192,9 +188,27 @@ pub fn run_program<M: Machine>(
         }
     }
     // Rapid positioning: as fast as the slowest axis on the path allows.
-    let rapid = cfg.axes.iter().map(|a| a.max_feed).fold(0.0, f64::max);
-    let program_path = program.path.as_deref();
-    let mut points: Vec<Probing3dRecord> = Vec::new();
+    let rapid = cfg
+        .machine
+        .axes
+        .iter()
+        .map(|a| a.max_feed)
+        .fold(0.0, f64::max);
+    let mut local = LocalEstimator;
+    let estimator: &mut dyn Estimator = match opts.estimator.as_deref_mut() {
+        Some(e) => e,
+        None => &mut local,
+    };
+    let mut ctx = CycleContext {
+        cfg,
+        kinematics,
+        estimator,
+        confirm: &mut *opts.confirm,
+        progress: &mut *opts.progress,
+        out_dir: &opts.out_dir,
+        program: program.path.as_deref(),
+        probing3d: Vec::new(),
+    };
     for block in &program.blocks {
         let call = match &block.statement {
             Statement::Cycle(call) => &**call,
@@ -205,7 +219,7 @@ pub fn run_program<M: Machine>(
                         MoveFeed::Feed(f) => f,
                     };
                     let number = block.number.unwrap_or(block.line as u32);
-                    (opts.progress)(ProgressEvent::Move {
+                    (ctx.progress)(ProgressEvent::Move {
                         block: number,
                         target: mv.target,
                         feed,
@@ -219,49 +233,7 @@ pub fn run_program<M: Machine>(
             }
             _ => continue,
         };
-        (opts.progress)(ProgressEvent::CycleStarted {
-            block: call.block,
-            cycle: call.cycle,
-            line: call.line,
-        });
-        let outcome = run_cycle(
-            call,
-            machine,
-            cfg,
-            opts,
-            program_path,
-            &mut points,
-            &mut report,
-        );
-        let result = match outcome {
-            Ok(out) => {
-                if let Some(m) = &out.stop {
-                    report.stopped = Some(format!("block {}: {m}", call.block));
-                }
-                CycleResult {
-                    block: call.block,
-                    cycle: call.cycle,
-                    q: out.q,
-                    qs: out.qs,
-                    status: Status::Ok,
-                    message: out.stop,
-                    kinematics: out.kinematics,
-                }
-            }
-            Err(e) => {
-                let message = e.to_string();
-                report.stopped = Some(format!(
-                    "block {}: cycle {} failed: {message}",
-                    call.block, call.cycle
-                ));
-                CycleResult::error(call.block, call.cycle, message)
-            }
-        };
-        (opts.progress)(ProgressEvent::CycleFinished {
-            block: call.block,
-            cycle: call.cycle,
-            status: result.status,
-        });
+        let result = run_cycle(call, machine, &mut ctx, &mut report);
         report.cycles.push(result);
         if report.stopped.is_some() {
             break;
@@ -270,161 +242,63 @@ pub fn run_program<M: Machine>(
     report
 }
 
-/// What a cycle gives the report.
-struct CycleOutput {
-    q: BTreeMap<String, f64>,
-    qs: BTreeMap<String, String>,
-    /// The program stops after this cycle, with this message.
-    stop: Option<String>,
-    kinematics: Option<Box<KinematicsReport>>,
-}
-
-impl CycleOutput {
-    fn new(q: BTreeMap<String, f64>, stop: Option<String>) -> Self {
-        Self {
-            q,
-            qs: BTreeMap::new(),
-            stop,
-            kinematics: None,
-        }
-    }
-}
-
-type Outcome = Result<CycleOutput, CycleError>;
-
+/// Runs one cycle and reports it: its start, its result, the logs it wrote, why the
+/// program stops after it.
 fn run_cycle<M: Machine>(
     call: &CycleCall,
     machine: &mut M,
-    cfg: &MachineConfig,
-    opts: &mut RunOptions,
-    program_path: Option<&std::path::Path>,
-    points: &mut Vec<Probing3dRecord>,
+    ctx: &mut CycleContext<'_>,
     report: &mut ProgramReport,
-) -> Outcome {
-    match &call.kind {
-        CycleKind::MeasurePlane(p) => {
-            let out = cycle431::run(call, p, machine, opts.progress)?;
-            let stop = plane_protocol(call, p.protocol, &out.record, opts, program_path, report)?;
-            Ok(CycleOutput::new(out.q, stop))
-        }
-        CycleKind::Probing3d(p) => {
-            let out = cycle444::run(call, p, machine, opts.progress)?;
-            points.push(out.record);
-            // Rewritten after every point so it is complete even if a later cycle fails.
-            let path = protocol::write_probing3d_protocol(&opts.out_dir, points, program_path)
-                .map_err(|e| CycleError::Protocol {
-                    path: opts
-                        .out_dir
-                        .join(protocol::PROBING_3D_PROTOCOL)
-                        .display()
-                        .to_string(),
-                    message: e.to_string(),
-                })?;
-            note_protocol(call, path, opts, report);
-            Ok(CycleOutput::new(out.q, out.stop))
-        }
-        CycleKind::SaveKinematics => {
-            let message = save_kinematics_cycle(call, cfg, opts)?;
-            (opts.progress)(ProgressEvent::Note {
-                block: call.block,
-                text: message.clone(),
-            });
-            Ok(CycleOutput::new(BTreeMap::new(), None))
-        }
-        CycleKind::MeasureKinematics => {
-            let plan = crate::cycle451::plan(call, cfg).map_err(CycleError::Plan)?;
-            let kinematics = opts.kinematics_path(cfg);
-            let mut local = LocalEstimator;
-            let estimator: &mut dyn Estimator = match opts.estimator.as_deref_mut() {
-                Some(e) => e,
-                None => &mut local,
-            };
-            let mut ctx = crate::cycle451::Context {
-                cfg,
-                kinematics,
-                estimator,
-                confirm: &mut *opts.confirm,
-                progress: &mut *opts.progress,
-                out_dir: &opts.out_dir,
-                program: program_path,
-            };
-            let out = crate::cycle451::run(call, &plan, machine, &mut ctx)?;
-            if let Some(path) = out.protocol {
-                note_protocol(call, path, opts, report);
+) -> CycleResult {
+    let head = &call.head;
+    (ctx.progress)(ProgressEvent::CycleStarted {
+        block: head.block,
+        cycle: head.cycle,
+        line: head.line,
+    });
+    let outcome: Result<CycleOutput, CycleError> = match &call.kind {
+        CycleKind::MeasurePlane(p) => p.run(head, machine, ctx),
+        CycleKind::Probing3d(p) => p.run(head, machine, ctx),
+        CycleKind::SaveKinematics(p) => p.run(head, machine, ctx),
+        CycleKind::MeasureKinematics(p) => p.run(head, machine, ctx),
+    };
+    let result = match outcome {
+        Ok(out) => {
+            for path in out.logs {
+                (ctx.progress)(ProgressEvent::MeasuringLog {
+                    block: head.block,
+                    path: path.clone(),
+                });
+                if !report.protocols.contains(&path) {
+                    report.protocols.push(path);
+                }
             }
-            Ok(CycleOutput {
+            if let Some(m) = &out.stop {
+                report.stopped = Some(format!("block {}: {m}", head.block));
+            }
+            CycleResult {
+                block: head.block,
+                cycle: head.cycle,
                 q: out.q,
                 qs: out.qs,
-                stop: out.stop,
-                kinematics: Some(Box::new(out.report)),
-            })
+                status: Status::Ok,
+                message: out.stop,
+                kinematics: out.kinematics,
+            }
         }
-    }
-}
-
-/// Cycle 450 SAVE KINEMATICS (Q410 mode, Q409 designation) on the active kinematics
-/// file.
-fn save_kinematics_cycle(
-    call: &CycleCall,
-    cfg: &MachineConfig,
-    opts: &RunOptions,
-) -> Result<String, CycleError> {
-    use crate::kinematics_file::{save_kinematics, SaveMode};
-    // Both are required and range-checked by the parameter table.
-    let mode = call
-        .number("Q410")
-        .and_then(SaveMode::from_q410)
-        .ok_or_else(|| CycleError::Plan("Q410 must be 0..3".into()))?;
-    let designation = call.number("Q409").unwrap_or(0.0) as u32;
-    save_kinematics(mode, designation, &opts.kinematics_path(cfg), cfg)
-        .map_err(|e| CycleError::Plan(e.to_string()))
-}
-
-fn note_protocol(
-    call: &CycleCall,
-    path: PathBuf,
-    opts: &mut RunOptions,
-    report: &mut ProgramReport,
-) {
-    (opts.progress)(ProgressEvent::Protocol {
-        block: call.block,
-        path: path.clone(),
+        Err(e) => {
+            let message = e.to_string();
+            report.stopped = Some(format!(
+                "block {}: cycle {} failed: {message}",
+                head.block, head.cycle
+            ));
+            CycleResult::error(head.block, head.cycle, message)
+        }
+    };
+    (ctx.progress)(ProgressEvent::CycleFinished {
+        block: head.block,
+        cycle: head.cycle,
+        status: result.status,
     });
-    if !report.protocols.contains(&path) {
-        report.protocols.push(path);
-    }
-}
-
-/// Q281: 1 writes TCHPR431.TXT; 2 shows it and goes on only when confirmed.
-fn plane_protocol(
-    call: &CycleCall,
-    mode: u8,
-    record: &PlaneRecord,
-    opts: &mut RunOptions,
-    program_path: Option<&std::path::Path>,
-    report: &mut ProgramReport,
-) -> Result<Option<String>, CycleError> {
-    match mode {
-        1 => {
-            let path = protocol::write_plane_protocol(&opts.out_dir, record, program_path)
-                .map_err(|e| CycleError::Protocol {
-                    path: opts
-                        .out_dir
-                        .join(protocol::PLANE_PROTOCOL)
-                        .display()
-                        .to_string(),
-                    message: e.to_string(),
-                })?;
-            note_protocol(call, path, opts, report);
-            Ok(None)
-        }
-        2 => {
-            let text =
-                protocol::plane_protocol_text(record, program_path, &protocol::timestamp_utc());
-            Ok((!(opts.confirm)(&text)).then(|| {
-                "the cycle 431 protocol was not confirmed (Q281=2); program stopped".to_string()
-            }))
-        }
-        _ => Ok(None),
-    }
+    result
 }

@@ -4,6 +4,8 @@
 mod common;
 
 use common::MockMachine;
+use probebridge_cycles::linear::LinearBlockErrorKind;
+use probebridge_cycles::runner::{preflight_program, Preflight, PreflightKind};
 use probebridge_cycles::Program;
 
 #[test]
@@ -32,6 +34,17 @@ fn an_l_block_that_cannot_run_is_refused_before_anything_moves() {
     let mut m = MockMachine::new(vec![]);
     let (report, _) = common::run(&program, &mut m, &common::temp_dir("l-bad"), true);
     assert_eq!(m.motion_count(), 0);
-    let why = report.stopped.unwrap();
-    assert!(why.contains("line 3") && why.contains("IX+10"), "{why}");
+    let e = preflight_program(
+        &program,
+        0b111,
+        &cfg,
+        &common::temp_dir("l-bad").join("k.toml"),
+    )
+    .unwrap_err();
+    assert_eq!(
+        e.kind(),
+        PreflightKind::Positioning(LinearBlockErrorKind::UnsupportedWord)
+    );
+    assert!(matches!(e, Preflight::Positioning { line: 3, .. }), "{e}");
+    assert_eq!(report.stopped.unwrap(), format!("{e}; nothing moved"));
 }

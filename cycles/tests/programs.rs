@@ -4,8 +4,8 @@
 mod common;
 
 use common::{MockMachine, Surface};
-use hal::config::MachineConfig;
 use nalgebra::Vector3;
+use probebridge_cycles::CyclesConfig;
 use probebridge_cycles::{Program, Status};
 use std::path::PathBuf;
 
@@ -13,8 +13,8 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-fn machine() -> MachineConfig {
-    MachineConfig::load(&root().join("configs/machines/table-ac.toml")).unwrap()
+fn machine() -> CyclesConfig {
+    CyclesConfig::load(&root().join("configs/machines/table-ac.toml")).unwrap()
 }
 
 fn load(name: &str) -> Program {

@@ -6,6 +6,7 @@ mod common;
 use common::{MockMachine, Surface};
 use hal::ErrorKind;
 use nalgebra::Vector3;
+use probebridge_cycles::runner::{preflight_program, PreflightKind};
 use probebridge_cycles::{check_program, Program, ProgramReport, Status};
 
 fn point(n: u32, x: f64) -> String {
@@ -128,11 +129,20 @@ fn nothing_moves_when_validation_fails() {
     };
     let report = probebridge_cycles::run_program(&program, &mut m, &other, &mut opts);
     assert_eq!(m.motion_count(), 0);
-    assert!(report.cycles[0]
-        .message
-        .as_deref()
-        .unwrap()
-        .contains("not in the probe table"));
+    assert_eq!(report.cycles[0].status, Status::Error);
+    let e = preflight_program(
+        &program,
+        0b111,
+        &other,
+        &opts.kinematics_path(&other.machine),
+    )
+    .unwrap_err();
+    assert_eq!(e.kind(), PreflightKind::ProbeNotInTable, "{e}");
+    assert_eq!(
+        report.cycles[0].message.as_deref(),
+        Some(e.to_string().split_once(": ").unwrap().1),
+        "the report says why"
+    );
 }
 
 #[test]

@@ -13,10 +13,10 @@ fn program_450(mode: u8, designation: u32) -> String {
 }
 
 /// The table-ac machine: its C axis carries the errors saved and restored here.
-fn config() -> hal::config::MachineConfig {
+fn config() -> probebridge_cycles::CyclesConfig {
     let path =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/machines/table-ac.toml");
-    hal::config::MachineConfig::load(&path).unwrap()
+    probebridge_cycles::CyclesConfig::load(&path).unwrap()
 }
 
 fn run(text: &str, kin: &std::path::Path) -> (probebridge_cycles::ProgramReport, Vec<String>) {
@@ -47,7 +47,7 @@ fn save_change_restore_delete() {
     let dir = common::temp_dir("450");
     let kin = dir.join("table-ac.kinematics.toml");
     let cfg = config();
-    let mut k = ActiveKinematics::load(&kin, &cfg).unwrap();
+    let mut k = ActiveKinematics::load(&kin, &cfg.machine).unwrap();
     k.errors.insert("EX0C".into(), 0.011);
     k.write().unwrap();
 
@@ -64,7 +64,9 @@ fn save_change_restore_delete() {
     let (r, _) = run(&program_450(1, 12), &kin);
     assert_eq!(r.cycles[0].status, Status::Ok, "{:?}", r.cycles[0].message);
     assert_eq!(
-        ActiveKinematics::load(&kin, &cfg).unwrap().error("EX0C"),
+        ActiveKinematics::load(&kin, &cfg.machine)
+            .unwrap()
+            .error("EX0C"),
         0.011
     );
 

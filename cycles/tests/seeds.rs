@@ -6,6 +6,9 @@
 
 mod common;
 
+use probebridge_cycles::cycle450::{SaveMode, SaveParams};
+use probebridge_cycles::cycle451::Feed;
+use probebridge_cycles::kinematics::Mode;
 use probebridge_cycles::program::{CycleKind, LengthUnit, Origin, Statement, Value};
 use probebridge_cycles::{check_program, Program};
 
@@ -25,15 +28,28 @@ fn seed_001_450_and_451_check_mode() {
     let p = Program::parse(SEED_001_CHECK, &common::config()).unwrap();
     let cycles: Vec<_> = p.cycles().collect();
     assert_eq!(cycles.len(), 2);
-    assert_eq!((cycles[0].cycle, cycles[0].block), (450, 12));
-    assert_eq!(cycles[0].title, "SAVE KINEMATICS");
-    assert_eq!(cycles[0].number("Q410"), Some(0.0));
-    assert_eq!(cycles[0].number("Q409"), Some(5.0));
-    let k = cycles[1];
+    assert_eq!((cycles[0].head.cycle, cycles[0].head.block), (450, 12));
+    assert_eq!(cycles[0].head.title, "SAVE KINEMATICS");
+    assert_eq!(cycles[0].head.number("Q410"), Some(0.0));
+    assert_eq!(cycles[0].head.number("Q409"), Some(5.0));
     assert_eq!(
-        (k.cycle, k.block, k.kind.clone()),
-        (451, 13, CycleKind::MeasureKinematics)
+        cycles[0].kind,
+        CycleKind::SaveKinematics(SaveParams {
+            mode: SaveMode::Save,
+            designation: 5
+        })
     );
+    let k = cycles[1];
+    assert_eq!((k.head.cycle, k.head.block), (451, 13));
+    // Typed at parse time.
+    let CycleKind::MeasureKinematics(kp) = &k.kind else {
+        panic!("{:?}", k.kind)
+    };
+    assert_eq!(kp.mode, Mode::Check);
+    assert_eq!(kp.sphere_radius, 12.5);
+    assert_eq!(kp.feed, Feed::Value(750.0));
+    assert_eq!((kp.ranges[1].start, kp.ranges[1].points), (-90.0, 2));
+    assert_eq!((kp.points, kp.preset, kp.backlash), (4, 0, 0.0));
     let expect = [
         ("Q406", 0.0),
         ("Q407", 12.5),
@@ -58,21 +74,21 @@ fn seed_001_450_and_451_check_mode() {
         ("Q432", 0.0),
     ];
     for (q, v) in expect {
-        assert_eq!(k.number(q), Some(v), "{q}");
-        assert_eq!(k.params[q].origin, Origin::Written, "{q}");
+        assert_eq!(k.head.number(q), Some(v), "{q}");
+        assert_eq!(k.head.params[q].origin, Origin::Written, "{q}");
     }
-    assert_eq!(k.tool.probe.name, "TOUCH_PROBE");
+    assert_eq!(k.head.tool.probe.name, "TOUCH_PROBE");
 }
 
 #[test]
 fn seed_001_451_optimise_mode() {
     let p = Program::parse(SEED_001_OPTIMISE, &common::config()).unwrap();
     let k = p.cycles().next().unwrap();
-    assert_eq!((k.cycle, k.block), (451, 12));
-    assert_eq!(k.number("Q406"), Some(1.0));
-    assert_eq!(k.number("Q420"), Some(270.0));
-    assert_eq!(k.number("Q431"), Some(1.0));
-    assert_eq!(k.number("Q432"), Some(0.5));
+    assert_eq!((k.head.cycle, k.head.block), (451, 12));
+    assert_eq!(k.head.number("Q406"), Some(1.0));
+    assert_eq!(k.head.number("Q420"), Some(270.0));
+    assert_eq!(k.head.number("Q431"), Some(1.0));
+    assert_eq!(k.head.number("Q432"), Some(0.5));
 }
 
 #[test]
@@ -81,7 +97,7 @@ fn seed_003_444_block_verbatim() {
     let p = Program::parse(&text, &common::config()).unwrap();
     let c = p.cycles().next().unwrap();
     assert_eq!(
-        (c.cycle, c.block, c.title.as_str()),
+        (c.head.cycle, c.head.block, c.head.title.as_str()),
         (444, 11, "ANTASTEN 3D")
     );
     let CycleKind::Probing3d(q) = &c.kind else {
@@ -93,7 +109,7 @@ fn seed_003_444_block_verbatim() {
     assert_eq!(q.tolerance_text, "1-1");
     let t = q.tolerance.unwrap();
     assert_eq!((t.upper, t.lower), (1.0, -1.0));
-    assert_eq!(c.params["QS400"].value, Value::Text("1-1".into()));
+    assert_eq!(c.head.params["QS400"].value, Value::Text("1-1".into()));
     assert_eq!(p.unit, LengthUnit::Mm);
 }
 
@@ -182,7 +198,10 @@ fn truncated_examples_headers_are_recognised_and_complete_with_their_rows() {
         }
         let p =
             Program::parse(&restored, &cfg).unwrap_or_else(|e| panic!("{name}:\n{e}\n{restored}"));
-        let got: Vec<(u16, String)> = p.cycles().map(|c| (c.cycle, c.title.clone())).collect();
+        let got: Vec<(u16, String)> = p
+            .cycles()
+            .map(|c| (c.head.cycle, c.head.title.clone()))
+            .collect();
         let want: Vec<(u16, String)> = expected.iter().map(|(n, t)| (*n, t.to_string())).collect();
         assert_eq!(got, want, "{name}");
         assert!(p.blocks.iter().any(

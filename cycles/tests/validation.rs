@@ -256,16 +256,16 @@ fn keywords_only_where_the_table_allows_them() {
     let base = "Q263=+0 ~\nQ264=+0 ~\nQ294=+0 ~\nQ581=+1 ~\nQ582=+0 ~\nQ583=+0 ~\nQ320=PREDEF ~\nQ260=PREDEF";
     let p = Program::parse(&format!("{HEAD}{base}"), &common::config()).unwrap();
     let c = p.cycles().next().unwrap();
-    assert_eq!(c.number("Q320"), Some(0.5));
-    assert_eq!(c.params["Q320"].origin, Origin::Predef);
-    assert_eq!(c.number("Q260"), Some(150.0));
+    assert_eq!(c.head.number("Q320"), Some(0.5));
+    assert_eq!(c.head.params["Q320"].origin, Origin::Predef);
+    assert_eq!(c.head.number("Q260"), Some(150.0));
     let d = diags_of(&format!("{HEAD}{}", base.replace("Q263=+0", "Q263=PREDEF")));
     assert_eq!(d, vec!["line 3: Q263=PREDEF: 1ST POINT 1ST AXIS does not take PREDEF (allowed -99999.9999..99999.9999)"]);
     let d = diags_of(&format!("{HEAD}{}", base.replace("Q263=+0", "Q263=FMAX")));
     assert!(d[0].contains("does not take FMAX"), "{d:?}");
     // PREDEF needs a value in the configuration.
     let mut cfg = common::config();
-    cfg.cycles.predef.remove("Q260");
+    cfg.parameters.predef.remove("Q260");
     let d = check_program(&format!("{HEAD}{base}"), &cfg);
     assert_eq!(d.len(), 1);
     assert_eq!(d[0].line, 10);
@@ -277,7 +277,10 @@ fn keywords_only_where_the_table_allows_them() {
     // 451's feed takes FMAX and FAUTO.
     let text = "1 TOOL CALL \"TOUCH_PROBE\" Z\n2 G451 Q406=+0 Q407=+12.5 Q253=FMAX";
     let p = Program::parse(text, &common::config()).unwrap();
-    assert_eq!(p.cycles().next().unwrap().params["Q253"].value, Value::Fmax);
+    assert_eq!(
+        p.cycles().next().unwrap().head.params["Q253"].value,
+        Value::Fmax
+    );
 }
 
 #[test]
@@ -291,8 +294,8 @@ fn defaults_fill_optional_parameters() {
     .unwrap();
     let c = p.cycles().next().unwrap();
     for (q, v) in [("Q320", 0.0), ("Q309", 0.0)] {
-        assert_eq!(c.number(q), Some(v));
-        assert_eq!(c.params[q].origin, Origin::Default);
+        assert_eq!(c.head.number(q), Some(v));
+        assert_eq!(c.head.params[q].origin, Origin::Default);
     }
     let CycleKind::Probing3d(params) = &c.kind else {
         panic!()
@@ -380,7 +383,7 @@ fn iso_form_on_one_line_and_with_continuation() {
     for (text, block) in [(one.to_string(), 20), (format!("N10 T1 G17\n{cont}"), 20)] {
         let p = Program::parse(&text, &cfg).unwrap_or_else(|e| panic!("{e}"));
         let c = p.cycles().next().unwrap();
-        assert_eq!((c.cycle, c.block), (444, block));
+        assert_eq!((c.head.cycle, c.head.block), (444, block));
         let CycleKind::Probing3d(q) = &c.kind else {
             panic!()
         };
@@ -411,12 +414,12 @@ fn inch_programs_are_converted_to_mm() {
     let t = q.tolerance.unwrap();
     assert!((t.upper - 0.254).abs() < 1e-12 && (t.lower + 0.0508).abs() < 1e-12);
     let k = cycles.next().unwrap();
-    assert!((k.number("Q407").unwrap() - 12.7).abs() < 1e-12);
+    assert!((k.head.number("Q407").unwrap() - 12.7).abs() < 1e-12);
     assert!(
-        (k.number("Q253").unwrap() - 254.0).abs() < 1e-9,
+        (k.head.number("Q253").unwrap() - 254.0).abs() < 1e-9,
         "feed in 1/10 inch/min"
     );
-    assert_eq!(k.number("Q380"), Some(0.0), "angles are not converted");
+    assert_eq!(k.head.number("Q380"), Some(0.0), "angles are not converted");
 }
 
 #[test]

@@ -1,9 +1,12 @@
-//! The machine description: axes and their drives, bus timing, kinematic chain, probe
-//! table and the measuring cycles' machine parameters. One TOML file per machine under
-//! `configs/machines/`. Parsing is strict: an unknown key or a value out of range is an
-//! error naming the file, the key and why, before anything moves.
+//! The machine description: axes and their drives, bus timing, kinematic chain. One
+//! TOML file per machine under `configs/machines/`. Parsing is strict: an unknown key or
+//! a value out of range is an error naming the file, the key and why, before anything
+//! moves. The same file carries the probe table (`[[probe]]`) and the measuring cycles'
+//! machine parameters (`[cycles]`): probebridge-cycles reads and validates those; hal
+//! accepts exactly these two sections unread.
 
 use crate::axis::Axis;
+use serde::de::IgnoredAny;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -168,62 +171,6 @@ pub struct KinematicsConfig {
     pub pivot: BTreeMap<Axis, [f64; 3]>,
 }
 
-/// One entry of the touch-probe table (the TNC's tchprobe.tp).
-#[derive(Clone, Debug, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct ProbeEntry {
-    /// Tool name as in `TOOL CALL "NAME"`.
-    pub name: String,
-    /// Stylus ball radius R, mm.
-    pub radius: f64,
-    /// Clearance added to Q320, mm.
-    pub set_up: f64,
-    /// Positioning feed, mm/min.
-    pub fmax: f64,
-    /// Probing feed, mm/min.
-    pub f: f64,
-    /// Most probing travel beyond the nominal point, mm.
-    pub dist: f64,
-    /// Spindle orientation tracking (recorded).
-    #[serde(default)]
-    pub track: bool,
-    /// Retract distance after a contact, mm.
-    pub mb: f64,
-}
-
-/// Machine parameters of the measuring cycles.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct CycleParameters {
-    /// Largest allowed difference between fitted and nominal calibration sphere
-    /// radius (cycle 451), mm.
-    #[serde(default = "default_max_dev_cal_ball", rename = "maxDevCalBall")]
-    pub max_dev_cal_ball: f64,
-    /// Largest kinematics correction written without confirmation, mm / deg.
-    #[serde(default = "default_max_modification", rename = "maxModification")]
-    pub max_modification: f64,
-    /// Values of parameters given as `PREDEF` in a program, by Q number ("Q320").
-    #[serde(default)]
-    pub predef: BTreeMap<String, f64>,
-}
-
-fn default_max_dev_cal_ball() -> f64 {
-    0.1
-}
-fn default_max_modification() -> f64 {
-    0.5
-}
-
-impl Default for CycleParameters {
-    fn default() -> Self {
-        Self {
-            max_dev_cal_ball: default_max_dev_cal_ball(),
-            max_modification: default_max_modification(),
-            predef: BTreeMap::new(),
-        }
-    }
-}
-
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct MachineConfig {
@@ -236,10 +183,13 @@ pub struct MachineConfig {
     pub bus: BusConfig,
     #[serde(default)]
     pub kinematics: KinematicsConfig,
+    /// `[[probe]]`: the probe table, read and validated by probebridge-cycles.
     #[serde(rename = "probe", default)]
-    pub probes: Vec<ProbeEntry>,
-    #[serde(default)]
-    pub cycles: CycleParameters,
+    pub probe_table: IgnoredAny,
+    /// `[cycles]`: the measuring cycles' machine parameters, read and validated by
+    /// probebridge-cycles.
+    #[serde(rename = "cycles", default)]
+    pub cycle_parameters: IgnoredAny,
     /// Where this configuration was read from (set by [`MachineConfig::load`]).
     #[serde(skip)]
     pub path: PathBuf,
@@ -286,10 +236,6 @@ impl MachineConfig {
         match &mut self.bus {
             BusConfig::CanOpen(b) => Some(b),
         }
-    }
-
-    pub fn probe(&self, name: &str) -> Option<&ProbeEntry> {
-        self.probes.iter().find(|p| p.name == name)
     }
 
     fn invalid(&self, key: impl Into<String>, message: impl Into<String>) -> ConfigError {
@@ -423,30 +369,6 @@ impl MachineConfig {
                 ));
             }
         }
-        for (i, p) in self.probes.iter().enumerate() {
-            let key = |f: &str| format!("probe[{i}] ({}).{f}", p.name);
-            for (f, v, min) in [
-                ("radius", p.radius, 0.0),
-                ("fmax", p.fmax, 0.0),
-                ("f", p.f, 0.0),
-                ("dist", p.dist, 0.0),
-            ] {
-                if !(v.is_finite() && v > min) {
-                    return Err(self.invalid(key(f), "must be > 0"));
-                }
-            }
-            for (f, v) in [("set_up", p.set_up), ("mb", p.mb)] {
-                if !(v.is_finite() && v >= 0.0) {
-                    return Err(self.invalid(key(f), "must be >= 0"));
-                }
-            }
-        }
-        if self.cycles.max_dev_cal_ball.is_nan() || self.cycles.max_dev_cal_ball <= 0.0 {
-            return Err(self.invalid("cycles.maxDevCalBall", "must be > 0"));
-        }
-        if self.cycles.max_modification.is_nan() || self.cycles.max_modification <= 0.0 {
-            return Err(self.invalid("cycles.maxModification", "must be > 0"));
-        }
         Ok(())
     }
 }
@@ -536,6 +458,20 @@ max_acceleration = 1000.0
                 "{e}"
             );
         }
+    }
+
+    #[test]
+    fn probe_table_and_cycles_are_left_to_the_cycles_other_sections_refused() {
+        let with =
+            format!("{MINI}[[probe]]\nname = \"P\"\nanything = 1\n[cycles]\nmaxDevCalBall = 0.1\n");
+        MachineConfig::parse(&with, Path::new("m.toml")).unwrap();
+        let e = MachineConfig::parse(
+            &format!("{MINI}[probes]\nname = \"P\"\n"),
+            Path::new("m.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("m.toml") && e.contains("probes"), "{e}");
     }
 
     #[test]

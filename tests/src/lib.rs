@@ -21,9 +21,16 @@ pub fn scenario(text: &str) -> Scenario {
         .unwrap_or_else(|e| panic!("test scenario invalid: {e}"))
 }
 
-/// The probe table as the bridge sets it up for a scenario (R = the scenario's).
+/// The machine configuration of a scenario.
 pub fn machine_config(sc: &Scenario) -> hal::config::MachineConfig {
-    let mut cfg = sc.machine.clone();
+    sc.machine.clone()
+}
+
+/// The machine as the cycles see it, with the probe table as the bridge sets it up for
+/// a scenario (R = the scenario's).
+pub fn cycles_config(sc: &Scenario) -> cycles::CyclesConfig {
+    let mut cfg = cycles::CyclesConfig::of(sc.machine.clone())
+        .unwrap_or_else(|e| panic!("machine configuration invalid: {e}"));
     for p in &mut cfg.probes {
         p.radius = sc.probe_table_radius();
     }

@@ -8,7 +8,7 @@ use cycles::results::{CycleResult, ProgramReport, Status};
 use cycles::runner::{run_program, RunOptions};
 use probebridge_tests::conformance::{Backend, CanInproc};
 use probebridge_tests::spec451::*;
-use probebridge_tests::{configs_dir, machine_config, scenario};
+use probebridge_tests::{configs_dir, cycles_config, machine_config, scenario};
 
 use std::path::{Path, PathBuf};
 
@@ -30,7 +30,7 @@ fn temp_dir(name: &str) -> PathBuf {
 fn run_with(
     program: &str,
     sc: &sim::Scenario,
-    cfg: &hal::config::MachineConfig,
+    cfg: &cycles::CyclesConfig,
     dir: &Path,
     answer: bool,
 ) -> Run {
@@ -57,7 +57,7 @@ fn run_with(
 }
 
 fn run(program: &str, sc: &sim::Scenario, dir: &Path) -> Run {
-    run_with(program, sc, &machine_config(sc), dir, true)
+    run_with(program, sc, &cycles_config(sc), dir, true)
 }
 
 /// Per rotary axis: (start, end, incidence, points).
@@ -465,7 +465,7 @@ fn a_correction_beyond_max_modification_needs_confirmation() {
         points: 3,
         ..P451::default()
     };
-    let cfg = machine_config(&sc);
+    let cfg = cycles_config(&sc);
     // Refused: nothing written, the program stops.
     let dir = temp_dir("maxmod-no");
     let r = run_with(&program(&p, [50.0, -30.0, 80.0]), &sc, &cfg, &dir, false);
@@ -479,8 +479,9 @@ fn a_correction_beyond_max_modification_needs_confirmation() {
     let dir = temp_dir("maxmod-yes");
     let r = run_with(&program(&p, [50.0, -30.0, 80.0]), &sc, &cfg, &dir, true);
     assert!(r.report.completed(), "{:?}", r.report.stopped);
-    let k = cycles::kinematics_file::ActiveKinematics::load(&dir.join("kinematics.toml"), &cfg)
-        .unwrap();
+    let k =
+        cycles::kinematics_file::ActiveKinematics::load(&dir.join("kinematics.toml"), &cfg.machine)
+            .unwrap();
     assert!((k.error("EX0C") - 0.7).abs() < 2e-3, "{}", k.error("EX0C"));
 }
 
@@ -537,8 +538,9 @@ fn hirth_axis_positions_on_the_grid_and_q408_0_refused() {
         .unwrap()
         .replace("[truth]", "[truth]\nhirth_C = 3.0");
     let sc = scenario(&text);
-    let mut cfg = machine_config(&sc);
-    cfg.axes
+    let mut cfg = cycles_config(&sc);
+    cfg.machine
+        .axes
         .iter_mut()
         .find(|a| a.name == hal::Axis::C)
         .unwrap()
@@ -580,7 +582,7 @@ fn hirth_axis_positions_on_the_grid_and_q408_0_refused() {
 #[test]
 fn parameter_ranges_are_checked_before_anything_moves() {
     let sc = demo_sphere();
-    let cfg = machine_config(&sc);
+    let cfg = cycles_config(&sc);
     let good = P451 {
         c: Ax(90.0, 270.0, 0.0, 3),
         ..P451::default()

@@ -6,10 +6,10 @@ use cycles::program::Program;
 use cycles::results::{ProgramReport, Status};
 use cycles::runner::{run_program, RunOptions};
 use probebridge_tests::conformance::{Backend, CanInproc};
-use probebridge_tests::{machine_config, scenario};
+use probebridge_tests::{cycles_config, scenario};
 
 fn run(program: &str, sc: &sim::Scenario) -> ProgramReport {
-    let cfg = machine_config(sc);
+    let cfg = cycles_config(sc);
     let program = Program::parse(program, &cfg).unwrap_or_else(|e| panic!("{e}"));
     let mut m = CanInproc::open(sc);
     let out = std::env::temp_dir().join(format!("pb-sil-{}", std::process::id()));

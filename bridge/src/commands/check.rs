@@ -3,7 +3,7 @@
 //! the first move (cycle 451's plan against the machine and its active kinematics);
 //! nothing moves and no bus is opened.
 
-use crate::session::{resolve_machine, MachineOptions};
+use crate::session::{cycles_config, resolve_machine, MachineOptions};
 use cycles::kinematics_file::ActiveKinematics;
 use cycles::parser::parse_program;
 use cycles::runner::preflight_program;
@@ -15,15 +15,16 @@ pub fn run(
     machine: &MachineOptions,
     kinematics: Option<PathBuf>,
 ) -> Result<u8, String> {
-    let (cfg, _) = resolve_machine(machine).map_err(|e| e.to_string())?;
+    let (cfg, scenario) = resolve_machine(machine).map_err(|e| e.to_string())?;
+    let cycles_cfg = cycles_config(&cfg, scenario.as_ref()).map_err(|e| e.to_string())?;
     let text = std::fs::read_to_string(program)
         .map_err(|e| format!("cannot read {}: {e}", program.display()))?;
-    let errors: Vec<String> = match parse_program(&text, &cfg) {
+    let errors: Vec<String> = match parse_program(&text, &cycles_cfg) {
         Err(invalid) => invalid.0.iter().map(|d| d.to_string()).collect(),
         // Valid text: now what only the machine can tell, as `run` checks it.
         Ok(parsed) => {
             let kinematics = kinematics.unwrap_or_else(|| ActiveKinematics::default_path(&cfg));
-            match preflight_program(&parsed, cfg.axis_mask(), &cfg, &kinematics) {
+            match preflight_program(&parsed, cfg.axis_mask(), &cycles_cfg, &kinematics) {
                 Ok(()) => Vec::new(),
                 Err(e) => vec![e.to_string()],
             }

@@ -9,10 +9,11 @@
 //! the protocol is.
 
 use crate::ipc::{EstimatorChild, IpcEstimator};
-use crate::session::{MachineOptions, Session};
+use crate::session::{cycles_config, MachineOptions, Session};
 use cycles::kinematics_file::ActiveKinematics;
 use cycles::program::Program;
-use cycles::runner::{run_program, ProgressEvent, RunOptions};
+use cycles::progress::ProgressEvent;
+use cycles::runner::{run_program, RunOptions};
 use hal::{Axis, AxisPositions, Machine, ProbeMove};
 use std::time::Duration;
 
@@ -45,8 +46,8 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
         .first()
         .copied()
         .ok_or_else(|| format!("{}: the demo needs a [[sphere]]", scenario.path.display()))?;
-    let probe = s
-        .config
+    let probes = cycles_config(&s.config, Some(scenario)).map_err(|e| e.to_string())?;
+    let probe = probes
         .probes
         .first()
         .ok_or_else(|| {
@@ -167,24 +168,24 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
         .clone()
         .ok_or("the demo runs on the simulator only")?;
     let sphere = scenario.spheres[0];
-    let cfg = s.config.clone();
+    let cfg = cycles_config(&s.config, Some(&scenario)).map_err(|e| e.to_string())?;
     let probe = cfg.probes[0].clone();
     let dir = std::env::temp_dir().join(format!("probebridge-demo-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     // A temporary copy of the machine's kinematics file.
-    let shipped = ActiveKinematics::default_path(&cfg);
+    let shipped = ActiveKinematics::default_path(&cfg.machine);
     let kin = dir.join(shipped.file_name().unwrap_or_default());
     let _ = std::fs::remove_file(&kin);
     let _ = std::fs::remove_file(kin.with_extension("toml.prev"));
     if shipped.exists() {
         std::fs::copy(&shipped, &kin).map_err(|e| format!("{}: {e}", shipped.display()))?;
     }
-    let before = ActiveKinematics::load(&kin, &cfg).map_err(|e| e.to_string())?;
+    let before = ActiveKinematics::load(&kin, &cfg.machine).map_err(|e| e.to_string())?;
 
     let mut q = String::new();
     let mut measured = Vec::new();
     for (axis, base) in [(Axis::A, 411), (Axis::B, 415), (Axis::C, 419)] {
-        let (start, end, n) = demo_range(axis, &cfg).unwrap_or((0.0, 0.0, 0));
+        let (start, end, n) = demo_range(axis, &cfg.machine).unwrap_or((0.0, 0.0, 0));
         if n > 0 {
             measured.push(axis);
         }
@@ -266,7 +267,7 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
     );
     println!("  error       before       after    injected (scenario truth)");
     for a in &measured {
-        for name in cycles::kinematics_file::error_names(*a) {
+        for name in cycles::iso230_7::error_names(*a) {
             let b = before.error(name);
             let after = k.errors_after.get(*name).copied().unwrap_or(b);
             let truth = scenario.truth.get(name).unwrap_or(0.0);

@@ -1,7 +1,7 @@
 //! `probebridge probe`: one probing move, reported with the latched positions of all
 //! axes.
 
-use crate::session::{MachineOptions, Session};
+use crate::session::{cycles_config, MachineOptions, Session};
 use hal::{AxisPositions, Machine, ProbeMove};
 use std::path::PathBuf;
 
@@ -29,7 +29,8 @@ pub fn run(args: &ProbeArgs) -> Result<(), String> {
     for note in &s.startup.notes {
         eprintln!("note: {note}");
     }
-    let rapid = s.config.probes.first().map_or(3000.0, |p| p.fmax);
+    let probes = cycles_config(&s.config, s.scenario.as_ref()).map_err(|e| e.to_string())?;
+    let rapid = probes.probes.first().map_or(3000.0, |p| p.fmax);
     let start = AxisPositions::linear(args.start);
     s.machine
         .move_to(&start, rapid)

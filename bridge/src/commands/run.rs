@@ -4,9 +4,10 @@
 
 use crate::ipc::{EstimatorChild, EstimatorClient, IpcEstimator};
 use crate::output::write_atomic;
-use crate::session::{resolve_machine, MachineOptions, Session};
+use crate::session::{cycles_config, resolve_machine, MachineOptions, Session};
 use cycles::program::{Program, ProgramError};
-use cycles::runner::{run_program, ProgressEvent, RunOptions};
+use cycles::progress::ProgressEvent;
+use cycles::runner::{run_program, RunOptions};
 use std::io::{BufRead, IsTerminal, Write};
 use std::path::PathBuf;
 use std::time::Duration;
@@ -29,7 +30,8 @@ pub struct RunArgs {
 /// Exit status: 0 every cycle succeeded, 1 a cycle failed or stopped the program,
 /// 2 the program is invalid (nothing moved).
 pub fn run(args: &RunArgs) -> Result<u8, String> {
-    let (cfg, _) = resolve_machine(&args.machine).map_err(|e| e.to_string())?;
+    let (cfg, scenario) = resolve_machine(&args.machine).map_err(|e| e.to_string())?;
+    let cfg = cycles_config(&cfg, scenario.as_ref()).map_err(|e| e.to_string())?;
     let program = match Program::load(&args.program, &cfg) {
         Ok(p) => p,
         Err(ProgramError::Invalid { path, errors }) => {
@@ -56,7 +58,7 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     // Cycle 451 fits its spheres and solves its identification in the estimator
     // process: use the one serving this prefix, or start one. It must subscribe before
     // the first contact is published.
-    let estimator = if program.cycles().any(|c| c.cycle == 451) {
+    let estimator = if program.cycles().any(|c| c.head.cycle == 451) {
         estimator_link(&args.machine.service)
     } else {
         None
@@ -79,7 +81,7 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
             );
         }
         ProgressEvent::Note { text, .. } => eprintln!("    {text}"),
-        ProgressEvent::Protocol { path, .. } => eprintln!("    protocol {}", path.display()),
+        ProgressEvent::MeasuringLog { path, .. } => eprintln!("    protocol {}", path.display()),
         ProgressEvent::CycleFinished { status, .. } => eprintln!("    {status:?}"),
         _ => {}
     };
@@ -116,7 +118,7 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     if let Some(e) = ipc.as_mut() {
         opts.estimator = Some(e);
     }
-    let report = run_program(&program, &mut session.machine, &session.config, &mut opts);
+    let report = run_program(&program, &mut session.machine, &cfg, &mut opts);
     print!("{}", report.to_text());
     if let Some(path) = &args.json {
         write_atomic(path, report.to_json().as_bytes())?;

@@ -27,7 +27,7 @@
 //! the fitted centre of the latched X/Y/Z positions of its contacts.
 //! [`KinematicModel::predict`] computes that, [`KinematicModel::table_point`] inverts it.
 
-use crate::kinematics_file::error_names;
+use crate::iso230_7::error_names;
 use hal::config::MachineConfig;
 use hal::{Axis, AxisPositions};
 use nalgebra::{Isometry3, Point3, Rotation3, Translation3, Unit, UnitQuaternion, Vector3};
@@ -92,7 +92,7 @@ impl ErrorPart {
 pub const ERROR_COUNT: usize = 15;
 
 /// All location and zero errors of A, B, C, by slot: `5 * rotary_slot(axis) + k` with
-/// `k` in the order of [`crate::kinematics_file::error_names`] (QS order, then zero).
+/// `k` in the order of [`crate::iso230_7::error_names`] (QS order, then zero).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ErrorSet(pub [f64; ERROR_COUNT]);
 

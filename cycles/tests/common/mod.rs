@@ -2,9 +2,9 @@
 //! simulator) that records every move, and a machine configuration.
 #![allow(dead_code)]
 
-use hal::config::MachineConfig;
 use hal::{AxisPositions, Contact, ErrorKind, Machine, MachineError, ProbeMove};
 use nalgebra::Vector3;
+use probebridge_cycles::CyclesConfig;
 use std::path::Path;
 
 pub const CONFIG: &str = r#"
@@ -57,8 +57,8 @@ Q320 = 0.5
 Q260 = 150.0
 "#;
 
-pub fn config() -> MachineConfig {
-    MachineConfig::parse(CONFIG, Path::new("mock.toml")).unwrap()
+pub fn config() -> CyclesConfig {
+    CyclesConfig::parse(CONFIG, Path::new("mock.toml")).unwrap()
 }
 
 /// Surfaces; normals point out of the material.

@@ -1,4 +1,4 @@
-//! `TCHPRAUTO.html`, the protocol of cycle 451 (seeds 000/004, "Protocol function";
+//! `TCHPRAUTO.html`, the measuring log of cycle 451 (seeds 000/004, "Protocol function";
 //! spec.md): date and time, program, tool, active kinematics, mode, incidence angles;
 //! per measured axis start and end angle, number of points, measuring circle radius,
 //! mean backlash, the axis's position before and after optimisation (relative to the
@@ -8,20 +8,14 @@
 //! (`EXC`, `EYC`, `EZC`, ...: the deviation of the sphere centre in X/Y/Z over the axis
 //! angle; red measured, green optimised).
 
-use crate::cycle451::{AxisReport, KinematicsReport};
+use super::report::{AxisReport, KinematicsReport};
 use crate::kinematics::model::{ErrorPart, ErrorSet, Joint};
+use crate::measuring_log::{escape as esc, program_name, write, MeasuringLogError};
 use hal::Axis;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-pub const KINEMATICS_PROTOCOL: &str = "TCHPRAUTO.html";
-
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-}
+pub const KINEMATICS_LOG: &str = "TCHPRAUTO.html";
 
 fn mode_text(mode: u8) -> &'static str {
     match mode {
@@ -36,8 +30,8 @@ fn v3(v: &[f64; 3]) -> String {
     format!("X{:+.4} Y{:+.4} Z{:+.4}", v[0], v[1], v[2])
 }
 
-/// The full text of the protocol.
-pub fn kinematics_protocol_html(
+/// The full text of the log.
+pub fn kinematics_log_html(
     r: &KinematicsReport,
     program: Option<&Path>,
     when: &str,
@@ -57,11 +51,7 @@ pub fn kinematics_protocol_html(
         );
     };
     row(&mut s, "Date and time", &esc(when));
-    row(
-        &mut s,
-        "NC program",
-        &esc(&program.map_or_else(|| "-".to_string(), |p| p.display().to_string())),
-    );
+    row(&mut s, "NC program", &esc(&program_name(program)));
     row(&mut s, "Tool", &esc(&r.probe));
     row(
         &mut s,
@@ -383,18 +373,16 @@ pub fn svg_plot(name: &str, axis: &str, points: &[(f64, f64, f64)]) -> String {
 }
 
 /// Writes `TCHPRAUTO.html` into `dir`.
-pub fn write_kinematics_protocol(
+pub fn write_kinematics_log(
     dir: &Path,
     report: &KinematicsReport,
     program: Option<&Path>,
     when: &str,
     written: Option<&str>,
-) -> std::io::Result<PathBuf> {
-    let path = dir.join(KINEMATICS_PROTOCOL);
-    std::fs::create_dir_all(dir)?;
-    std::fs::write(
-        &path,
-        kinematics_protocol_html(report, program, when, written),
-    )?;
-    Ok(path)
+) -> Result<PathBuf, MeasuringLogError> {
+    write(
+        dir,
+        KINEMATICS_LOG,
+        &kinematics_log_html(report, program, when, written),
+    )
 }

@@ -1,0 +1,49 @@
+//! What every measuring cycle has in common: what it runs with besides the machine
+//! ([`CycleContext`]) and the one signature all of them have ([`MeasuringCycle`]).
+
+use crate::cycle_block::CycleBlock;
+use crate::cycles_config::CyclesConfig;
+use crate::error::CycleError;
+use crate::kinematics::Estimator;
+use crate::measuring_log::probing3d::Probing3dRecord;
+use crate::progress::{ProgressEvent, ProgressSink};
+use crate::results::CycleOutput;
+use hal::Machine;
+use std::path::{Path, PathBuf};
+
+/// What a cycle needs besides the machine; one per program run.
+pub struct CycleContext<'a> {
+    pub cfg: &'a CyclesConfig,
+    /// The machine's active kinematics file (cycles 450, 451).
+    pub kinematics: PathBuf,
+    /// Where cycle 451 fits its spheres and solves its identification.
+    pub estimator: &'a mut dyn Estimator,
+    /// Shows a text and returns whether to go on (Q281=2, a large 451 correction).
+    pub confirm: &'a mut dyn FnMut(&str) -> bool,
+    pub progress: &'a mut ProgressSink<'a>,
+    /// Where measuring logs are written.
+    pub out_dir: &'a Path,
+    /// The program file, named in the measuring logs.
+    pub program: Option<&'a Path>,
+    /// Every cycle 444 point of this run so far: TCHPR444.html lists them all.
+    pub probing3d: Vec<Probing3dRecord>,
+}
+
+impl CycleContext<'_> {
+    pub fn note(&mut self, block: u32, text: impl Into<String>) {
+        (self.progress)(ProgressEvent::Note {
+            block,
+            text: text.into(),
+        });
+    }
+}
+
+/// A measuring cycle, by its typed parameters: every cycle runs with this signature.
+pub trait MeasuringCycle {
+    fn run<M: Machine>(
+        &self,
+        call: &CycleBlock,
+        machine: &mut M,
+        ctx: &mut CycleContext<'_>,
+    ) -> Result<CycleOutput, CycleError>;
+}

@@ -1,0 +1,478 @@
+//! Steps 2 and 3: locating the sphere, then measuring it at every position of every
+//! planned axis. Between positions the probe retracts to Q408 above the preset and
+//! over it before the rotary axes turn, or (Q408 = 0) follows the sphere at the pole in
+//! steps of at most [`TRACK_STEP_DEG`]. A sphere is the pole along the (possibly tilted)
+//! tool axis and Q423 points around the equator, fitted by the estimator; it is probed
+//! again around the fitted centre when that is more than [`RE_PROBE_TOLERANCE`] from
+//! where it was expected.
+
+use super::plan::KinematicsPlan;
+use super::report::SphereRecord;
+use crate::cycle::CycleContext;
+use crate::cycle_block::CycleBlock;
+use crate::error::CycleError;
+use crate::kinematics::model::{angles_of, rotary_slot, Angles, KinematicModel};
+use crate::probe_axis::ProbeAxis;
+use crate::probe_table::ProbeEntry;
+use crate::progress::ProgressEvent;
+use hal::{Axis, AxisPositions, Contact, Machine, ProbeMove};
+use nalgebra::Vector3;
+use std::collections::BTreeMap;
+
+/// A sphere whose fitted centre is farther than this from where it was expected is
+/// probed a second time around the fitted centre, mm.
+pub const RE_PROBE_TOLERANCE: f64 = 0.1;
+/// Largest rotary step of a move that follows the sphere (Q408 = 0), deg.
+pub const TRACK_STEP_DEG: f64 = 5.0;
+
+pub(super) fn axis_map(axes: &[Axis], a: &Angles) -> BTreeMap<String, f64> {
+    axes.iter()
+        .map(|x| (x.name().to_string(), a[rotary_slot(*x).expect("rotary")]))
+        .collect()
+}
+
+pub(super) fn arr(v: &Vector3<f64>) -> [f64; 3] {
+    [v.x, v.y, v.z]
+}
+
+/// Per position of an axis: whether it is the reference, and its sphere(s).
+pub(super) type PositionSpheres = Vec<(bool, Vec<Sphere>)>;
+
+/// A sphere measured at one position (last round).
+#[derive(Clone, Debug)]
+pub(super) struct Sphere {
+    pub angles: Angles,
+    pub centre: Vector3<f64>,
+    pub radius: f64,
+    pub record: SphereRecord,
+}
+
+/// Every measured axis (its index in the plan) and its positions.
+pub(super) type Measured = Vec<(usize, PositionSpheres)>;
+
+/// The machine, the plan and the model while the cycle measures.
+pub(super) struct Measure<'a, 'c, M: Machine> {
+    machine: &'a mut M,
+    pub ctx: &'a mut CycleContext<'c>,
+    plan: &'a KinematicsPlan,
+    probe: &'a ProbeEntry,
+    tool: ProbeAxis,
+    block: u32,
+    /// The control's model with the active kinematics.
+    pub model: KinematicModel,
+    run_base: u64,
+    runs: u64,
+    /// Commanded rotary angles now.
+    now: Angles,
+    /// Rotary angles where the cycle started (over the sphere).
+    pub start: Angles,
+    /// The sphere centre in table coordinates (from the locate measurement).
+    table_point: Vector3<f64>,
+    /// Active preset, machine X/Y/Z.
+    pub preset: Vector3<f64>,
+    /// Notes for the report.
+    pub notes: Vec<String>,
+}
+
+impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
+    /// Reads where the machine stands; nothing moves yet.
+    pub fn new(
+        machine: &'a mut M,
+        ctx: &'a mut CycleContext<'c>,
+        plan: &'a KinematicsPlan,
+        call: &'a CycleBlock,
+        model: KinematicModel,
+    ) -> Result<Self, CycleError> {
+        let start = machine
+            .positions()
+            .map_err(|e| CycleError::machine("reading the axis positions", &e))?;
+        let start = angles_of(&start);
+        Ok(Measure {
+            machine,
+            ctx,
+            plan,
+            probe: &call.tool.probe,
+            tool: call.tool.axis,
+            block: call.block,
+            model,
+            run_base: hal::clock::monotonic_ns(),
+            runs: 0,
+            now: start,
+            start,
+            table_point: Vector3::zeros(),
+            preset: Vector3::zeros(),
+            notes: Vec::new(),
+        })
+    }
+
+    pub fn note(&mut self, text: String) {
+        (self.ctx.progress)(ProgressEvent::Note {
+            block: self.block,
+            text,
+        });
+    }
+
+    /// Locates the sphere below the probe: probes down along the tool axis, then
+    /// measures the sphere around that estimate. Returns its centre (ball centre in
+    /// machine X/Y/Z); Q431 = 1/3 set the preset there.
+    pub fn locate(&mut self) -> Result<Vector3<f64>, CycleError> {
+        let start = self.start;
+        let p = &self.plan.params;
+        let n0 = self.frame(&start)[0];
+        let dist = self.clearance() + self.probe.dist;
+        let first = self
+            .probe(
+                "locating the sphere: probing along the tool axis from the start position",
+                -n0,
+                dist,
+            )
+            .map_err(|e| match e {
+                CycleError::Machine {
+                    step,
+                    kind,
+                    message,
+                } if kind == hal::ErrorKind::NotTriggered => CycleError::Machine {
+                    step,
+                    kind,
+                    message: format!(
+                        "{message}; before cycle 451 position the probe over the sphere centre, about Q320 + SET_UP = {:.3} mm above the sphere",
+                        self.clearance()
+                    ),
+                },
+                e => e,
+            })?;
+        let c0 = Vector3::from(first.positions.xyz()) - n0 * (p.sphere_radius + self.probe.radius);
+        let located = self.sphere(&start, c0, "locating the sphere")?;
+        self.table_point = self.model.table_point(&located.angles, &located.centre);
+        let ball = self.model.ball_in_machine(&located.angles, &located.centre);
+        if p.preset == 1 || p.preset == 3 {
+            self.preset = ball;
+            self.note(format!(
+                "Q431={}: preset set to the sphere centre X{:+.4} Y{:+.4} Z{:+.4}",
+                p.preset, ball.x, ball.y, ball.z
+            ));
+        }
+        Ok(ball)
+    }
+
+    /// Measures every planned axis: the 0 deg reference, then its positions (from both
+    /// sides with Q432), and goes back to where the cycle started.
+    pub fn measure_axes(&mut self) -> Result<Measured, CycleError> {
+        let plan = self.plan;
+        let mut measured = Vec::new();
+        for (gi, ap) in plan.axes.iter().enumerate() {
+            let b = if plan.backlash_measured(ap) {
+                plan.params.backlash
+            } else {
+                0.0
+            };
+            if plan.params.backlash != 0.0 && ap.hirth > 0.0 {
+                self.notes.push(format!(
+                    "{}: no backlash measurement on a Hirth axis",
+                    ap.axis
+                ));
+            }
+            let mut positions = Vec::new();
+            for (k, &angle) in std::iter::once(&0.0).chain(&ap.positions).enumerate() {
+                let what = if k == 0 {
+                    format!("{} reference at 0 deg", ap.axis)
+                } else {
+                    format!("{} position {k} ({}{angle:+.4})", ap.axis, ap.axis)
+                };
+                self.note(format!("measuring {what}"));
+                let spheres = self.position(ap.axis, angle, b, &what)?;
+                positions.push((k == 0, spheres));
+            }
+            measured.push((gi, positions));
+        }
+        // Back to where the cycle started, over the sphere.
+        self.go_to(self.start, None)?;
+        Ok(measured)
+    }
+
+    /// The sphere(s) at one position of `axis`: approached from `angle + b` and from
+    /// `angle - b` when `b != 0` (Q432), else directly.
+    fn position(
+        &mut self,
+        axis: Axis,
+        angle: f64,
+        b: f64,
+        what: &str,
+    ) -> Result<Vec<Sphere>, CycleError> {
+        let plan = self.plan;
+        let target = plan.angles(axis, angle);
+        let sides: Vec<Option<f64>> = if b != 0.0 {
+            vec![Some(b), Some(-b)]
+        } else {
+            vec![None]
+        };
+        let mut spheres = Vec::new();
+        for (si, side) in sides.iter().enumerate() {
+            let via = side.map(|off| plan.angles(axis, angle + off));
+            if si == 0 {
+                self.go_to(target, via)?;
+            } else {
+                if let Some(v) = via {
+                    self.track(v)?;
+                }
+                self.track(target)?;
+            }
+            let expected = self.model.predict(&target, &self.table_point);
+            let label = match side {
+                Some(off) => format!(
+                    "{what}, approached from {}",
+                    if *off > 0.0 { "above" } else { "below" }
+                ),
+                None => what.to_string(),
+            };
+            let mut s = self.sphere(&target, expected, &label)?;
+            s.record.approach = side.map(|off| if off > 0.0 { "above" } else { "below" }.into());
+            spheres.push(s);
+        }
+        Ok(spheres)
+    }
+
+    fn mv(&mut self, step: &str, target: AxisPositions, feed: f64) -> Result<(), CycleError> {
+        (self.ctx.progress)(ProgressEvent::Move {
+            block: self.block,
+            target,
+            feed,
+        });
+        self.machine
+            .move_to(&target, feed)
+            .map_err(|e| CycleError::machine(step, &e))
+    }
+
+    fn move_xyz(&mut self, step: &str, p: Vector3<f64>) -> Result<(), CycleError> {
+        self.mv(
+            step,
+            AxisPositions::linear(arr(&p)),
+            self.plan.positioning_feed,
+        )
+    }
+
+    fn probe(&mut self, step: &str, dir: Vector3<f64>, max: f64) -> Result<Contact, CycleError> {
+        let direction = arr(&dir.normalize());
+        (self.ctx.progress)(ProgressEvent::Probe {
+            block: self.block,
+            direction,
+            max_distance: max,
+        });
+        let c = self
+            .machine
+            .probe(&ProbeMove {
+                direction,
+                feed: self.probe.f,
+                max_distance: max,
+            })
+            .map_err(|e| CycleError::machine(step, &e))?;
+        (self.ctx.progress)(ProgressEvent::Contact {
+            block: self.block,
+            centre: c.positions.xyz(),
+        });
+        Ok(c)
+    }
+
+    fn clearance(&self) -> f64 {
+        self.probe.set_up + self.plan.params.clearance
+    }
+
+    /// Distance of the ball centre from the sphere centre at a start point.
+    fn reach(&self) -> f64 {
+        self.plan.params.sphere_radius + self.probe.radius + self.clearance()
+    }
+
+    /// Tool axis, main axis and minor axis in machine coordinates at `a`.
+    fn frame(&self, a: &Angles) -> [Vector3<f64>; 3] {
+        let [main, minor, tool] = self.tool.indices();
+        let unit = |i: usize| {
+            let mut v = Vector3::zeros();
+            v[i] = 1.0;
+            self.model.tool_vector(a, v)
+        };
+        [unit(tool), unit(main), unit(minor)]
+    }
+
+    /// Pole start at `a` for the sphere centre `c` (X/Y/Z axis coordinates).
+    fn pole(&self, a: &Angles, c: &Vector3<f64>) -> Vector3<f64> {
+        c + self.frame(a)[0] * self.reach()
+    }
+
+    fn predicted_pole(&self, a: &Angles) -> Vector3<f64> {
+        self.pole(a, &self.model.predict(a, &self.table_point))
+    }
+
+    fn rotary(&self, a: &Angles) -> AxisPositions {
+        let mut p = AxisPositions::new();
+        for &x in &self.plan.present {
+            p.set(x, a[rotary_slot(x).expect("rotary")]);
+        }
+        p
+    }
+
+    fn next_run(&mut self) -> u64 {
+        self.runs += 1;
+        let id = self.run_base + self.runs;
+        self.machine.set_run(id);
+        id
+    }
+
+    /// Measures the sphere expected at `c` with the axes at `a` (the probe stands at
+    /// the pole start or anywhere above the sphere on the tool axis side).
+    fn sphere(
+        &mut self,
+        a: &Angles,
+        mut c: Vector3<f64>,
+        what: &str,
+    ) -> Result<Sphere, CycleError> {
+        let p = &self.plan.params;
+        let (reach, dist) = (self.reach(), self.clearance() + self.probe.dist);
+        let [n, u, v] = self.frame(a);
+        let mut run_ids = Vec::new();
+        for round in 0..2 {
+            let run = self.next_run();
+            run_ids.push(run);
+            let mut contacts = Vec::with_capacity(1 + p.points as usize);
+            let top = c + n * reach;
+            self.move_xyz(&format!("{what}: moving over the pole"), top)?;
+            contacts.push(self.probe(&format!("{what}: probing the pole"), -n, dist)?);
+            self.move_xyz(&format!("{what}: retracting from the pole"), top)?;
+            for i in 0..p.points {
+                let phi =
+                    (p.reference_angle + 360.0 * f64::from(i) / f64::from(p.points)).to_radians();
+                let w = u * phi.cos() + v * phi.sin();
+                let step = format!("{what}: point {} of {}", i + 1, p.points);
+                self.move_xyz(&step, top + w * reach)?;
+                self.move_xyz(&step, c + w * reach)?;
+                contacts.push(self.probe(&step, -w, dist)?);
+                self.move_xyz(&step, c + w * reach)?;
+                self.move_xyz(&step, top + w * reach)?;
+            }
+            self.move_xyz(&format!("{what}: back over the pole"), top)?;
+            let fit = self.ctx.estimator.fit_sphere(run, &contacts).map_err(|e| {
+                CycleError::Geometry(format!("{what}: sphere fit (run {run}): {e}"))
+            })?;
+            let radius = fit.radius - self.probe.radius;
+            let shift = (fit.centre - c).norm();
+            if round == 0 && shift > RE_PROBE_TOLERANCE {
+                self.note(format!(
+                    "{what}: the sphere is {shift:.4} mm from where it was expected; probing it again around the fitted centre"
+                ));
+                c = fit.centre;
+                continue;
+            }
+            let dev = radius - p.sphere_radius;
+            if dev.abs() > self.ctx.cfg.parameters.max_dev_cal_ball {
+                return Err(CycleError::Geometry(format!(
+                    "{what}: the fitted sphere radius {radius:.4} mm differs from Q407 = {:.4} mm by {dev:+.4} mm, more than maxDevCalBall = {} mm; wrong sphere, or a probe that is not calibrated; nothing was changed",
+                    p.sphere_radius, self.ctx.cfg.parameters.max_dev_cal_ball
+                )));
+            }
+            let n_c = contacts.len() as f64;
+            let mut angles = [0.0; 3];
+            for k in contacts.iter() {
+                let l = angles_of(&k.positions);
+                for s in 0..3 {
+                    angles[s] += l[s] / n_c;
+                }
+            }
+            for &x in &Axis::ROTARY {
+                if !self.plan.present.contains(&x) {
+                    angles[rotary_slot(x).expect("rotary")] = 0.0;
+                }
+            }
+            return Ok(Sphere {
+                angles,
+                centre: fit.centre,
+                radius,
+                record: SphereRecord {
+                    angles: axis_map(&self.plan.present, &angles),
+                    centre: arr(&fit.centre),
+                    radius,
+                    rms: fit.rms,
+                    run_ids,
+                    approach: None,
+                },
+            });
+        }
+        unreachable!("the second round returns")
+    }
+
+    /// Turns the rotary axes to `to` following the sphere at the pole, in steps.
+    fn track(&mut self, to: Angles) -> Result<(), CycleError> {
+        let from = self.now;
+        let turn = (0..3).map(|s| (to[s] - from[s]).abs()).fold(0.0, f64::max);
+        let steps = ((turn / TRACK_STEP_DEG).ceil() as usize).max(1);
+        for i in 1..=steps {
+            let f = i as f64 / steps as f64;
+            let mut a = from;
+            for s in 0..3 {
+                a[s] = from[s] + (to[s] - from[s]) * f;
+            }
+            if i == steps {
+                a = to;
+            }
+            let target = self
+                .rotary(&a)
+                .merged(&AxisPositions::linear(arr(&self.predicted_pole(&a))));
+            self.mv(
+                "turning the rotary axes with the probe over the sphere",
+                target,
+                self.plan.positioning_feed,
+            )?;
+            self.now = a;
+        }
+        Ok(())
+    }
+
+    /// Goes to the pole start at `to`, approaching `to` from `via` (backlash).
+    fn go_to(&mut self, to: Angles, via: Option<Angles>) -> Result<(), CycleError> {
+        let moves = (0..3).any(|s| (to[s] - self.now[s]).abs() > 1e-9) || via.is_some();
+        let h = self.plan.params.retract_height;
+        if !moves {
+            let pole = self.predicted_pole(&to);
+            return self.move_xyz("moving over the sphere", pole);
+        }
+        if h > 0.0 {
+            let t = self.tool.tool_index();
+            let height = self.preset[t] + h;
+            let [main, minor, _] = self.tool.indices();
+            let up = AxisPositions::new().with(Axis::LINEAR[t], height);
+            self.mv("retracting to Q408", up, self.plan.positioning_feed)?;
+            let over = AxisPositions::new()
+                .with(Axis::LINEAR[main], self.preset[main])
+                .with(Axis::LINEAR[minor], self.preset[minor]);
+            self.mv(
+                "moving over the preset at Q408",
+                over,
+                self.plan.positioning_feed,
+            )?;
+            for a in via.iter().chain(std::iter::once(&to)) {
+                self.mv(
+                    "turning the rotary axes (Q253)",
+                    self.rotary(a),
+                    self.plan.rotary_feed,
+                )?;
+                self.now = *a;
+            }
+            let pole = self.predicted_pole(&to);
+            if pole[t] > height {
+                return Err(CycleError::Plan(format!(
+                    "Q408: the retraction height {height:.3} ({} above the preset) is below the probe's start point over the sphere ({:.3}) at {}; give a higher Q408",
+                    h,
+                    pole[t],
+                    self.rotary(&to)
+                )));
+            }
+            let mut above = pole;
+            above[t] = height;
+            self.move_xyz("moving over the sphere at Q408", above)?;
+            self.move_xyz("approaching the sphere", pole)
+        } else {
+            if let Some(v) = via {
+                self.track(v)?;
+            }
+            self.track(to)
+        }
+    }
+}

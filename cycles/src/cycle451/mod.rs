@@ -1,0 +1,155 @@
+//! Cycle 451 MEASURE KINEMATICS: the calibration sphere measured at several angles of
+//! each rotary axis, compared with the active kinematic model, and (modes 1..3) the
+//! model corrected (spec.md, "Cycle 451"; seeds 000, 001, 004).
+//!
+//! # Sequence
+//!
+//! Each step has its file: [`parameters`] (typed at parse time), [`plan`], [`measure`],
+//! [`identify`], [`evaluate`], [`report`], [`write_back`] and the [`measuring_log`].
+//!
+//! 1. Locate: the probe stands roughly over the sphere, about Q320 + SET_UP above it
+//!    (an `L` block or the operator put it there). It probes down along the tool axis,
+//!    then measures the sphere around that estimate. This machine has no preset table:
+//!    the active preset is the table origin until Q431 = 1/3 sets it to this centre.
+//! 2. Per measured axis, in the order A, B, C: the 0 deg reference first, then the
+//!    measuring positions ([`crate::kinematics::positions`]); the other rotary axes stand
+//!    at their incidence angles (Q413/Q417/Q421). Between positions the probe retracts to
+//!    Q408 above the preset and over the preset in the working plane before the rotary
+//!    axes turn at Q253; with Q408 = 0 it follows the sphere at the pole in steps of at
+//!    most [`measure::TRACK_STEP_DEG`] (refused with a Hirth axis). Linear pre-positioning runs at
+//!    min(Q253, FMAX).
+//! 3. Sphere measurement: the pole along the (possibly tilted) tool axis, then Q423
+//!    points around the equator in the working plane from Q380, radially toward the
+//!    centre; a sphere with free radius through the latched X/Y/Z positions (each
+//!    measurement its own run id, fitted by the [`crate::kinematics::Estimator`]). When the fit moved the
+//!    centre by more than [`measure::RE_PROBE_TOLERANCE`] from where it was expected, the sphere is
+//!    probed once more around the new centre; the radius of the last round must be Q407
+//!    within `maxDevCalBall`.
+//! 4. Q432 != 0: every position is measured twice, approached from angle + Q432 and from
+//!    angle - Q432; the identification uses the mean, the backlash is the mean tangential
+//!    difference over the measuring circle radius (not for radii < 1 mm or Hirth axes).
+//! 5. Identification ([`crate::kinematics::identification`]) by the estimator, results
+//!    (Q141..Q149, QS144..QS146), protocol `TCHPRAUTO.html`, and for modes 1..3 the
+//!    corrected errors written through [`crate::kinematics_file::ActiveKinematics::write`]: only after all of that
+//!    succeeded, and beyond `maxModification` only when confirmed.
+
+pub mod evaluate;
+pub mod identify;
+pub mod measure;
+pub mod measuring_log;
+pub mod parameters;
+pub mod plan;
+pub mod report;
+pub mod write_back;
+
+pub use parameters::{AxisRange, Feed, KinematicsParams};
+pub use plan::{plan, AxisPlan, KinematicsPlan, PlanError, PlanErrorKind};
+pub use report::{AxisReport, KinematicsReport, PositionReport, SphereRecord};
+
+use crate::cycle::{CycleContext, MeasuringCycle};
+use crate::cycle_block::CycleBlock;
+use crate::error::CycleError;
+use crate::kinematics::model::{ErrorSet, KinematicModel};
+use crate::kinematics_file::ActiveKinematics;
+use crate::results::CycleOutput;
+use evaluate::Evaluation;
+use hal::Machine;
+use measure::{arr, axis_map, Measure};
+use nalgebra::Vector3;
+use write_back::WriteBack;
+
+impl MeasuringCycle for KinematicsParams {
+    fn run<M: Machine>(
+        &self,
+        call: &CycleBlock,
+        machine: &mut M,
+        ctx: &mut CycleContext<'_>,
+    ) -> Result<CycleOutput, CycleError> {
+        let cfg = ctx.cfg;
+        let plan = plan::plan(self, &call.tool.probe, &cfg.machine)
+            .map_err(|e| CycleError::Plan(e.to_string()))?;
+        let active = ActiveKinematics::load(&ctx.kinematics, &cfg.machine)
+            .map_err(|e| CycleError::Plan(format!("active kinematics: {e}")))?;
+        let active_set = ErrorSet::from_map(&active.errors);
+        let model = KinematicModel::new(&plan.chain, &active_set);
+        let mut m = Measure::new(machine, ctx, &plan, call, model)?;
+        let located_ball = m.locate()?;
+        let preset_measuring = m.preset;
+        let measured = m.measure_axes()?;
+
+        let input = identify::input(&plan, active_set, &measured);
+        let result = identify::identify(m.ctx.estimator, &input)?;
+        let estimator = m.ctx.estimator.name();
+
+        let ev = Evaluation {
+            plan: &plan,
+            model: &m.model,
+            input: &input,
+            result: &result,
+        };
+        let mut notes = std::mem::take(&mut m.notes);
+        let axes = measured
+            .iter()
+            .map(|(gi, positions)| ev.axis_report(&plan.axes[*gi], positions, &mut notes))
+            .collect::<Result<Vec<_>, _>>()?;
+        let offset = ev.reference_ball() - preset_measuring;
+        let (q, qs) = ev.results(&axes, &offset);
+        // Q431 = 2/3: the preset goes to the sphere centre where the cycle ends (it
+        // returns to the rotary angles it started at, where the sphere was located).
+        let p = &plan.params;
+        let mut preset_after = m.preset;
+        if p.preset == 2 || p.preset == 3 {
+            preset_after = located_ball;
+            m.note(format!(
+                "Q431={}: preset set to the sphere centre X{:+.4} Y{:+.4} Z{:+.4}",
+                p.preset, located_ball.x, located_ball.y, located_ball.z
+            ));
+        }
+        for t in &result.transfers {
+            notes.push(format!(
+                "machine datum: {} = {:+.6} deg moved into {}",
+                ErrorSet::name(t.from),
+                t.value,
+                ErrorSet::name(t.to)
+            ));
+        }
+        let ctx = m.ctx;
+
+        let write_back = WriteBack::decide(
+            call.block,
+            p.mode,
+            &result,
+            cfg.parameters.max_modification,
+            ctx,
+        );
+        if !p.mode.writes() {
+            notes.push("mode 0 (check): the kinematics were not changed".into());
+        }
+        let preset_before = Vector3::zeros();
+        let mut report = KinematicsReport {
+            mode: p.mode.q406(),
+            machine: cfg.machine.name.clone(),
+            kinematics_file: ctx.kinematics.clone(),
+            estimator,
+            probe: call.tool.probe.name.clone(),
+            written: false,
+            incidence: axis_map(&plan.present, &plan.incidence),
+            preset_before: arr(&preset_before),
+            preset_after: arr(&preset_after),
+            preset_shift: arr(&(preset_after - preset_before)),
+            offset_error: arr(&offset),
+            errors_before: result.before.to_map(&plan.present),
+            errors_after: result.after.to_map(&plan.present),
+            axes,
+            notes,
+        };
+        let log = write_back.write(call.block, &mut report, &active, ctx)?;
+        Ok(CycleOutput {
+            q,
+            qs,
+            stop: write_back.stop,
+            kinematics: Some(Box::new(report)),
+            logs: vec![log],
+        })
+    }
+}

@@ -1,0 +1,240 @@
+//! Step 1: everything decided before anything moves: which axes the cycle measures and
+//! where, Q408 with Hirth axes, feeds, software limits, mode 3's machine datum.
+
+use super::parameters::{AxisRange, Feed, KinematicsParams};
+use crate::kinematics::identification::{machine_datum_targets, Mode};
+use crate::kinematics::model::{rotary_slot, Angles, ChainSpec};
+use crate::kinematics::positions::{measuring_positions, on_grid};
+use crate::probe_table::ProbeEntry;
+use hal::config::MachineConfig;
+use hal::Axis;
+
+/// Why a 451 block cannot run on this machine (nothing moved).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum PlanErrorKind {
+    /// An axis's only measuring position is the 0 deg reference.
+    NoMeasuringPosition,
+    /// Q414/Q418/Q422 ask for no rotary axis the machine has.
+    NoAxisToMeasure,
+    /// Q408 = 0 (follow the sphere) with a Hirth axis.
+    DirectMoveWithHirth,
+    /// Q253 = 0.
+    ZeroFeed,
+    /// An angle the cycle would command is outside the software limits.
+    SoftwareLimit,
+    /// Q406 = 3 but no measured axis has a machine datum to take up its error.
+    NoMachineDatum,
+}
+
+/// A 451 block the machine cannot run; the message names the parameter.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{message}")]
+pub struct PlanError {
+    kind: PlanErrorKind,
+    message: String,
+}
+
+impl PlanError {
+    fn new(kind: PlanErrorKind, message: impl Into<String>) -> Self {
+        Self {
+            kind,
+            message: message.into(),
+        }
+    }
+
+    pub fn kind(&self) -> PlanErrorKind {
+        self.kind
+    }
+}
+
+/// A measured axis and its positions.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AxisPlan {
+    pub axis: Axis,
+    pub range: AxisRange,
+    /// Hirth grid, deg (0 = none).
+    pub hirth: f64,
+    /// The measuring positions after the 0 deg reference (on the grid, 0 dropped).
+    pub positions: Vec<f64>,
+}
+
+/// Everything decided before anything moves.
+#[derive(Clone, Debug, PartialEq)]
+pub struct KinematicsPlan {
+    pub params: KinematicsParams,
+    pub chain: ChainSpec,
+    /// Measured axes, A-B-C order.
+    pub axes: Vec<AxisPlan>,
+    /// The machine's rotary axes.
+    pub present: Vec<Axis>,
+    /// Incidence angles of the present axes (on their grid), 0 for absent ones.
+    pub incidence: Angles,
+    /// Linear pre-positioning feed: min(Q253, FMAX), mm/min.
+    pub positioning_feed: f64,
+    /// Rotary positioning feed: Q253 (FMAX: the probe table's), deg/min.
+    pub rotary_feed: f64,
+}
+
+impl KinematicsPlan {
+    /// Angles with `axis` at `angle` and the others at their incidence angles.
+    pub fn angles(&self, axis: Axis, angle: f64) -> Angles {
+        let mut a = self.incidence;
+        a[rotary_slot(axis).expect("rotary")] = angle;
+        a
+    }
+
+    /// The measured axes.
+    pub fn measured(&self) -> Vec<Axis> {
+        self.axes.iter().map(|a| a.axis).collect()
+    }
+
+    /// Whether Q432 measures the backlash of this axis.
+    pub fn backlash_measured(&self, a: &AxisPlan) -> bool {
+        self.params.backlash != 0.0 && a.hirth == 0.0
+    }
+}
+
+/// Checks a 451 block against the machine before anything moves: which axes it
+/// measures and where, Q408 with Hirth axes, feeds, software limits, mode 3's machine
+/// datum. The message names the parameter.
+pub fn plan(
+    params: &KinematicsParams,
+    probe: &ProbeEntry,
+    cfg: &MachineConfig,
+) -> Result<KinematicsPlan, PlanError> {
+    let params = params.clone();
+    let chain = ChainSpec::of(cfg);
+    let present: Vec<Axis> = Axis::ROTARY
+        .into_iter()
+        .filter(|a| cfg.axis(*a).is_some())
+        .collect();
+    let hirth = |a: Axis| cfg.axis(a).map_or(0.0, |c| c.hirth);
+    let mut incidence = [0.0; 3];
+    for &a in &present {
+        let s = rotary_slot(a).expect("rotary");
+        incidence[s] = on_grid(params.ranges[s].incidence, hirth(a));
+    }
+    let count_q = ["Q414", "Q418", "Q422"];
+    let mut axes = Vec::new();
+    for &a in &present {
+        let s = rotary_slot(a).expect("rotary");
+        let range = params.ranges[s];
+        if range.points == 0 {
+            continue;
+        }
+        let positions = measuring_positions(range.start, range.end, range.points, hirth(a));
+        if positions.is_empty() {
+            return Err(PlanError::new(PlanErrorKind::NoMeasuringPosition, format!(
+                "{}: the only measuring position of {a} is 0 deg, the reference; give another start angle or more points",
+                count_q[s]
+            )));
+        }
+        axes.push(AxisPlan {
+            axis: a,
+            range,
+            hirth: hirth(a),
+            positions,
+        });
+    }
+    if axes.is_empty() {
+        let have: Vec<&str> = present.iter().map(|a| a.name()).collect();
+        let asked: Vec<String> = ["A", "B", "C"]
+            .iter()
+            .zip(params.ranges)
+            .filter(|(_, r)| r.points > 0)
+            .map(|(n, r)| format!("{} point(s) on {n}", r.points))
+            .collect();
+        return Err(PlanError::new(
+            PlanErrorKind::NoAxisToMeasure,
+            format!(
+                "no rotary axis to measure: the machine has {} and Q414/Q418/Q422 ask for {}",
+                if have.is_empty() {
+                    "no rotary axis".to_string()
+                } else {
+                    have.join(", ")
+                },
+                if asked.is_empty() {
+                    "none".to_string()
+                } else {
+                    asked.join(", ")
+                }
+            ),
+        ));
+    }
+    if params.retract_height == 0.0 {
+        if let Some(a) = present.iter().find(|a| hirth(**a) > 0.0) {
+            return Err(PlanError::new(PlanErrorKind::DirectMoveWithHirth, format!(
+                "Q408=0 (move directly) is not allowed with the Hirth axis {a} (grid {} deg): give a retraction height",
+                hirth(*a)
+            )));
+        }
+    }
+    let positioning_feed = match params.feed {
+        Feed::Fmax => probe.fmax,
+        Feed::Value(v) => v.min(probe.fmax),
+    };
+    let rotary_feed = match params.feed {
+        Feed::Fmax => probe.fmax,
+        Feed::Value(v) => v,
+    };
+    if positioning_feed <= 0.0 {
+        return Err(PlanError::new(
+            PlanErrorKind::ZeroFeed,
+            "Q253=0: the pre-positioning feed must be > 0",
+        ));
+    }
+    // Every angle the cycle commands must be inside the software limits.
+    let limit_q = [
+        ["Q411", "Q412", "Q413"],
+        ["Q415", "Q416", "Q417"],
+        ["Q419", "Q420", "Q421"],
+    ];
+    for &a in &present {
+        let s = rotary_slot(a).expect("rotary");
+        let c = cfg.axis(a).expect("present");
+        let check = |v: f64, what: &str| -> Result<(), PlanError> {
+            if v < c.min || v > c.max {
+                Err(PlanError::new(PlanErrorKind::SoftwareLimit, format!(
+                    "{what}: {a}{v:+.4} is outside the software limits {:+.4} .. {:+.4}; nothing moved",
+                    c.min, c.max
+                )))
+            } else {
+                Ok(())
+            }
+        };
+        check(incidence[s], limit_q[s][2])?;
+        if let Some(p) = axes.iter().find(|p| p.axis == a) {
+            let b = if hirth(a) == 0.0 {
+                params.backlash.abs()
+            } else {
+                0.0
+            };
+            for &v in std::iter::once(&0.0).chain(&p.positions) {
+                check(v, &format!("{}/{}", limit_q[s][0], limit_q[s][1]))?;
+                if b > 0.0 {
+                    check(v + b, "Q432")?;
+                    check(v - b, "Q432")?;
+                }
+            }
+        }
+    }
+    if params.mode == Mode::MachineDatum {
+        let measured: Vec<Axis> = axes.iter().map(|a| a.axis).collect();
+        if machine_datum_targets(&chain, &measured).is_empty() {
+            return Err(PlanError::new(PlanErrorKind::NoMachineDatum, format!(
+                "Q406=3: none of the measured axes ({}) has a rotary axis nearer the machine bed in its kinematic chain whose machine datum could take up its orientation error; use Q406=2",
+                measured.iter().map(|a| a.name()).collect::<Vec<_>>().join(", ")
+            )));
+        }
+    }
+    Ok(KinematicsPlan {
+        params,
+        chain,
+        axes,
+        present,
+        incidence,
+        positioning_feed,
+        rotary_feed,
+    })
+}

@@ -1,0 +1,111 @@
+//! Step 6: the write-back. Modes 1..3 write the corrected errors to the active
+//! kinematics file, only after everything else succeeded (the measuring log is written
+//! first), and a correction beyond `maxModification` only when the operator confirms.
+
+use super::measuring_log::{write_kinematics_log, KINEMATICS_LOG};
+use super::report::KinematicsReport;
+use crate::cycle::CycleContext;
+use crate::error::CycleError;
+use crate::kinematics::identification::{IdentificationResult, Mode};
+use crate::kinematics::model::ErrorSet;
+use crate::kinematics_file::ActiveKinematics;
+use crate::measuring_log::timestamp_utc;
+use std::path::PathBuf;
+
+/// What the cycle does with the identified errors.
+pub(super) struct WriteBack {
+    /// (slot, before, after) of every error that changed.
+    pub changes: Vec<(usize, f64, f64)>,
+    /// The changes are written.
+    pub accept: bool,
+    /// The program stops (a large correction was not confirmed).
+    pub stop: Option<String>,
+}
+
+impl WriteBack {
+    /// Decides: mode 0 writes nothing; beyond `max_modification` the operator decides.
+    pub fn decide(
+        block: u32,
+        mode: Mode,
+        result: &IdentificationResult,
+        max_modification: f64,
+        ctx: &mut CycleContext<'_>,
+    ) -> Self {
+        let changes: Vec<(usize, f64, f64)> = (0..result.before.0.len())
+            .filter(|&i| result.after.0[i] != result.before.0[i])
+            .map(|i| (i, result.before.0[i], result.after.0[i]))
+            .collect();
+        let mut stop = None;
+        let mut accept = mode.writes() && !changes.is_empty();
+        let largest = changes
+            .iter()
+            .map(|(_, b, a)| (a - b).abs())
+            .fold(0.0, f64::max);
+        let limit = max_modification;
+        if accept && largest > limit {
+            let mut text = format!(
+                "Cycle 451 (block {block}): the correction exceeds maxModification = {limit} (mm / deg):\n"
+            );
+            for (i, b, a) in &changes {
+                let (_, part) = ErrorSet::describe(*i);
+                text.push_str(&format!(
+                    "  {:<5} {b:+.6} -> {a:+.6} {} ({:+.6})\n",
+                    ErrorSet::name(*i),
+                    part.unit(),
+                    a - b
+                ));
+            }
+            let file = ctx.kinematics.display().to_string();
+            text.push_str(&format!("Accept and write it to {file}?"));
+            if !(ctx.confirm)(&text) {
+                accept = false;
+                stop = Some(format!(
+                    "the kinematics correction (largest change {largest:.6} > maxModification {limit}) was not confirmed; {file} was not changed"
+                ));
+            }
+        }
+        WriteBack {
+            changes,
+            accept,
+            stop,
+        }
+    }
+
+    /// Writes the measuring log, then (when accepted) the corrected kinematics over
+    /// `active`; marks the report written. Returns the log's path.
+    pub fn write(
+        &self,
+        block: u32,
+        report: &mut KinematicsReport,
+        active: &ActiveKinematics,
+        ctx: &mut CycleContext<'_>,
+    ) -> Result<PathBuf, CycleError> {
+        let file = ctx.kinematics.display().to_string();
+        let written_text = self.accept.then(|| format!("written to {file}"));
+        let log = write_kinematics_log(
+            ctx.out_dir,
+            report,
+            ctx.program,
+            &timestamp_utc(),
+            written_text.as_deref(),
+        )
+        .map_err(|e| CycleError::MeasuringLog {
+            path: ctx.out_dir.join(KINEMATICS_LOG).display().to_string(),
+            message: e.source.to_string(),
+        })?;
+        if self.accept {
+            let mut new = active.clone();
+            for (i, _, a) in &self.changes {
+                new.errors.insert(ErrorSet::name(*i).to_string(), *a);
+            }
+            new.write()
+                .map_err(|e| CycleError::Plan(format!("writing the corrected kinematics: {e}")))?;
+            report.written = true;
+            ctx.note(
+                block,
+                format!("corrected kinematics written to {file} (previous version kept as .prev)"),
+            );
+        }
+        Ok(log)
+    }
+}

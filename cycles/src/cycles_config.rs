@@ -1,0 +1,86 @@
+//! A machine as the measuring cycles see it: hal's [`MachineConfig`] and, from the same
+//! TOML file, the probe table ([`crate::probe_table`]) and the cycles' machine
+//! parameters ([`crate::machine_parameters`]). hal accepts `[[probe]]` and `[cycles]`
+//! unread; they are validated here, just as strictly (unknown keys refused, errors
+//! name the file, the key and why).
+
+use crate::machine_parameters::MachineParameters;
+use crate::probe_table::ProbeEntry;
+use hal::config::{ConfigError, MachineConfig};
+use serde::Deserialize;
+use std::path::Path;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct CyclesConfig {
+    pub machine: MachineConfig,
+    /// `[[probe]]`, in table order (tool numbers index it from 1).
+    pub probes: Vec<ProbeEntry>,
+    /// `[cycles]`.
+    pub parameters: MachineParameters,
+}
+
+/// The sections of the machine TOML the cycles own; hal checks every other key.
+#[derive(Deserialize)]
+struct Sections {
+    #[serde(rename = "probe", default)]
+    probes: Vec<ProbeEntry>,
+    #[serde(default)]
+    cycles: MachineParameters,
+}
+
+impl CyclesConfig {
+    /// Reads and validates the machine TOML at `path`: hal's part and the cycles'.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses and validates; `path` names the source in errors.
+    pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
+        let machine = MachineConfig::parse(text, path)?;
+        Self::with_machine(machine, text)
+    }
+
+    /// The cycles' sections for a machine configuration already read (from the file
+    /// it was read from, [`MachineConfig::path`]).
+    pub fn of(machine: MachineConfig) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(&machine.path).map_err(|source| ConfigError::Read {
+            path: machine.path.clone(),
+            source,
+        })?;
+        Self::with_machine(machine, &text)
+    }
+
+    fn with_machine(machine: MachineConfig, text: &str) -> Result<Self, ConfigError> {
+        let path = machine.path.clone();
+        let s: Sections = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
+        let invalid = |key: String, message: &str| ConfigError::Invalid {
+            path: path.clone(),
+            key,
+            message: message.to_string(),
+        };
+        for (i, p) in s.probes.iter().enumerate() {
+            if let Some((f, why)) = p.invalid_field() {
+                return Err(invalid(format!("probe[{i}] ({}).{f}", p.name), why));
+            }
+        }
+        if let Some((key, why)) = s.cycles.invalid_field() {
+            return Err(invalid(key.to_string(), why));
+        }
+        Ok(Self {
+            machine,
+            probes: s.probes,
+            parameters: s.cycles,
+        })
+    }
+
+    pub fn probe(&self, name: &str) -> Option<&ProbeEntry> {
+        self.probes.iter().find(|p| p.name == name)
+    }
+}

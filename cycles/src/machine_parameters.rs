@@ -1,0 +1,51 @@
+//! The measuring cycles' machine parameters: `[cycles]` of the machine TOML
+//! (`maxDevCalBall`, `maxModification`, and `[cycles.predef]` for PREDEF). Read and
+//! validated here, not by hal, which accepts the section unread.
+
+use serde::Deserialize;
+use std::collections::BTreeMap;
+
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MachineParameters {
+    /// Largest allowed difference between fitted and nominal calibration sphere
+    /// radius (cycle 451), mm.
+    #[serde(default = "default_max_dev_cal_ball", rename = "maxDevCalBall")]
+    pub max_dev_cal_ball: f64,
+    /// Largest kinematics correction written without confirmation, mm / deg.
+    #[serde(default = "default_max_modification", rename = "maxModification")]
+    pub max_modification: f64,
+    /// Values of parameters given as `PREDEF` in a program, by Q number ("Q320").
+    #[serde(default)]
+    pub predef: BTreeMap<String, f64>,
+}
+
+fn default_max_dev_cal_ball() -> f64 {
+    0.1
+}
+fn default_max_modification() -> f64 {
+    0.5
+}
+
+impl Default for MachineParameters {
+    fn default() -> Self {
+        Self {
+            max_dev_cal_ball: default_max_dev_cal_ball(),
+            max_modification: default_max_modification(),
+            predef: BTreeMap::new(),
+        }
+    }
+}
+
+impl MachineParameters {
+    /// The first value out of range, as (key, reason).
+    pub fn invalid_field(&self) -> Option<(&'static str, &'static str)> {
+        if self.max_dev_cal_ball.is_nan() || self.max_dev_cal_ball <= 0.0 {
+            return Some(("cycles.maxDevCalBall", "must be > 0"));
+        }
+        if self.max_modification.is_nan() || self.max_modification <= 0.0 {
+            return Some(("cycles.maxModification", "must be > 0"));
+        }
+        None
+    }
+}

@@ -1,0 +1,76 @@
+//! `TCHPR431.TXT`, the measuring log of cycle 431 (Q281 = 1, or shown for Q281 = 2).
+
+use super::{axis_names, program_name, timestamp_utc, write, MeasuringLogError};
+use crate::plane::PlaneAngles;
+use crate::probe_axis::ProbeAxis;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+pub const PLANE_LOG: &str = "TCHPR431.TXT";
+
+/// What the log shows of one plane.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlaneRecord {
+    pub block: u32,
+    pub line: usize,
+    pub probe: String,
+    pub axis: ProbeAxis,
+    pub nominal: [[f64; 3]; 3],
+    /// Measured points (main, minor, Q173..Q175).
+    pub measured: [[f64; 3]; 3],
+    pub angles: PlaneAngles,
+}
+
+/// The text of `TCHPR431.TXT`.
+pub fn plane_log_text(r: &PlaneRecord, program: Option<&Path>, when: &str) -> String {
+    let names = axis_names(r.axis);
+    let mut s = String::new();
+    let _ = writeln!(s, "TCHPR431 MEASURE PLANE");
+    let _ = writeln!(s, "Date/time:   {when}");
+    let _ = writeln!(s, "Program:     {}", program_name(program));
+    let _ = writeln!(s, "Block:       {} (line {})", r.block, r.line);
+    let _ = writeln!(s, "Probe:       {} (axis {})", r.probe, r.axis);
+    let _ = writeln!(s);
+    let _ = writeln!(
+        s,
+        "Point  Nominal {0:>2}/{1}/{2}                      Measured {2}    Q",
+        names[0], names[1], names[2]
+    );
+    for (i, (n, m)) in r.nominal.iter().zip(&r.measured).enumerate() {
+        let _ = writeln!(
+            s,
+            "{:>5}  {:+12.4} {:+12.4} {:+12.4}   {:+12.4}   Q{}",
+            i + 1,
+            n[0],
+            n[1],
+            n[2],
+            m[2],
+            173 + i
+        );
+    }
+    let a = &r.angles;
+    let _ = writeln!(s);
+    let _ = writeln!(s, "Spatial angle A  Q170 = {:+.4} deg", a.spa);
+    let _ = writeln!(s, "Spatial angle B  Q171 = {:+.4} deg", a.spb);
+    let _ = writeln!(s, "Spatial angle C  Q172 = {:+.4} deg", a.spc);
+    let _ = writeln!(s, "Projection A     Q158 = {:+.4} deg", a.proj_a);
+    let _ = writeln!(s, "Projection B     Q159 = {:+.4} deg", a.proj_b);
+    let _ = writeln!(
+        s,
+        "Plane normal     ({:+.6}, {:+.6}, {:+.6})",
+        a.normal.x, a.normal.y, a.normal.z
+    );
+    s
+}
+
+pub fn write_plane_log(
+    dir: &Path,
+    r: &PlaneRecord,
+    program: Option<&Path>,
+) -> Result<PathBuf, MeasuringLogError> {
+    write(
+        dir,
+        PLANE_LOG,
+        &plane_log_text(r, program, &timestamp_utc()),
+    )
+}

@@ -1,0 +1,69 @@
+//! The probe table and the cycles' machine parameters are read from the machine TOML
+//! by this crate, as strictly as hal reads the rest: unknown keys refused, every error
+//! names the file, the key and why.
+
+mod common;
+
+use hal::config::ConfigError;
+use probebridge_cycles::CyclesConfig;
+use std::path::Path;
+
+fn parse(text: &str) -> Result<CyclesConfig, ConfigError> {
+    CyclesConfig::parse(text, Path::new("m.toml"))
+}
+
+#[test]
+fn probe_table_and_parameters_are_read() {
+    let c = common::config();
+    assert_eq!(c.probes.len(), 2);
+    assert_eq!(c.probe("TS 460").unwrap().radius, 1.5);
+    assert_eq!(c.parameters.predef["Q260"], 150.0);
+    // Defaults of the machine parameters.
+    assert_eq!(c.parameters.max_dev_cal_ball, 0.1);
+    assert_eq!(c.parameters.max_modification, 0.5);
+    assert_eq!(c.machine.axes.len(), 3);
+}
+
+#[test]
+fn unknown_keys_in_the_cycles_sections_are_refused() {
+    let text = common::CONFIG.replace("mb = 5.0", "mb = 5.0\nmbb = 1.0");
+    let e = parse(&text).unwrap_err();
+    assert!(matches!(e, ConfigError::Parse { .. }), "{e}");
+    let e = e.to_string();
+    assert!(e.contains("m.toml") && e.contains("mbb"), "{e}");
+
+    let text = common::CONFIG.replace(
+        "[cycles.predef]",
+        "[cycles]\nmaxDevCalbal = 1\n[cycles.predef]",
+    );
+    let e = parse(&text).unwrap_err().to_string();
+    assert!(e.contains("m.toml") && e.contains("maxDevCalbal"), "{e}");
+}
+
+#[test]
+fn values_out_of_range_name_file_and_key() {
+    let text = common::CONFIG.replace("radius = 1.5", "radius = -1.5");
+    match parse(&text).unwrap_err() {
+        ConfigError::Invalid { path, key, message } => {
+            assert_eq!(path, Path::new("m.toml"));
+            assert_eq!(key, "probe[1] (TS 460).radius");
+            assert_eq!(message, "must be > 0");
+        }
+        e => panic!("{e}"),
+    }
+    let text = common::CONFIG.replace(
+        "[cycles.predef]",
+        "[cycles]\nmaxModification = 0\n[cycles.predef]",
+    );
+    match parse(&text).unwrap_err() {
+        ConfigError::Invalid { key, .. } => assert_eq!(key, "cycles.maxModification"),
+        e => panic!("{e}"),
+    }
+}
+
+#[test]
+fn hal_still_checks_its_own_keys() {
+    let text = common::CONFIG.replace("[cycles.predef]", "[cycle]\nx = 1\n[cycles.predef]");
+    let e = parse(&text).unwrap_err().to_string();
+    assert!(e.contains("m.toml") && e.contains("cycle"), "{e}");
+}
