@@ -9,6 +9,7 @@
 //!   that does no I/O (frames in, frames out).
 //! - [`config`]: the machine description (axes, bus mapping, kinematics, probe table).
 
+pub mod atomic_write;
 pub mod axis;
 pub mod can;
 pub mod canopen;
