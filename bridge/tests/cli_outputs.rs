@@ -1,7 +1,10 @@
 //! Output paths are checked before the machine is opened: a measurement is never made
 //! only to lose its results, and nothing but a regular file is ever replaced.
 
-#[allow(dead_code, reason = "each test binary uses a part of the shared helpers")]
+#[allow(
+    dead_code,
+    reason = "each test binary uses a part of the shared helpers"
+)]
 mod common;
 use common::{bin, configs, run, tmpdir};
 use std::os::unix::fs::FileTypeExt;
