@@ -268,7 +268,8 @@ fn serve(
             let request = *active.payload();
             // A request that was sent before the samples it is about were drained.
             receive(store, &mut *log)?;
-            let reply = store.answer(&request, &mut log);
+            let mut reply = store.answer(&request, &mut log);
+            reply.server_pid = std::process::id();
             shutdown |= request.request_kind() == Some(RequestKind::Shutdown);
             let sent = active
                 .loan_uninit()

@@ -456,6 +456,19 @@ fn child_entry() {
                 std::thread::park();
             }
         }
+        "parent" => {
+            let estimator = format!("{prefix}/estimator");
+            let child = EstimatorChild::spawn_command(
+                child_command("estimator", &estimator),
+                &estimator,
+                T,
+            )
+            .unwrap();
+            println!("PB_PID {}", child.id());
+            loop {
+                std::thread::park();
+            }
+        }
         other => panic!("unknown child role {other}"),
     }
 }
@@ -556,6 +569,61 @@ fn an_estimator_child_process_answers_and_exits_on_drop() {
         !std::path::Path::new(&format!("/proc/{pid}")).exists(),
         "estimator child {pid} still exists"
     );
+}
+
+#[test]
+fn a_killed_estimator_ends_a_pending_request_at_once_not_at_its_timeout() {
+    let prefix = unique_prefix("killed");
+    let child =
+        EstimatorChild::spawn_command(child_command("estimator", &prefix), &prefix, T).unwrap();
+    // The ping of spawn told the client which process answers.
+    let pid = child.id();
+    // SAFETY: SIGKILL to the child we started.
+    assert_eq!(unsafe { libc::kill(pid as i32, libc::SIGKILL) }, 0);
+    // Without the liveness watch this would end as a Timeout after a minute.
+    match child.client().fit_sphere(1, Duration::from_secs(60)) {
+        Err(IpcError::Died { pid: p, what, .. }) => {
+            assert_eq!(p, pid);
+            assert_eq!(what, "a sphere fit request");
+        }
+        other => panic!("expected the estimator's death, got {other:?}"),
+    }
+    // Dropping the handle neither hangs nor leaves the zombie behind.
+    drop(child);
+    assert!(!std::path::Path::new(&format!("/proc/{pid}")).exists());
+}
+
+#[test]
+fn the_estimator_child_dies_with_a_killed_parent() {
+    let prefix = unique_prefix("orphan");
+    let mut parent = child_command("parent", &prefix)
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(parent.stdout.take().unwrap()).lines();
+    let pid: i32 = loop {
+        let line = lines.next().expect("the parent's estimator pid").unwrap();
+        // libtest may have printed "test child_entry ... " on the same line.
+        if let Some((_, p)) = line.split_once("PB_PID ") {
+            break p.trim().parse().unwrap();
+        }
+    };
+    // SAFETY: pidfd_open of the grandchild, which is running.
+    let fd = unsafe { libc::syscall(libc::SYS_pidfd_open, pid, 0) } as i32;
+    assert!(fd >= 0, "pidfd_open: {}", std::io::Error::last_os_error());
+    parent.kill().unwrap();
+    parent.wait().unwrap();
+    let mut p = libc::pollfd {
+        fd,
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    // SAFETY: one pollfd we own; returns when the estimator ends, or after 20 s.
+    let ended = unsafe { libc::poll(&mut p, 1, 20_000) };
+    // SAFETY: closing the descriptor we opened.
+    unsafe { libc::close(fd) };
+    assert_eq!(ended, 1, "the orphaned estimator {pid} is still running");
+    let _ = probebridge::ipc::remove_stale_resources(T);
 }
 
 #[test]

@@ -11,6 +11,7 @@
 //!   limits, the probing path plus braking distance, feeds) and the collision rule.
 //! - [`config`]: the machine description (axes, bus mapping, kinematics, probe table).
 
+pub mod atomic_write;
 pub mod axis;
 pub mod can;
 pub mod canopen;

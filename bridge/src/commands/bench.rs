@@ -102,6 +102,7 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
             args.period_us
         ));
     }
+    crate::output::check_output(args.json.as_deref())?;
     let warmup = args.warmup.unwrap_or((args.triggers / 10).clamp(1, 100));
     let total = warmup + args.triggers;
     let pid = std::process::id();

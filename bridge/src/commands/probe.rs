@@ -25,6 +25,7 @@ pub fn run(args: &ProbeArgs) -> Result<(), String> {
     if !args.feed.is_finite() || args.feed <= 0.0 {
         return Err(format!("--feed {}: must be > 0", args.feed));
     }
+    crate::output::check_output(args.json.as_deref())?;
     let mut s = Session::open(&args.machine).map_err(|e| e.to_string())?;
     for note in &s.startup.notes {
         eprintln!("note: {note}");

@@ -54,6 +54,7 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
         .unwrap_or_else(|| PathBuf::from("."));
     std::fs::create_dir_all(&out_dir)
         .map_err(|e| format!("cannot create {}: {e}", out_dir.display()))?;
+    crate::output::check_output(args.json.as_deref())?;
 
     // Cycle 451 fits its spheres and solves its identification in the estimator
     // process: use the one serving this prefix, or start one. It must subscribe before

@@ -2,7 +2,9 @@
 
 use core::sync::atomic::{AtomicU64, Ordering};
 use core::time::Duration;
+use std::os::unix::process::CommandExt;
 use std::process::{Child, Command, Stdio};
+use std::sync::Mutex;
 use std::time::Instant;
 
 use iceoryx2::port::client::Client;
@@ -10,6 +12,7 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 
+use super::process_watch::ProcessWatch;
 use super::{
     create_node, listener, notifier, open_event_service, open_request_service,
     remove_stale_resources, EstimatorReply, EstimatorRequest, IpcError, ReplyStatus, RequestKind,
@@ -24,8 +27,13 @@ pub struct EstimatorClient {
     result_listener: Listener<Svc>,
     next_request_id: AtomicU64,
     names: ServiceNames,
+    /// The process that answered last (from the replies' `server_pid`).
+    server: Mutex<Option<ProcessWatch>>,
     _node: Node<Svc>,
 }
+
+/// Longest sleep between two looks at the estimator's liveness while a reply is due.
+const LIVENESS_SLICE: Duration = Duration::from_millis(10);
 
 impl EstimatorClient {
     /// Opens the services and waits (up to `timeout`) until the estimator answers a
@@ -52,6 +60,7 @@ impl EstimatorClient {
             result_listener,
             next_request_id: AtomicU64::new(1),
             names,
+            server: Mutex::new(None),
             _node: node,
         })
     }
@@ -161,6 +170,7 @@ impl EstimatorClient {
                         got: reply.kind,
                     });
                 }
+                self.watch(reply.server_pid);
                 return Ok(reply);
             }
             if !pending.is_connected() {
@@ -182,9 +192,45 @@ impl EstimatorClient {
                 });
             }
             self.result_listener
-                .timed_wait(|_| {}, deadline - now)
+                .timed_wait(|_| {}, (deadline - now).min(LIVENESS_SLICE))
                 .map_err(|e| IpcError::iox("wait for the reply event", e))?;
+            if let Some(pid) = self.server_exited() {
+                // It may have answered just before it ended.
+                if let Some(reply) = pending
+                    .receive()
+                    .map_err(|e| IpcError::iox("receive reply", e))?
+                {
+                    return Ok(*reply.payload());
+                }
+                return Err(IpcError::Died {
+                    prefix: self.names.prefix.clone(),
+                    pid,
+                    what,
+                });
+            }
         }
+    }
+
+    /// Watches the process that sent a reply (once per process).
+    fn watch(&self, pid: u32) {
+        if pid == 0 {
+            return;
+        }
+        let mut server = self.server.lock().unwrap_or_else(|e| e.into_inner());
+        if server.as_ref().is_some_and(|w| w.pid() == pid) {
+            return;
+        }
+        // Without a pidfd (an old kernel) the request timeout still applies.
+        *server = ProcessWatch::open(pid).ok();
+    }
+
+    /// The pid of the watched estimator if it has ended.
+    fn server_exited(&self) -> Option<u32> {
+        let server = self.server.lock().unwrap_or_else(|e| e.into_inner());
+        server
+            .as_ref()
+            .filter(|w| w.has_exited())
+            .map(ProcessWatch::pid)
     }
 
     fn drain_events(&self) -> Result<(), IpcError> {
@@ -229,6 +275,17 @@ impl EstimatorChild {
     ) -> Result<Self, IpcError> {
         // Open the client first, so a failure there does not leave a child behind.
         let client = EstimatorClient::open(prefix)?;
+        // The estimator ends with the thread that started it, even when this process
+        // is killed with no chance to clean up: no orphaned estimator keeps serving.
+        // SAFETY: prctl is async-signal-safe; nothing else runs between fork and exec.
+        unsafe {
+            command.pre_exec(|| {
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
         let child = command.stdin(Stdio::null()).spawn()?;
         let mut this = Self {
             client: Some(client),

@@ -28,6 +28,7 @@ mod client;
 mod forwarder;
 mod identify;
 mod payload;
+mod process_watch;
 mod publisher;
 mod subscriber;
 
@@ -151,6 +152,12 @@ pub enum IpcError {
     WrongReply { expected: u32, got: u32 },
     #[error("estimator process: {0}")]
     Process(String),
+    #[error("the estimator process (pid {pid}) serving {prefix:?} died while {what} was pending")]
+    Died {
+        prefix: String,
+        pid: u32,
+        what: &'static str,
+    },
     #[error("estimator process: {0}")]
     Io(#[from] std::io::Error),
 }

@@ -217,7 +217,9 @@ pub struct EstimatorReply {
     pub n_points: u64,
     /// Number of valid entries in `values`.
     pub n_values: u32,
-    pub reserved: u32,
+    /// Process id of the estimator that answered: the client watches that process, so
+    /// its death ends a wait at once instead of after the request timeout.
+    pub server_pid: u32,
     pub values: [f64; REPLY_VALUES],
 }
 
@@ -230,7 +232,7 @@ impl EstimatorReply {
             run_id: request.run_id,
             n_points: 0,
             n_values: 0,
-            reserved: 0,
+            server_pid: 0,
             values: [0.0; REPLY_VALUES],
         }
     }
