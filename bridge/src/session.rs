@@ -10,7 +10,7 @@ use hal::can::CanTransport;
 use hal::config::MachineConfig;
 use hal::master::{CanMachine, MasterOptions, Pacing, StartupReport};
 use hal::{Machine, MachineError};
-use sim::machine::{SimMachine, SimRunner};
+use sim::machine::{SimClock, SimMachine, SimRunner};
 use sim::scenario::Scenario;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -126,14 +126,16 @@ impl Session {
                         ));
                     };
                     let bus = InprocBus::new();
-                    let sim = SimRunner::spawn(SimMachine::new(scenario), bus.endpoint());
+                    let mut machine = SimMachine::new(scenario);
                     let pacing = if opts.realtime {
+                        machine.set_clock(SimClock::Monotonic);
                         Pacing::RealTime
                     } else {
                         Pacing::Lockstep {
                             answer_timeout: Duration::from_millis(200),
                         }
                     };
+                    let sim = SimRunner::spawn(machine, bus.endpoint());
                     (Box::new(bus.endpoint()), Some(sim), pacing)
                 }
             };

@@ -1,29 +1,120 @@
 //! A simulated CiA 402 servo drive on CANopen, built on the same codec as the master
-//! (`hal::canopen`, `hal::cia402`): an object dictionary behind an SDO server, NMT,
-//! PDOs as the master maps them, heartbeat, EMCY, the drive state machine, cyclic
-//! synchronous position with one cycle of servo lag, and touch probe 1 latching the
-//! exact position at the instant the probe signal rises.
+//! (`hal::canopen`, `hal::cia402`): an object dictionary behind an SDO server, NMT with
+//! a boot-up at power-on, PDOs as any master maps them (transmission types honoured),
+//! a heartbeat producer on the drive's own clock, EMCY, the drive state machine (driven
+//! by the controlword however it arrives), cyclic synchronous position with one cycle
+//! of servo lag, and touch probe 1 latching the exact position at the instant the probe
+//! signal rises.
 //!
 //! Per SYNC a drive answers in a fixed order: heartbeat (when due), EMCY (when new),
 //! event-driven TPDOs whose data changed, then the synchronous TPDOs. The master under
 //! lockstep pacing relies on the synchronous TPDO1 being a drive's last frame.
+//!
+//! Time: the drive's timers (heartbeat, TPDO event timer and inhibit time) run on the
+//! clock its host passes in (`now_us`): the wall clock when the drives stand for
+//! hardware, the simulated time (SYNCs times the period) on a virtual clock.
 
 use hal::can::CanFrame;
 use hal::canopen::cob_id;
-use hal::canopen::emcy::Emcy;
+use hal::canopen::emcy::{code as emcy_code, error_register, Emcy};
 use hal::canopen::heartbeat;
 use hal::canopen::nmt::{NmtCommand, NmtState};
 use hal::canopen::object as obj;
-use hal::canopen::pdo::{MapEntry, PdoMapping, COB_ID_INVALID};
+use hal::canopen::pdo::{
+    communication_index, default_cob_id_entry, MapEntry, PdoDirection, PdoParameters,
+    COB_ID_EXTENDED, COB_ID_INVALID,
+};
 use hal::canopen::sdo::{ObjectDictionary, SdoAbortCode, SdoServer};
+use hal::cia402::controlword::fault_reset_edge;
 use hal::cia402::{Probe, State, Statusword, TouchProbeFunction, TouchProbeStatus};
 
 const PDOS: usize = 4;
 
-#[derive(Clone, Copy, Debug)]
-struct PdoComm {
-    cob_id: u32,
-    transmission: u8,
+/// 0x1000: CiA 402 (profile 0x0192), servo drive (type 0x0002).
+pub const DEVICE_TYPE: u32 = 0x0002_0192;
+/// 0x1018:1. The simulator has no CiA-assigned vendor-ID: 0 is none.
+pub const VENDOR_ID: u32 = 0;
+/// 0x1018:2.
+pub const PRODUCT_CODE: u32 = 0x0000_0402;
+/// 0x1018:3: major revision 1 (upper 16 bits), minor 0.
+pub const REVISION: u32 = 0x0001_0000;
+/// 0x1018:4 is the node-ID: every simulated drive of a machine has its own serial.
+/// 0x6502: cyclic synchronous position (bit 7) only.
+pub const SUPPORTED_DRIVE_MODES: u32 = 1 << 7;
+/// 0x1006 at power-on and after a reset of communication.
+pub const DEFAULT_CYCLE_PERIOD_US: u32 = 2000;
+/// 0x1005 at power-on: SYNC on 0x080, consumed (bit 30 clear: this drive never
+/// produces SYNC).
+pub const DEFAULT_SYNC_COB_ID: u32 = 0x80;
+const CYCLIC_SYNCHRONOUS_POSITION: i8 = 8;
+/// EMCYs held while the drive may not send them (NMT stopped).
+const EMCY_QUEUE: usize = 4;
+
+const DEVICE_NAME: &[u8] = b"probebridge simulated CiA 402 drive";
+
+/// The communication profile area (0x1000-0x1FFF) that a reset of communication
+/// restores.
+#[derive(Clone, Debug)]
+struct Communication {
+    cycle_period_us: u32,
+    heartbeat_ms: u16,
+    sync_cob_id: u32,
+    emcy_cob_id: u32,
+    rpdo: [PdoParameters; PDOS],
+    tpdo: [PdoParameters; PDOS],
+}
+
+/// A PDO of the predefined connection set, invalid until a master configures it (an
+/// empty PDO has nothing to carry).
+fn pdo_at_power_on(direction: PdoDirection, num: u8, node: u8) -> PdoParameters {
+    let mut p = PdoParameters::new(direction, num, node).expect("PDO numbers 1..=4");
+    let cob = default_cob_id_entry(direction, num, node).expect("PDO numbers 1..=4");
+    let index = communication_index(direction, num).expect("PDO numbers 1..=4");
+    p.write(index, 1, &(cob | COB_ID_INVALID).to_le_bytes(), |_| true)
+        .expect("a valid COB-ID entry");
+    p
+}
+
+impl Communication {
+    fn new(node: u8) -> Self {
+        Self {
+            cycle_period_us: DEFAULT_CYCLE_PERIOD_US,
+            heartbeat_ms: 0,
+            sync_cob_id: DEFAULT_SYNC_COB_ID,
+            emcy_cob_id: u32::from(cob_id::emcy_cob(node)),
+            rpdo: core::array::from_fn(|i| pdo_at_power_on(PdoDirection::Rpdo, i as u8 + 1, node)),
+            tpdo: core::array::from_fn(|i| pdo_at_power_on(PdoDirection::Tpdo, i as u8 + 1, node)),
+        }
+    }
+}
+
+/// The drive profile area (0x6000-0x9FFF) that a reset of the node restores.
+#[derive(Clone, Debug)]
+struct Application {
+    mode: i8,
+    controlword: u16,
+    target: i32,
+    tp_function: u16,
+    tp_status: u16,
+    tp_pos_edge: i32,
+    state: State,
+    /// Active fault (its EMCY error code, 0x603F), until a fault reset.
+    fault: Option<u16>,
+}
+
+impl Application {
+    fn new(position_inc: i32) -> Self {
+        Self {
+            mode: 0,
+            controlword: 0,
+            target: position_inc,
+            tp_function: 0,
+            tp_status: 0,
+            tp_pos_edge: 0,
+            state: State::SwitchOnDisabled,
+            fault: None,
+        }
+    }
 }
 
 /// The drive's objects. Plain fields, `Copy` data only: SYNC processing allocates
@@ -31,85 +122,157 @@ struct PdoComm {
 #[derive(Clone, Debug)]
 struct Objects {
     node: u8,
-    cycle_period_us: u32,
-    heartbeat_ms: u16,
-    mode: i8,
-    controlword: u16,
-    statusword: u16,
-    target: i32,
+    comm: Communication,
+    app: Application,
+    /// Encoder position: physical, no reset changes it.
     actual: i32,
-    error_code: u16,
-    tp_function: u16,
-    tp_status: u16,
-    tp_pos_edge: i32,
-    rpdo_comm: [PdoComm; PDOS],
-    rpdo_map: [PdoMapping; PDOS],
-    tpdo_comm: [PdoComm; PDOS],
-    tpdo_map: [PdoMapping; PDOS],
-    /// Set when the master wrote 0x60B8 (through an RPDO or SDO).
-    tp_function_written: bool,
+    /// An RPDO of the wrong length came in; cleared by the next good one.
+    pdo_length_error: bool,
+    /// EMCYs to send, oldest first.
+    emcy: [Emcy; EMCY_QUEUE],
+    emcy_len: usize,
+    /// 0x1017 was written: the producer starts over.
+    heartbeat_restart: bool,
 }
 
-const DEVICE_NAME: &[u8] = b"probebridge simulated CiA 402 drive";
-
 impl Objects {
-    fn new(node: u8) -> Self {
-        let default_comm = |base: u16| PdoComm {
-            cob_id: COB_ID_INVALID | (base as u32 + node as u32),
-            transmission: 255,
-        };
+    fn new(node: u8, position_inc: i32) -> Self {
         Self {
             node,
-            cycle_period_us: 2000,
-            heartbeat_ms: 0,
-            mode: 0,
-            controlword: 0,
-            statusword: State::SwitchOnDisabled.statusword_bits(),
-            target: 0,
-            actual: 0,
-            error_code: 0,
-            tp_function: 0,
-            tp_status: 0,
-            tp_pos_edge: 0,
-            rpdo_comm: cob_id::RPDO_BASE.map(default_comm),
-            rpdo_map: Default::default(),
-            tpdo_comm: cob_id::TPDO_BASE.map(default_comm),
-            tpdo_map: Default::default(),
-            tp_function_written: false,
+            comm: Communication::new(node),
+            app: Application::new(position_inc),
+            actual: position_inc,
+            pdo_length_error: false,
+            emcy: [Emcy {
+                error_code: 0,
+                error_register: 0,
+                manufacturer: [0; 5],
+            }; EMCY_QUEUE],
+            emcy_len: 0,
+            heartbeat_restart: true,
         }
+    }
+
+    /// 0x1001: generic bit with any error, plus the class of each active one.
+    fn error_register(&self) -> u8 {
+        let mut r = 0;
+        if let Some(code) = self.app.fault {
+            r |= error_register::GENERIC
+                | match code >> 8 {
+                    0x20..=0x2F => error_register::CURRENT,
+                    0x30..=0x3F => error_register::VOLTAGE,
+                    0x40..=0x4F => error_register::TEMPERATURE,
+                    0x81 | 0x82 => error_register::COMMUNICATION,
+                    0xFF => error_register::MANUFACTURER,
+                    _ => 0,
+                };
+        }
+        if self.pdo_length_error {
+            r |= error_register::GENERIC | error_register::COMMUNICATION;
+        }
+        r
+    }
+
+    /// Queues an EMCY whose error register byte is 0x1001 as it is now (code 0x0000:
+    /// an error went away). A full queue drops the oldest.
+    fn push_emcy(&mut self, code: u16) {
+        if self.emcy_len == EMCY_QUEUE {
+            self.emcy.copy_within(1.., 0);
+            self.emcy_len -= 1;
+        }
+        self.emcy[self.emcy_len] = Emcy {
+            error_code: code,
+            error_register: self.error_register(),
+            manufacturer: [0; 5],
+        };
+        self.emcy_len += 1;
+    }
+
+    /// 0x6041: the state bits, remote (the controlword is obeyed), voltage enabled
+    /// while the power stage is switched on, and in cyclic synchronous position with
+    /// operation enabled bit 12: the drive follows the target position.
+    fn statusword(&self) -> u16 {
+        let s = self.app.state;
+        Statusword(s.statusword_bits() | Statusword::REMOTE)
+            .with(
+                Statusword::VOLTAGE_ENABLED,
+                matches!(
+                    s,
+                    State::ReadyToSwitchOn
+                        | State::SwitchedOn
+                        | State::OperationEnabled
+                        | State::QuickStopActive
+                ),
+            )
+            .with(
+                Statusword::TARGET_POSITION_FOLLOWED,
+                s == State::OperationEnabled && self.app.mode == CYCLIC_SYNCHRONOUS_POSITION,
+            )
+            .bits()
     }
 
     /// Value of a mappable object as raw bits.
     fn mapped_value(&self, index: u16, sub: u8) -> Option<u64> {
         Some(match (index, sub) {
-            (obj::CONTROLWORD, 0) => self.controlword as u64,
-            (obj::STATUSWORD, 0) => self.statusword as u64,
+            (obj::CONTROLWORD, 0) => self.app.controlword as u64,
+            (obj::STATUSWORD, 0) => self.statusword() as u64,
             (obj::MODES_OF_OPERATION, 0) | (obj::MODES_OF_OPERATION_DISPLAY, 0) => {
-                self.mode as u8 as u64
+                self.app.mode as u8 as u64
             }
             (obj::POSITION_ACTUAL_VALUE, 0) => self.actual as u32 as u64,
-            (obj::TARGET_POSITION, 0) => self.target as u32 as u64,
-            (obj::ERROR_CODE, 0) => self.error_code as u64,
-            (obj::TOUCH_PROBE_FUNCTION, 0) => self.tp_function as u64,
-            (obj::TOUCH_PROBE_STATUS, 0) => self.tp_status as u64,
-            (obj::TOUCH_PROBE_1_POSITIVE_EDGE, 0) => self.tp_pos_edge as u32 as u64,
+            (obj::TARGET_POSITION, 0) => self.app.target as u32 as u64,
+            (obj::ERROR_CODE, 0) => self.app.fault.unwrap_or(0) as u64,
+            (obj::TOUCH_PROBE_FUNCTION, 0) => self.app.tp_function as u64,
+            (obj::TOUCH_PROBE_STATUS, 0) => self.app.tp_status as u64,
+            (obj::TOUCH_PROBE_1_POSITIVE_EDGE, 0) => self.app.tp_pos_edge as u32 as u64,
             _ => return None,
         })
     }
 
-    /// Objects the master may write through an RPDO.
+    /// Writes an object the master may write through an RPDO or SDO, with its effect:
+    /// a controlword steps the state machine, a touch probe function (re)arms.
     fn write_mapped(&mut self, index: u16, sub: u8, v: u64) -> Result<(), SdoAbortCode> {
         match (index, sub) {
-            (obj::CONTROLWORD, 0) => self.controlword = v as u16,
-            (obj::TARGET_POSITION, 0) => self.target = v as u32 as i32,
-            (obj::MODES_OF_OPERATION, 0) => self.mode = v as u8 as i8,
+            (obj::CONTROLWORD, 0) => self.apply_controlword(v as u16),
+            (obj::TARGET_POSITION, 0) => self.app.target = v as u32 as i32,
+            (obj::MODES_OF_OPERATION, 0) => self.app.mode = v as u8 as i8,
             (obj::TOUCH_PROBE_FUNCTION, 0) => {
-                self.tp_function = v as u16;
-                self.tp_function_written = true;
+                self.app.tp_function = v as u16;
+                self.apply_touch_probe_function();
             }
             _ => return Err(SdoAbortCode::CANNOT_BE_MAPPED),
         }
         Ok(())
+    }
+
+    /// The state machine takes `cw`. A fault reset (bit 7 rising) in Fault clears the
+    /// fault (its cause is gone in the simulation; a collision that persists comes
+    /// back at the next step) and sends the EMCY "error reset".
+    fn apply_controlword(&mut self, cw: u16) {
+        let prev = self.app.controlword;
+        if self.app.state == State::Fault && self.app.fault.is_some() && fault_reset_edge(cw, prev)
+        {
+            self.app.fault = None;
+            self.push_emcy(emcy_code::NO_ERROR);
+        }
+        self.app.state = self
+            .app
+            .state
+            .on_controlword(cw, prev, self.app.fault.is_some());
+        self.app.controlword = cw;
+    }
+
+    /// Enabling touch probe 1 (again) clears its stored edges, as a real drive does,
+    /// so each probing move latches afresh.
+    fn apply_touch_probe_function(&mut self) {
+        let f = TouchProbeFunction::from_bits(self.app.tp_function);
+        let level = self.app.tp_status & TouchProbeStatus::INPUT_LEVEL;
+        self.app.tp_status = level
+            | if f.enabled(Probe::One) {
+                TouchProbeStatus::ENABLED
+            } else {
+                0
+            };
     }
 
     fn object_bits(index: u16, sub: u8) -> Option<u8> {
@@ -127,9 +290,26 @@ impl Objects {
         })
     }
 
-    fn pdo_slot(index: u16, base: u16) -> Option<usize> {
-        let i = index.wrapping_sub(base) as usize;
-        (i < PDOS).then_some(i)
+    /// Whether `e` can go into a PDO of `direction`: an RPDO carries only what the
+    /// master may write, a TPDO any process value; the length must be the object's.
+    fn mappable(direction: PdoDirection, e: MapEntry) -> bool {
+        let writable = matches!(
+            e.index,
+            obj::CONTROLWORD
+                | obj::TARGET_POSITION
+                | obj::MODES_OF_OPERATION
+                | obj::TOUCH_PROBE_FUNCTION
+        );
+        Self::object_bits(e.index, e.sub) == Some(e.bits)
+            && (direction == PdoDirection::Tpdo || writable)
+    }
+
+    fn pdo_mut(&mut self, index: u16) -> Option<&mut PdoParameters> {
+        let c = &mut self.comm;
+        c.rpdo
+            .iter_mut()
+            .chain(c.tpdo.iter_mut())
+            .find(|p| p.handles(index))
     }
 }
 
@@ -153,151 +333,128 @@ fn put(buf: &mut [u8], v: u64, n: usize) -> Result<usize, SdoAbortCode> {
     Ok(n)
 }
 
+/// A simple variable: only sub-index 0 exists.
+fn var(sub: u8, v: u64, n: usize) -> Result<(u64, usize), SdoAbortCode> {
+    if sub == 0 {
+        Ok((v, n))
+    } else {
+        Err(SdoAbortCode::SUB_INDEX_DOES_NOT_EXIST)
+    }
+}
+
+/// A write to a read-only simple variable.
+fn read_only(sub: u8) -> Result<(), SdoAbortCode> {
+    var(sub, 0, 0).and(Err(SdoAbortCode::READ_ONLY))
+}
+
+/// A COB-ID entry (0x1005, 0x1014): 11-bit identifier, no bits in 11..=28, no 29-bit
+/// frames; a valid entry's identifier changes only through an invalid one (CiA 301).
+fn cob_id_entry(old: u32, data: &[u8], reserved: u32) -> Result<u32, SdoAbortCode> {
+    let v = le(data, 4)? as u32;
+    if v & (COB_ID_EXTENDED | reserved | 0x1FFF_F800) != 0 {
+        return Err(SdoAbortCode::VALUE_RANGE_EXCEEDED);
+    }
+    let both_valid = old & COB_ID_INVALID == 0 && v & COB_ID_INVALID == 0;
+    if both_valid && (old & 0x7FF) != (v & 0x7FF) {
+        return Err(SdoAbortCode::VALUE_RANGE_EXCEEDED);
+    }
+    Ok(v)
+}
+
 impl ObjectDictionary for Objects {
     fn read(&mut self, index: u16, sub: u8, buf: &mut [u8]) -> Result<usize, SdoAbortCode> {
-        if let Some(i) = Self::pdo_slot(index, obj::RPDO_COMMUNICATION)
-            .or(Self::pdo_slot(index, obj::TPDO_COMMUNICATION))
-        {
-            let c = if index < obj::TPDO_COMMUNICATION {
-                self.rpdo_comm[i]
-            } else {
-                self.tpdo_comm[i]
-            };
-            return match sub {
-                0 => put(buf, 2, 1),
-                1 => put(buf, c.cob_id as u64, 4),
-                2 => put(buf, c.transmission as u64, 1),
-                _ => Err(SdoAbortCode::SUB_INDEX_DOES_NOT_EXIST),
-            };
+        if let Some(p) = self.pdo_mut(index) {
+            return p.read(index, sub, buf);
         }
-        if let Some(i) =
-            Self::pdo_slot(index, obj::RPDO_MAPPING).or(Self::pdo_slot(index, obj::TPDO_MAPPING))
-        {
-            let m = if index < obj::TPDO_MAPPING {
-                &self.rpdo_map[i]
-            } else {
-                &self.tpdo_map[i]
-            };
-            return match sub {
-                0 => put(buf, m.entries().len() as u64, 1),
-                s => m
-                    .entries()
-                    .get(s as usize - 1)
-                    .map_or(Err(SdoAbortCode::SUB_INDEX_DOES_NOT_EXIST), |e| {
-                        put(buf, e.to_u32() as u64, 4)
-                    }),
-            };
-        }
-        match (index, sub) {
-            (obj::DEVICE_TYPE, 0) => put(buf, 0x0002_0192, 4), // CiA 402 servo drive
-            (obj::ERROR_REGISTER, 0) => put(buf, (self.error_code != 0) as u64, 1),
-            (obj::MANUFACTURER_DEVICE_NAME, 0) => {
+        let (v, n) = match index {
+            obj::DEVICE_TYPE => var(sub, DEVICE_TYPE as u64, 4)?,
+            obj::ERROR_REGISTER => var(sub, self.error_register() as u64, 1)?,
+            obj::COB_ID_SYNC => var(sub, self.comm.sync_cob_id as u64, 4)?,
+            obj::COMMUNICATION_CYCLE_PERIOD => var(sub, self.comm.cycle_period_us as u64, 4)?,
+            obj::MANUFACTURER_DEVICE_NAME => {
+                var(sub, 0, 0)?;
                 buf.get_mut(..DEVICE_NAME.len())
                     .ok_or(SdoAbortCode::OUT_OF_MEMORY)?
                     .copy_from_slice(DEVICE_NAME);
-                Ok(DEVICE_NAME.len())
+                return Ok(DEVICE_NAME.len());
             }
-            (obj::COMMUNICATION_CYCLE_PERIOD, 0) => put(buf, self.cycle_period_us as u64, 4),
-            (obj::PRODUCER_HEARTBEAT_TIME, 0) => put(buf, self.heartbeat_ms as u64, 2),
-            _ => match (self.mapped_value(index, sub), Self::object_bits(index, sub)) {
-                (Some(v), Some(bits)) => put(buf, v, bits as usize / 8),
-                _ => Err(SdoAbortCode::OBJECT_DOES_NOT_EXIST),
+            obj::COB_ID_EMCY => var(sub, self.comm.emcy_cob_id as u64, 4)?,
+            obj::PRODUCER_HEARTBEAT_TIME => var(sub, self.comm.heartbeat_ms as u64, 2)?,
+            obj::IDENTITY => match sub {
+                0 => (4, 1),
+                1 => (VENDOR_ID as u64, 4),
+                2 => (PRODUCT_CODE as u64, 4),
+                3 => (REVISION as u64, 4),
+                4 => (self.node as u64, 4),
+                _ => return Err(SdoAbortCode::SUB_INDEX_DOES_NOT_EXIST),
             },
-        }
+            obj::SUPPORTED_DRIVE_MODES => var(sub, SUPPORTED_DRIVE_MODES as u64, 4)?,
+            _ => match (self.mapped_value(index, 0), Self::object_bits(index, 0)) {
+                (Some(v), Some(bits)) => var(sub, v, bits as usize / 8)?,
+                _ => return Err(SdoAbortCode::OBJECT_DOES_NOT_EXIST),
+            },
+        };
+        put(buf, v, n)
     }
 
     fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), SdoAbortCode> {
-        if let Some(i) = Self::pdo_slot(index, obj::RPDO_COMMUNICATION)
-            .or(Self::pdo_slot(index, obj::TPDO_COMMUNICATION))
-        {
-            let rx = index < obj::TPDO_COMMUNICATION;
-            let c = if rx {
-                &mut self.rpdo_comm[i]
-            } else {
-                &mut self.tpdo_comm[i]
-            };
-            return match sub {
-                1 => {
-                    c.cob_id = le(data, 4)? as u32;
-                    Ok(())
-                }
-                2 => {
-                    c.transmission = le(data, 1)? as u8;
-                    Ok(())
-                }
-                0 => Err(SdoAbortCode::READ_ONLY),
+        if let Some(p) = self.pdo_mut(index) {
+            let direction = p.direction();
+            return p.write(index, sub, data, |e| Self::mappable(direction, e));
+        }
+        match index {
+            obj::DEVICE_TYPE
+            | obj::ERROR_REGISTER
+            | obj::MANUFACTURER_DEVICE_NAME
+            | obj::SUPPORTED_DRIVE_MODES
+            | obj::STATUSWORD
+            | obj::MODES_OF_OPERATION_DISPLAY
+            | obj::POSITION_ACTUAL_VALUE
+            | obj::ERROR_CODE
+            | obj::TOUCH_PROBE_STATUS
+            | obj::TOUCH_PROBE_1_POSITIVE_EDGE => read_only(sub),
+            obj::IDENTITY => match sub {
+                0..=4 => Err(SdoAbortCode::READ_ONLY),
                 _ => Err(SdoAbortCode::SUB_INDEX_DOES_NOT_EXIST),
-            };
-        }
-        if let Some(i) =
-            Self::pdo_slot(index, obj::RPDO_MAPPING).or(Self::pdo_slot(index, obj::TPDO_MAPPING))
-        {
-            let rx = index < obj::TPDO_MAPPING;
-            let comm = if rx {
-                self.rpdo_comm[i]
-            } else {
-                self.tpdo_comm[i]
-            };
-            // CiA 301: the mapping may only change while the PDO is disabled.
-            if comm.cob_id & COB_ID_INVALID == 0 {
-                return Err(SdoAbortCode::DEVICE_STATE);
-            }
-            let m = if rx {
-                &mut self.rpdo_map[i]
-            } else {
-                &mut self.tpdo_map[i]
-            };
-            return match sub {
-                0 => {
-                    let n = le(data, 1)? as usize;
-                    if n == 0 {
-                        *m = PdoMapping::new();
-                        Ok(())
-                    } else if n == m.entries().len() {
-                        Ok(())
-                    } else {
-                        Err(SdoAbortCode::VALUE_RANGE_EXCEEDED)
-                    }
-                }
-                s => {
-                    let e = MapEntry::from_u32(le(data, 4)? as u32);
-                    if Self::object_bits(e.index, e.sub) != Some(e.bits) {
-                        return Err(SdoAbortCode::CANNOT_BE_MAPPED);
-                    }
-                    if s as usize != m.entries().len() + 1 {
-                        return Err(SdoAbortCode::SUB_INDEX_DOES_NOT_EXIST);
-                    }
-                    m.push(e).map_err(|_| SdoAbortCode::PDO_LENGTH_EXCEEDED)
-                }
-            };
-        }
-        match (index, sub) {
-            (obj::COMMUNICATION_CYCLE_PERIOD, 0) => {
-                self.cycle_period_us = le(data, 4)? as u32;
+            },
+            obj::COB_ID_SYNC => {
+                var(sub, 0, 0)?;
+                // Bit 30 would make this drive the SYNC producer: it is not one.
+                self.comm.sync_cob_id = cob_id_entry(self.comm.sync_cob_id, data, 1 << 30)?;
                 Ok(())
             }
-            (obj::PRODUCER_HEARTBEAT_TIME, 0) => {
-                self.heartbeat_ms = le(data, 2)? as u16;
+            obj::COB_ID_EMCY => {
+                var(sub, 0, 0)?;
+                self.comm.emcy_cob_id = cob_id_entry(self.comm.emcy_cob_id, data, 1 << 30)?;
                 Ok(())
             }
-            (obj::MODES_OF_OPERATION, 0) => {
+            obj::COMMUNICATION_CYCLE_PERIOD => {
+                var(sub, 0, 0)?;
+                self.comm.cycle_period_us = le(data, 4)? as u32;
+                Ok(())
+            }
+            obj::PRODUCER_HEARTBEAT_TIME => {
+                var(sub, 0, 0)?;
+                self.comm.heartbeat_ms = le(data, 2)? as u16;
+                self.heartbeat_restart = true;
+                Ok(())
+            }
+            obj::MODES_OF_OPERATION => {
+                var(sub, 0, 0)?;
                 let m = le(data, 1)? as u8 as i8;
-                // This drive implements cyclic synchronous position only.
-                if m != 8 {
+                // This drive implements cyclic synchronous position only (0x6502).
+                if m != CYCLIC_SYNCHRONOUS_POSITION {
                     return Err(SdoAbortCode::VALUE_RANGE_EXCEEDED);
                 }
-                self.mode = m;
+                self.app.mode = m;
                 Ok(())
             }
-            (obj::CONTROLWORD, 0) | (obj::TARGET_POSITION, 0) | (obj::TOUCH_PROBE_FUNCTION, 0) => {
+            obj::CONTROLWORD | obj::TARGET_POSITION | obj::TOUCH_PROBE_FUNCTION => {
+                var(sub, 0, 0)?;
                 let bits = Self::object_bits(index, sub).unwrap_or(16);
                 let v = le(data, bits as usize / 8)?;
                 self.write_mapped(index, sub, v)
             }
-            (obj::STATUSWORD, 0)
-            | (obj::POSITION_ACTUAL_VALUE, 0)
-            | (obj::TOUCH_PROBE_STATUS, 0)
-            | (obj::TOUCH_PROBE_1_POSITIVE_EDGE, 0) => Err(SdoAbortCode::READ_ONLY),
             _ => Err(SdoAbortCode::OBJECT_DOES_NOT_EXIST),
         }
     }
@@ -309,37 +466,39 @@ pub struct SimDrive {
     od: Objects,
     sdo: SdoServer,
     nmt: NmtState,
-    state: State,
-    prev_controlword: u16,
     /// Encoder position at the start of the current step (increments).
     step_from: i32,
-    /// Active fault (EMCY error code), until reset.
-    fault: Option<u16>,
-    emcy_pending: Option<u16>,
-    /// Last data sent per event-driven TPDO, to send only on change.
-    last_event: [Option<([u8; 8], usize)>; PDOS],
-    since_heartbeat_us: u64,
+    /// Synchronous RPDO data received since the last SYNC: it takes effect at the next.
+    rpdo_at_sync: [Option<([u8; 8], usize)>; PDOS],
+    /// SYNCs since a TPDO of transmission type 1..=240 was last sent.
+    tpdo_syncs: [u8; PDOS],
+    /// Last data sent per TPDO (change detection for acyclic and event-driven ones).
+    last_sent: [Option<([u8; 8], usize)>; PDOS],
+    /// When each TPDO was last sent, on the drive's clock (inhibit time, event timer).
+    sent_at_us: [u64; PDOS],
+    /// The drive's clock, µs, as last told by [`Self::poll`] or [`Self::answer_sync`].
+    now_us: u64,
+    /// Heartbeat producer: when the last heartbeat was due; `None`: not started.
+    heartbeat_at_us: Option<u64>,
     /// Stops answering anything (a node that fell off the bus).
     pub silent: bool,
 }
 
 impl SimDrive {
-    /// A drive at encoder position `position_inc`.
+    /// A drive at encoder position `position_inc`, just powered on (pre-operational;
+    /// [`Self::power_on`] sends its boot-up).
     pub fn new(node: u8, position_inc: i32) -> Self {
-        let mut od = Objects::new(node);
-        od.actual = position_inc;
-        od.target = position_inc;
         Self {
-            od,
+            od: Objects::new(node, position_inc),
             sdo: SdoServer::new(node),
             nmt: NmtState::PreOperational,
-            state: State::SwitchOnDisabled,
-            prev_controlword: 0,
             step_from: position_inc,
-            fault: None,
-            emcy_pending: None,
-            last_event: [None; PDOS],
-            since_heartbeat_us: 0,
+            rpdo_at_sync: [None; PDOS],
+            tpdo_syncs: [0; PDOS],
+            last_sent: [None; PDOS],
+            sent_at_us: [0; PDOS],
+            now_us: 0,
+            heartbeat_at_us: None,
             silent: false,
         }
     }
@@ -349,7 +508,7 @@ impl SimDrive {
     }
 
     pub fn state(&self) -> State {
-        self.state
+        self.od.app.state
     }
 
     pub fn nmt_state(&self) -> NmtState {
@@ -364,15 +523,31 @@ impl SimDrive {
     /// Where the drive will be at the end of the next step: the CSP target when it is
     /// enabled (one cycle of servo lag), else where it is.
     pub fn next_position_inc(&self) -> i32 {
-        if self.state == State::OperationEnabled && self.od.mode == 8 && self.fault.is_none() {
-            self.od.target
+        let a = &self.od.app;
+        if a.state == State::OperationEnabled
+            && a.mode == CYCLIC_SYNCHRONOUS_POSITION
+            && a.fault.is_none()
+        {
+            a.target
         } else {
             self.od.actual
         }
     }
 
     pub fn cycle_period_us(&self) -> u32 {
-        self.od.cycle_period_us
+        self.od.comm.cycle_period_us
+    }
+
+    /// Whether this drive takes frames with `cob_id` as SYNC (0x1005).
+    pub fn consumes_sync(&self, cob_id: u16) -> bool {
+        self.od.comm.sync_cob_id & 0x7FF == u32::from(cob_id)
+    }
+
+    /// Power-on: the boot-up message (CiA 301: the node enters pre-operational).
+    pub fn power_on(&mut self, tx: &mut dyn FnMut(&CanFrame)) {
+        if !self.silent {
+            tx(&heartbeat::boot_up(self.od.node));
+        }
     }
 
     /// Handles an NMT, SDO or RPDO frame addressed to this drive; answers through `tx`.
@@ -395,13 +570,18 @@ impl SimDrive {
                     tx(&r);
                 }
             }
-            cob_id::CobKind::Rpdo { num, node }
-                if node == self.od.node && self.nmt == NmtState::Operational =>
-            {
-                self.on_rpdo(num, f.data());
+            _ if self.nmt == NmtState::Operational && !f.is_rtr() => {
+                let rx = &self.od.comm.rpdo;
+                if let Some(i) = rx
+                    .iter()
+                    .position(|p| p.is_enabled() && p.cob_id() == f.cob_id())
+                {
+                    self.on_rpdo(i, f.data());
+                }
             }
             _ => {}
         }
+        self.send_emcy(tx);
     }
 
     fn on_nmt(&mut self, cmd: NmtCommand, tx: &mut dyn FnMut(&CanFrame)) {
@@ -409,69 +589,160 @@ impl SimDrive {
             NmtCommand::Start => self.nmt = NmtState::Operational,
             NmtCommand::Stop => self.nmt = NmtState::Stopped,
             NmtCommand::EnterPreOperational => self.nmt = NmtState::PreOperational,
-            NmtCommand::ResetNode | NmtCommand::ResetCommunication => {
-                // Communication objects back to their defaults (CiA 301), then boot-up.
-                let keep = (self.od.actual, self.od.cycle_period_us);
-                let node = self.od.node;
-                self.od = Objects::new(node);
-                (self.od.actual, self.od.cycle_period_us) = keep;
-                self.od.target = keep.0;
-                self.sdo = SdoServer::new(node);
-                self.last_event = [None; PDOS];
-                self.state = if self.fault.is_some() {
-                    State::Fault
-                } else {
-                    State::SwitchOnDisabled
-                };
-                self.nmt = NmtState::PreOperational;
-                tx(&heartbeat::boot_up(node));
+            NmtCommand::ResetNode => {
+                // The application starts over too; the axis stays where it is.
+                self.od.app = Application::new(self.od.actual);
+                self.od.emcy_len = 0;
+                self.reset_communication(tx);
+            }
+            NmtCommand::ResetCommunication => self.reset_communication(tx),
+        }
+    }
+
+    /// CiA 301: the communication area (0x1000-0x1FFF) back to its power-on values,
+    /// then boot-up into pre-operational. The drive profile area is untouched.
+    fn reset_communication(&mut self, tx: &mut dyn FnMut(&CanFrame)) {
+        let node = self.od.node;
+        self.od.comm = Communication::new(node);
+        if self.od.pdo_length_error {
+            // A communication error: gone with the communication that had it.
+            self.od.pdo_length_error = false;
+            self.od.emcy_len = 0;
+        }
+        self.od.heartbeat_restart = true;
+        self.sdo = SdoServer::new(node);
+        self.rpdo_at_sync = [None; PDOS];
+        self.tpdo_syncs = [0; PDOS];
+        self.last_sent = [None; PDOS];
+        self.nmt = NmtState::PreOperational;
+        tx(&heartbeat::boot_up(node));
+    }
+
+    /// An RPDO arrived: event-driven data (254, 255) takes effect now, synchronous
+    /// data (0..=240) at the next SYNC.
+    fn on_rpdo(&mut self, i: usize, data: &[u8]) {
+        let p = &self.od.comm.rpdo[i];
+        let synchronous = p.transmission_type() <= 240;
+        let map = p.mapping().clone();
+        let Ok(values) = map.unpack(data) else {
+            // A PDO of the wrong length: CiA 301 EMCY 0x8210, the data is not used.
+            if !self.od.pdo_length_error {
+                self.od.pdo_length_error = true;
+                self.od.push_emcy(emcy_code::PDO_LENGTH_ERROR);
+            }
+            return;
+        };
+        if self.od.pdo_length_error {
+            self.od.pdo_length_error = false;
+            self.od.push_emcy(emcy_code::NO_ERROR);
+        }
+        if synchronous {
+            let mut d = [0u8; 8];
+            let n = data.len().min(8);
+            d[..n].copy_from_slice(&data[..n]);
+            self.rpdo_at_sync[i] = Some((d, n));
+            return;
+        }
+        for (e, v) in map.entries().iter().zip(values) {
+            let _ = self.od.write_mapped(e.index, e.sub, v);
+        }
+    }
+
+    /// A SYNC arrived (before the step it starts): synchronous RPDO data received
+    /// since the last one takes effect.
+    pub fn on_sync(&mut self) {
+        if self.silent {
+            return;
+        }
+        for i in 0..PDOS {
+            let Some((d, n)) = self.rpdo_at_sync[i].take() else {
+                continue;
+            };
+            let map = self.od.comm.rpdo[i].mapping().clone();
+            if let Ok(values) = map.unpack(&d[..n]) {
+                for (e, v) in map.entries().iter().zip(values) {
+                    let _ = self.od.write_mapped(e.index, e.sub, v);
+                }
             }
         }
     }
 
-    fn on_rpdo(&mut self, num: u8, data: &[u8]) {
-        let i = num as usize - 1;
-        if i >= PDOS || self.od.rpdo_comm[i].cob_id & COB_ID_INVALID != 0 {
+    /// Sends the queued EMCYs on the COB-ID of 0x1014, except in NMT stopped (CiA
+    /// 301: no EMCY there; they wait until the node leaves it).
+    fn send_emcy(&mut self, tx: &mut dyn FnMut(&CanFrame)) {
+        if self.nmt == NmtState::Stopped || self.od.emcy_len == 0 {
             return;
         }
-        let map = self.od.rpdo_map[i].clone();
-        let Ok(values) = map.unpack(data) else {
-            // A PDO of the wrong length: CiA 301 EMCY 0x8210, the data is not used.
-            self.emcy_pending = Some(hal::canopen::emcy::code::PDO_LENGTH_ERROR);
-            return;
-        };
-        for (e, v) in map.entries().iter().zip(values) {
-            let _ = self.od.write_mapped(e.index, e.sub, v);
+        let cob = self.od.comm.emcy_cob_id;
+        for e in &self.od.emcy[..self.od.emcy_len] {
+            if cob & COB_ID_INVALID != 0 {
+                break;
+            }
+            let f = e.encode(self.od.node);
+            if let Some(f) = CanFrame::new((cob & 0x7FF) as u16, f.data()) {
+                tx(&f);
+            }
         }
-        if self.od.tp_function_written {
-            self.od.tp_function_written = false;
-            self.apply_touch_probe_function();
-        }
-        let cw = self.od.controlword;
-        self.state = self
-            .state
-            .on_controlword(cw, self.prev_controlword, self.fault.is_some());
-        if self.state == State::SwitchOnDisabled
-            && self.fault.is_some()
-            && hal::cia402::controlword::fault_reset_edge(cw, self.prev_controlword)
-        {
-            self.fault = None;
-            self.od.error_code = 0;
-        }
-        self.prev_controlword = cw;
+        self.od.emcy_len = 0;
     }
 
-    /// Enabling touch probe 1 (again) clears its stored edges, as a real drive does,
-    /// so each probing move latches afresh.
-    fn apply_touch_probe_function(&mut self) {
-        let f = TouchProbeFunction::from_bits(self.od.tp_function);
-        let level = self.od.tp_status & TouchProbeStatus::INPUT_LEVEL;
-        self.od.tp_status = level
-            | if f.enabled(Probe::One) {
-                TouchProbeStatus::ENABLED
-            } else {
-                0
-            };
+    /// Time passes on the drive's clock (`now_us`, µs, never going back): the
+    /// heartbeat when due (0x1017 ms after the last), queued EMCYs, and in operational
+    /// the event-driven TPDOs whose data changed or whose event timer expired.
+    pub fn poll(&mut self, now_us: u64, tx: &mut dyn FnMut(&CanFrame)) {
+        if self.silent {
+            return;
+        }
+        self.now_us = now_us;
+        self.produce_heartbeat(tx);
+        self.send_emcy(tx);
+        if self.nmt == NmtState::Operational {
+            self.send_tpdos(false, tx);
+        }
+    }
+
+    fn produce_heartbeat(&mut self, tx: &mut dyn FnMut(&CanFrame)) {
+        let period_us = u64::from(self.od.comm.heartbeat_ms) * 1000;
+        if self.od.heartbeat_restart {
+            self.od.heartbeat_restart = false;
+            self.heartbeat_at_us = Some(self.now_us);
+        }
+        let Some(last) = self.heartbeat_at_us else {
+            return;
+        };
+        if period_us == 0 || self.now_us < last + period_us {
+            return;
+        }
+        // On the period's grid; after a stall of the host, one heartbeat, not a burst.
+        let next = last + period_us;
+        self.heartbeat_at_us = Some(if self.now_us >= next + period_us {
+            self.now_us
+        } else {
+            next
+        });
+        tx(&heartbeat::encode(self.od.node, self.nmt));
+    }
+
+    /// When [`Self::poll`] next has something to do on its own (heartbeat, an event
+    /// timer), on the drive's clock; `None`: nothing timed.
+    pub fn next_deadline_us(&self) -> Option<u64> {
+        if self.silent {
+            return None;
+        }
+        let period_us = u64::from(self.od.comm.heartbeat_ms) * 1000;
+        let heartbeat = if self.od.heartbeat_restart {
+            Some(self.now_us)
+        } else {
+            self.heartbeat_at_us
+                .filter(|_| period_us > 0)
+                .map(|t| t + period_us)
+        };
+        let timers = self.od.comm.tpdo.iter().enumerate().filter_map(|(i, p)| {
+            let event = p.transmission_type() >= 254 && p.event_timer_ms() > 0;
+            (self.nmt == NmtState::Operational && p.is_enabled() && event)
+                .then(|| self.sent_at_us[i] + u64::from(p.event_timer_ms()) * 1000)
+        });
+        heartbeat.into_iter().chain(timers).min()
     }
 
     /// Starts a simulation step: remembers where the axis starts from.
@@ -484,88 +755,98 @@ impl SimDrive {
     /// Returns whether touch probe 1 latched in this step.
     pub fn end_step(&mut self, to_inc: i32, latch_fraction: Option<f64>, level: bool) -> bool {
         let mut latched = false;
+        let app = &mut self.od.app;
         if let Some(frac) = latch_fraction {
-            let f = TouchProbeFunction::from_bits(self.od.tp_function);
-            let st = TouchProbeStatus::from_bits(self.od.tp_status);
+            let f = TouchProbeFunction::from_bits(app.tp_function);
+            let st = TouchProbeStatus::from_bits(app.tp_status);
             // First-event mode latches once until re-armed; continuous mode every edge.
             let room = !st.positive_edge_stored(Probe::One) || f.continuous(Probe::One);
             let armed = f.enabled(Probe::One) && f.sample_positive_edge(Probe::One) && room;
             if armed {
                 let from = self.step_from as f64;
                 let pos = from + frac * (to_inc as f64 - from);
-                self.od.tp_pos_edge = pos.round() as i32;
-                self.od.tp_status |= TouchProbeStatus::POSITIVE_EDGE_STORED;
+                app.tp_pos_edge = pos.round() as i32;
+                app.tp_status |= TouchProbeStatus::POSITIVE_EDGE_STORED;
                 latched = true;
             }
         }
         if level {
-            self.od.tp_status |= TouchProbeStatus::INPUT_LEVEL;
+            app.tp_status |= TouchProbeStatus::INPUT_LEVEL;
         } else {
-            self.od.tp_status &= !TouchProbeStatus::INPUT_LEVEL;
+            app.tp_status &= !TouchProbeStatus::INPUT_LEVEL;
         }
         self.od.actual = to_inc;
         latched
     }
 
-    /// Puts the drive into Fault with an EMCY `code` (sent with the next SYNC answer).
+    /// Puts the drive into Fault with an EMCY `code` (sent with the next answer).
     pub fn raise_fault(&mut self, code: u16) {
-        if self.fault.is_none() {
-            self.fault = Some(code);
-            self.od.error_code = code;
-            self.emcy_pending = Some(code);
-            self.state = State::Fault;
+        if self.od.app.fault.is_none() {
+            self.od.app.fault = Some(code);
+            self.od.app.state = State::Fault;
+            self.od.push_emcy(code);
         }
     }
 
-    /// Answers one SYNC (after [`Self::end_step`]): heartbeat when due, EMCY, event
-    /// TPDOs that changed, then synchronous TPDOs.
-    pub fn answer_sync(&mut self, tx: &mut dyn FnMut(&CanFrame)) {
+    /// Answers one SYNC (after [`Self::end_step`]), at `now_us` on the drive's clock:
+    /// heartbeat when due, EMCY, event TPDOs that changed, then synchronous TPDOs
+    /// (type 0 when its data changed, type n on every n-th SYNC).
+    pub fn answer_sync(&mut self, now_us: u64, tx: &mut dyn FnMut(&CanFrame)) {
         if self.silent {
             return;
         }
-        self.od.statusword = self.state.statusword_bits() | Statusword::REMOTE;
-        self.since_heartbeat_us += self.od.cycle_period_us as u64;
-        if self.od.heartbeat_ms > 0 && self.since_heartbeat_us >= self.od.heartbeat_ms as u64 * 1000
-        {
-            self.since_heartbeat_us = 0;
-            tx(&heartbeat::encode(self.od.node, self.nmt));
-        }
-        if let Some(code) = self.emcy_pending.take() {
-            let e = Emcy {
-                error_code: code,
-                error_register: 1,
-                manufacturer: [0; 5],
-            };
-            tx(&e.encode(self.od.node));
-        }
+        self.poll(now_us, tx);
         if self.nmt != NmtState::Operational {
             return;
         }
-        for pass_sync in [false, true] {
-            for i in 0..PDOS {
-                let c = self.od.tpdo_comm[i];
-                if c.cob_id & COB_ID_INVALID != 0 {
-                    continue;
-                }
-                let sync = (1..=240).contains(&c.transmission);
-                if sync != pass_sync {
-                    continue;
-                }
-                let map = &self.od.tpdo_map[i];
-                let mut values = [0u64; 8];
-                for (v, e) in values.iter_mut().zip(map.entries()) {
-                    *v = self.od.mapped_value(e.index, e.sub).unwrap_or(0);
-                }
-                let (data, len) = map.pack(&values[..map.entries().len()]);
-                if !sync {
-                    if self.last_event[i] == Some((data, len)) {
-                        continue;
+        self.send_tpdos(true, tx);
+    }
+
+    /// `at_sync`: the synchronous TPDOs of this SYNC; else the event-driven ones that
+    /// are due (data changed and the inhibit time over, or the event timer expired).
+    fn send_tpdos(&mut self, at_sync: bool, tx: &mut dyn FnMut(&CanFrame)) {
+        for i in 0..PDOS {
+            let c = &self.od.comm.tpdo[i];
+            if !c.is_enabled() {
+                self.tpdo_syncs[i] = 0;
+                continue;
+            }
+            let tt = c.transmission_type();
+            let sync = tt <= 240;
+            if sync != at_sync || (252..=253).contains(&tt) {
+                continue;
+            }
+            let since_us = self.now_us.saturating_sub(self.sent_at_us[i]);
+            let map = c.mapping();
+            let mut values = [0u64; 8];
+            for (v, e) in values.iter_mut().zip(map.entries()) {
+                *v = self.od.mapped_value(e.index, e.sub).unwrap_or(0);
+            }
+            let (data, len) = map.pack(&values[..map.entries().len()]);
+            let changed = self.last_sent[i] != Some((data, len));
+            let send = match tt {
+                0 => changed,
+                1..=240 => {
+                    self.tpdo_syncs[i] += 1;
+                    let due = self.tpdo_syncs[i] >= tt;
+                    if due {
+                        self.tpdo_syncs[i] = 0;
                     }
-                    self.last_event[i] = Some((data, len));
+                    due
                 }
-                if let Some(f) = CanFrame::new((c.cob_id & 0x7FF) as u16, &data[..len]) {
-                    tx(&f);
+                _ => {
+                    let inhibit_us = u64::from(c.inhibit_time_100us()) * 100;
+                    let timer_us = u64::from(c.event_timer_ms()) * 1000;
+                    (changed && since_us >= inhibit_us) || (timer_us > 0 && since_us >= timer_us)
                 }
+            };
+            if !send {
+                continue;
+            }
+            self.last_sent[i] = Some((data, len));
+            self.sent_at_us[i] = self.now_us;
+            if let Some(f) = CanFrame::new(c.cob_id(), &data[..len]) {
+                tx(&f);
             }
         }
     }

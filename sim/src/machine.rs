@@ -3,13 +3,17 @@
 //! probe signal at the same instant. Time is SYNC count times the cycle period the
 //! master configured (0x1006): the simulation runs on whatever clock the master runs,
 //! virtual or real.
+//!
+//! The drives' own timers (heartbeat producer, TPDO event timers) run on a
+//! [`SimClock`]: the wall clock when the drives stand for hardware on a bus that runs
+//! in real time (then they produce heartbeats with no SYNC at all), or the simulated
+//! time on a virtual clock, where no time passes between SYNCs.
 
 use crate::drive::SimDrive;
 use crate::scenario::{FaultKind, Scenario};
 use crate::world::World;
 use hal::axis::AxisPositions;
 use hal::can::{CanFrame, CanTransport, TransportError};
-use hal::canopen::cob_id::{self, CobKind};
 use hal::config::MachineConfig;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -36,11 +40,23 @@ struct PlannedFault {
     done: bool,
 }
 
+/// The clock of the drives' own timers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SimClock {
+    /// The simulated time: SYNCs times the cycle period. For masters on a virtual
+    /// clock (lockstep), which advance time only by SYNC.
+    Virtual,
+    /// CLOCK_MONOTONIC: for masters in real time, on SocketCAN or the in-process bus.
+    Monotonic,
+}
+
 /// All drives of one machine plus its physics.
 pub struct SimMachine {
     drives: Vec<AxisDrive>,
     world: World,
     time_us: u64,
+    clock: SimClock,
+    epoch_ns: u64,
     faults: Vec<PlannedFault>,
     syncs: u64,
     latch_log: Option<Arc<LatchLog>>,
@@ -146,10 +162,63 @@ impl SimMachine {
             drives,
             world: World::new(scenario),
             time_us: 0,
+            clock: SimClock::Virtual,
+            epoch_ns: 0,
             faults,
             syncs: 0,
             latch_log: None,
         }
+    }
+
+    /// Runs the drives' timers on `clock` (default [`SimClock::Virtual`]).
+    pub fn set_clock(&mut self, clock: SimClock) {
+        self.clock = clock;
+        self.epoch_ns = hal::clock::monotonic_ns();
+    }
+
+    pub fn clock(&self) -> SimClock {
+        self.clock
+    }
+
+    /// Now on the drives' clock, µs.
+    fn drive_now_us(&self) -> u64 {
+        match self.clock {
+            SimClock::Virtual => self.time_us,
+            SimClock::Monotonic => hal::clock::monotonic_ns().saturating_sub(self.epoch_ns) / 1000,
+        }
+    }
+
+    /// Power-on: every drive sends its boot-up.
+    pub fn power_on(&mut self, tx: &mut dyn FnMut(&CanFrame)) {
+        for d in &mut self.drives {
+            d.drive.power_on(tx);
+        }
+    }
+
+    /// Lets the drives' timers run (heartbeats, event-driven TPDOs, EMCYs). On the
+    /// virtual clock no time passes between SYNCs: nothing happens.
+    pub fn poll(&mut self, tx: &mut dyn FnMut(&CanFrame)) {
+        if self.clock == SimClock::Virtual {
+            return;
+        }
+        let now = self.drive_now_us();
+        for d in &mut self.drives {
+            d.drive.poll(now, tx);
+        }
+    }
+
+    /// How long until [`Self::poll`] has something to do on its own (`None`: nothing
+    /// timed, or the virtual clock).
+    pub fn poll_timeout(&self) -> Option<Duration> {
+        if self.clock == SimClock::Virtual {
+            return None;
+        }
+        let now = self.drive_now_us();
+        self.drives
+            .iter()
+            .filter_map(|d| d.drive.next_deadline_us())
+            .min()
+            .map(|t| Duration::from_micros(t.saturating_sub(now)))
     }
 
     /// Records the wall-clock instant of every latch into `log` (benchmarks).
@@ -181,8 +250,15 @@ impl SimMachine {
 
     /// Handles one frame from the bus; answers through `tx`.
     pub fn on_frame(&mut self, f: &CanFrame, tx: &mut dyn FnMut(&CanFrame)) {
-        if let CobKind::Sync = cob_id::classify(f.cob_id()) {
-            self.on_sync(tx);
+        // SYNC: on the COB-ID of 0x1005 (0x080 unless a master moved it), 0 or 1 byte.
+        let sync = f.data().len() <= 1
+            && !f.is_rtr()
+            && self
+                .drives
+                .iter()
+                .any(|d| d.drive.consumes_sync(f.cob_id()));
+        if sync {
+            self.on_sync(f.cob_id(), tx);
             return;
         }
         for d in &mut self.drives {
@@ -190,8 +266,13 @@ impl SimMachine {
         }
     }
 
-    fn on_sync(&mut self, tx: &mut dyn FnMut(&CanFrame)) {
+    fn on_sync(&mut self, cob: u16, tx: &mut dyn FnMut(&CanFrame)) {
         self.syncs += 1;
+        for d in &mut self.drives {
+            if d.drive.consumes_sync(cob) {
+                d.drive.on_sync();
+            }
+        }
         let period_us = self
             .drives
             .first()
@@ -234,8 +315,11 @@ impl SimMachine {
                 log.record(hal::clock::monotonic_ns());
             }
         }
+        let now = self.drive_now_us();
         for d in &mut self.drives {
-            d.drive.answer_sync(tx);
+            if d.drive.consumes_sync(cob) {
+                d.drive.answer_sync(now, tx);
+            }
         }
     }
 }
@@ -247,7 +331,8 @@ pub struct SimRunner {
 }
 
 impl SimRunner {
-    /// Serves `machine` on `transport`: every frame is handled as it arrives.
+    /// Serves `machine` on `transport`: powers it on (boot-ups), then handles every
+    /// frame as it arrives and runs the drives' timers in between.
     pub fn spawn<T: CanTransport + 'static>(machine: SimMachine, transport: T) -> Self {
         Self::spawn_with_init(machine, transport, || {})
     }
@@ -266,11 +351,21 @@ impl SimRunner {
             .spawn(move || {
                 init();
                 let mut out: Vec<CanFrame> = Vec::with_capacity(64);
+                machine.power_on(&mut |r| out.push(*r));
                 while !stop2.load(Ordering::Acquire) {
-                    let Some(f) = transport.receive(Duration::from_millis(50))? else {
-                        continue;
-                    };
-                    machine.on_frame(&f, &mut |r| out.push(*r));
+                    for r in out.drain(..) {
+                        transport.transmit(&r)?;
+                    }
+                    // Wake for the stop flag at least every 50 ms.
+                    let wait = machine
+                        .poll_timeout()
+                        .map_or(Duration::from_millis(50), |t| {
+                            t.min(Duration::from_millis(50))
+                        });
+                    if let Some(f) = transport.receive(wait)? {
+                        machine.on_frame(&f, &mut |r| out.push(*r));
+                    }
+                    machine.poll(&mut |r| out.push(*r));
                     for r in out.drain(..) {
                         transport.transmit(&r)?;
                     }

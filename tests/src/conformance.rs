@@ -5,7 +5,7 @@
 use hal::can::inproc::InprocBus;
 use hal::master::{CanMachine, MasterOptions, Pacing};
 use hal::{Axis, AxisPositions, Contact, ErrorKind, Machine, MachineError, NullSink, ProbeMove};
-use sim::machine::{SimMachine, SimRunner};
+use sim::machine::{SimClock, SimMachine, SimRunner};
 use sim::Scenario;
 use std::time::Duration;
 
@@ -128,7 +128,9 @@ impl Backend for SocketCan {
         if let Some(ms) = env(CAN_HEARTBEAT_TIMEOUT_MS_ENV) {
             timing.heartbeat_timeout_ms = ms as u16;
         }
-        let sim = SimRunner::spawn(SimMachine::new(scenario), open("simulated drives"));
+        let mut drives = SimMachine::new(scenario);
+        drives.set_clock(SimClock::Monotonic);
+        let sim = SimRunner::spawn(drives, open("simulated drives"));
         let options = MasterOptions {
             pacing: Pacing::RealTime,
             ..MasterOptions::default()

@@ -14,10 +14,15 @@ pub struct Loopback {
 }
 
 impl Loopback {
-    pub fn new(machine: SimMachine) -> Self {
+    /// Powers `machine` on: its boot-ups are the first frames to receive.
+    pub fn new(mut machine: SimMachine) -> Self {
+        let mut queue = heapless::Deque::new();
+        machine.power_on(&mut |f| {
+            let _ = queue.push_back(*f);
+        });
         Self {
             machine,
-            queue: heapless::Deque::new(),
+            queue,
             overrun: false,
         }
     }

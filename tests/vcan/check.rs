@@ -10,6 +10,10 @@
 //!   truth (`truth=probe`, `truth=431`, `QNNN=V`);
 //! - every program in `configs/programs` is covered by a case;
 //! - the Machine conformance suite on SocketCAN ran and passed (and was not skipped);
+//! - the third-party master (`canopen_master.py`, python-canopen against `probebridge
+//!   sim`), our master against a python-canopen LocalNode (`vcan-foreign-master`) and
+//!   that device's own view (`foreign_device.py`): each exited 0 and printed every one
+//!   of its checks with `-> ok` (the lines are printed here, with their observed values);
 //! - the candump log (`candump -L vcan0`) parses with `hal::can::candump::parse_log`;
 //!   per case (split at the marker frames 7FF#NN the VM sends before each case): the
 //!   NMT/SDO start-up sequence, the PDO mapping written over SDO, NMT start before the
@@ -28,7 +32,7 @@ use hal::canopen::pdo::mapping_index;
 use hal::cia402::touch_probe::TouchProbeStatus;
 use hal::master::process_data::{self, ProcessData, Tpdo2};
 use serde_json::Value;
-use sim::machine::SimMachine;
+use sim::machine::{SimClock, SimMachine};
 use sim::Scenario;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -41,6 +45,66 @@ const MARKER: u16 = 0x7FF;
 const CONFORMANCE_MARKER: u8 = 0xFF;
 /// Tests the conformance suite must have passed on SocketCAN.
 const CONFORMANCE_TESTS: usize = 7;
+/// Marker data bytes before the python-canopen master and the foreign device.
+const PYTHON_MASTER_MARKER: u8 = 0xFD;
+const FOREIGN_DEVICE_MARKER: u8 = 0xFE;
+
+/// The programs of the VM step beside the cases: results file stem, the checks each
+/// must print with `-> ok`.
+const CHECKED_PROGRAMS: [(&str, &[&str]); 3] = [
+    (
+        "python-canopen",
+        &[
+            "nmt_boot_up_at_power_on",
+            "sdo_expedited_upload_device_type",
+            "sdo_identity_0x1018",
+            "sdo_segmented_upload_0x1008",
+            "sdo_supported_drive_modes_0x6502",
+            "sdo_segmented_download_0x1006",
+            "sdo_abort_read_only",
+            "sdo_abort_no_sub_index",
+            "sdo_abort_no_object",
+            "sdo_abort_value_range",
+            "sdo_abort_length_too_low",
+            "heartbeat_period_without_sync",
+            "nmt_stopped_answers_no_sdo",
+            "nmt_states_in_heartbeat",
+            "nmt_reset_communication",
+            "pdo_remapping_read_back",
+            "tpdo_type_3_every_third_sync",
+            "tpdo_type_1_every_sync",
+            "cia402_mode_csp",
+            "cia402_walk_to_operation_enabled",
+            "cia402_statusword_bits_4_and_12_in_csp",
+            "cia402_statusword_by_sdo",
+            "emcy_fault_0x8611",
+            "cia402_fault_state",
+            "cia402_fault_reset_to_operation_enabled",
+        ],
+    ),
+    (
+        "foreign-master",
+        &[
+            "foreign_startup_accepted",
+            "foreign_downloads_read_back",
+            "foreign_segmented_upload_0x1008",
+            "foreign_expedited_upload_0x1018",
+            "foreign_abort_no_object",
+            "foreign_abort_no_sub_index",
+            "foreign_abort_read_only",
+            "foreign_abort_length",
+            "foreign_sdo_after_aborts",
+        ],
+    ),
+    (
+        "foreign-device",
+        &[
+            "foreign_device_downloads_as_written",
+            "foreign_device_pdo_mapping",
+            "foreign_device_nmt_state",
+        ],
+    ),
+];
 
 #[derive(Debug)]
 struct Expect {
@@ -438,6 +502,33 @@ fn check_conformance(results: &Path, r: &mut Report) {
     });
 }
 
+/// A program of the VM step that prints `CHECK <name>: <observed> -> ok|FAIL` lines.
+fn check_program(results: &Path, stem: &str, checks: &[&str], r: &mut Report) {
+    let log = results.join(format!("{stem}.log"));
+    let exit = read(&results.join(format!("{stem}.exit"))).unwrap_or_default();
+    let text = read(&log).unwrap_or_default();
+    println!("{stem}:");
+    for l in text.lines().filter(|l| l.starts_with("CHECK ")) {
+        println!("  {l}");
+    }
+    r.check(exit.trim() == "0", || {
+        format!(
+            "{stem}: exit status {:?}; its log ends with:\n    {}",
+            exit.trim(),
+            tail(&log, 30)
+        )
+    });
+    for name in checks {
+        let line = text
+            .lines()
+            .find(|l| l.strip_prefix("CHECK ").and_then(|l| l.split(':').next()) == Some(name));
+        r.check(line.is_some_and(|l| l.ends_with("-> ok")), || match line {
+            Some(l) => format!("{stem}: {l}"),
+            None => format!("{stem}: check {name} did not run"),
+        });
+    }
+}
+
 fn is_master_frame(f: &CanFrame) -> bool {
     matches!(
         classify(f.cob_id()),
@@ -492,18 +583,19 @@ fn check_segment(case: &Case, frames: &[CanFrame], results: &Path, r: &mut Repor
         return r.fail(format!("candump {name}: no frames recorded for this case"));
     }
 
-    // Start-up: NMT reset communication to all, every boot-up, SDO configuration,
-    // NMT start, then SYNC.
-    r.check(
-        frames[0].cob_id() == 0 && frames[0].data() == [0x82, 0],
-        || {
-            format!(
-            "candump {name}: the first frame is {:03X}#{:02X?}, expected the NMT reset 000#8200",
-            frames[0].cob_id(),
-            frames[0].data()
+    // Power-on: the simulator's boot-ups. Start-up: NMT reset communication to all,
+    // every boot-up, SDO configuration, NMT start, then SYNC.
+    let first = frames
+        .iter()
+        .find(|f| !(matches!(classify(f.cob_id()), CobKind::Heartbeat { .. }) && f.data() == [0]))
+        .unwrap_or(&frames[0]);
+    r.check(first.cob_id() == 0 && first.data() == [0x82, 0], || {
+        format!(
+            "candump {name}: the first frame after the power-on boot-ups is {:03X}#{:02X?}, expected the NMT reset 000#8200",
+            first.cob_id(),
+            first.data()
         )
-        },
-    );
+    });
     let first_sdo = frames
         .iter()
         .position(|f| matches!(classify(f.cob_id()), CobKind::SdoRequest { .. }))
@@ -620,15 +712,23 @@ fn check_segment(case: &Case, frames: &[CanFrame], results: &Path, r: &mut Repor
         }
     }
 
-    // Replay: the master's frames into a fresh simulator give the recorded answers.
+    // Replay: the master's frames into a fresh simulator, powered on and with its
+    // timers polled after every frame as `probebridge sim` does, give the recorded
+    // answers. Heartbeats (not boot-ups) run on the wall clock: left out on both sides.
     let mut sim = SimMachine::new(&sc);
+    sim.set_clock(SimClock::Monotonic);
     let mut replayed = Vec::new();
+    sim.power_on(&mut |a| replayed.push(*a));
     for f in frames.iter().filter(|f| is_master_frame(f)) {
         sim.on_frame(f, &mut |a| replayed.push(*a));
+        sim.poll(&mut |a| replayed.push(*a));
     }
+    let timed =
+        |f: &CanFrame| matches!(classify(f.cob_id()), CobKind::Heartbeat { .. }) && f.data() != [0];
+    replayed.retain(|f| !timed(f));
     let recorded: Vec<CanFrame> = frames
         .iter()
-        .filter(|f| is_drive_frame(f))
+        .filter(|f| is_drive_frame(f) && !timed(f))
         .copied()
         .collect();
     let first_diff = recorded
@@ -694,6 +794,16 @@ fn check_candump(cases: &[Case], results: &Path, r: &mut Report) {
                 case.number, case.name
             )),
         }
+    }
+    for (marker, what) in [
+        (PYTHON_MASTER_MARKER, "the python-canopen master"),
+        (FOREIGN_DEVICE_MARKER, "the foreign device"),
+    ] {
+        r.check(segments.get(&marker).is_some_and(|f| f.len() > 100), || {
+            format!(
+                "candump: no marker 7FF#{marker:02X} (or almost no traffic after it) before {what}"
+            )
+        });
     }
     match segments.get(&CONFORMANCE_MARKER) {
         Some(frames) => {
@@ -779,11 +889,14 @@ fn main() -> ExitCode {
         check_case(case, &results, &reference, &mut r);
     }
     check_conformance(&results, &mut r);
+    for (stem, checks) in CHECKED_PROGRAMS {
+        check_program(&results, stem, checks, &mut r);
+    }
     check_candump(&cases, &results, &mut r);
 
     if r.failures.is_empty() {
         println!(
-            "vcan-check: all {} checks passed ({} cases, conformance suite, candump replay)",
+            "vcan-check: all {} checks passed ({} cases, conformance suite, python-canopen master, foreign device, candump replay)",
             r.checks,
             cases.len()
         );

@@ -2,14 +2,21 @@
 # Runs inside the throwaway VM that .ci/vcan/run boots (the host's filesystem is
 # visible read-only, RESULTS is the writable --rwdir). Brings up vcan0, records all
 # traffic with candump, runs the cases of tests/vcan/cases against `probebridge sim`
-# on vcan0, then the Machine conformance suite on the SocketCAN backend. Everything
-# it finds goes into RESULTS; the host checks it (vng does not return the exit status).
+# on vcan0, a third-party master (python-canopen) against `probebridge sim`, our
+# master's start-up against a device that is not ours (a python-canopen LocalNode),
+# then the Machine conformance suite on the SocketCAN backend. Everything it finds
+# goes into RESULTS; the host checks it (vng does not return the exit status).
 #
-# Usage: in-vm.sh RESULTS PROBEBRIDGE_BIN CONFORMANCE_TEST_EXE
+# Usage: in-vm.sh RESULTS PROBEBRIDGE_BIN CONFORMANCE_TEST_EXE FOREIGN_MASTER_BIN PYTHON
+#   PYTHON: the python of the venv with canopen and python-can (.ci/vcan/setup).
 set -u
 RESULTS=$1
 export PROBEBRIDGE_BIN=$2
 CONFORMANCE=$3
+FOREIGN_MASTER=$4
+PYTHON=$5
+# The name the foreign device gives itself (0x1008, segmented: longer than 4 bytes).
+FOREIGN_NAME="python-canopen LocalNode CiA 402 drive"
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
 export PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin
 export IOX2_LOG_LEVEL=${IOX2_LOG_LEVEL:-Error}
@@ -17,6 +24,9 @@ exec > "$RESULTS/vm.log" 2>&1
 echo "vm: $(uname -r), $(nproc) cpus, $(awk '/MemTotal/ {print $2 " kB"}' /proc/meminfo)"
 date +%s > "$RESULTS/vm.started"
 
+# can-bcm: python-can's periodic sends (the LocalNode's heartbeat) use the kernel's
+# broadcast manager.
+modprobe can-bcm || echo "vm: no can-bcm module"
 if ! { modprobe vcan && ip link add dev vcan0 type vcan && ip link set vcan0 up; }; then
     echo "vm: cannot bring up vcan0" | tee "$RESULTS/vm.error"
     exit 1
@@ -37,6 +47,37 @@ candump_pid=$!
 sleep 0.5
 
 bash "$ROOT/tests/vcan/run-cases.sh" "$RESULTS" vcan0
+
+echo "== python-canopen: a third-party master against probebridge sim (drive-fault)"
+cansend vcan0 7FF#FD
+start=$(date +%s)
+timeout 300 "$PYTHON" "$ROOT/tests/vcan/canopen_master.py" --iface vcan0 \
+    --eds "$ROOT/tests/vcan/cia402-drive.eds" -- \
+    "$PROBEBRIDGE_BIN" sim --scenario "$ROOT/configs/scenarios/drive-fault.toml" --can vcan0 \
+    > "$RESULTS/python-canopen.log" 2>&1
+echo $? > "$RESULTS/python-canopen.exit"
+echo "   exit $(cat "$RESULTS/python-canopen.exit") after $(( $(date +%s) - start )) s"
+
+echo "== our master against a python-canopen LocalNode (not our drive)"
+cansend vcan0 7FF#FE
+start=$(date +%s)
+rm -f /run/pbvcan/foreign.ready
+"$PYTHON" "$ROOT/tests/vcan/foreign_device.py" --iface vcan0 \
+    --eds "$ROOT/tests/vcan/cia402-drive.eds" --node 1 --name "$FOREIGN_NAME" \
+    --ready /run/pbvcan/foreign.ready > "$RESULTS/foreign-device.log" 2>&1 &
+device_pid=$!
+for _ in $(seq 300); do
+    [ -f /run/pbvcan/foreign.ready ] && break
+    sleep 0.1
+done
+timeout 120 "$FOREIGN_MASTER" --can vcan0 --machine "$ROOT/configs/machines/table-ac.toml" \
+    --name "$FOREIGN_NAME" > "$RESULTS/foreign-master.log" 2>&1
+echo $? > "$RESULTS/foreign-master.exit"
+kill -TERM "$device_pid"
+wait "$device_pid"
+echo $? > "$RESULTS/foreign-device.exit"
+echo "   master exit $(cat "$RESULTS/foreign-master.exit"), device exit" \
+    "$(cat "$RESULTS/foreign-device.exit") after $(( $(date +%s) - start )) s"
 
 echo "== conformance suite on SocketCAN (vcan0)"
 cansend vcan0 7FF#FF

@@ -30,7 +30,7 @@ use hal::can::CanTransport;
 use hal::master::{BusLoad, CanMachine, MasterOptions, Pacing};
 use hal::{AxisPositions, ContactSample, Machine, ProbeMove, SampleSink};
 use serde_json::json;
-use sim::machine::{LatchLog, SimMachine, SimRunner};
+use sim::machine::{LatchLog, SimClock, SimMachine, SimRunner};
 use sim::Scenario;
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -183,6 +183,7 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
     let latches = LatchLog::new();
     let mut sim_machine = SimMachine::new(&scenario);
     sim_machine.set_latch_log(latches.clone());
+    sim_machine.set_clock(SimClock::Monotonic);
     let (master_transport, sim_transport): (Box<dyn CanTransport>, Box<dyn CanTransport>) =
         match &args.can {
             None => {

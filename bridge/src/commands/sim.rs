@@ -3,7 +3,7 @@
 
 use crate::session::load_scenario;
 use hal::can::socketcan::SocketCanTransport;
-use sim::machine::{SimMachine, SimRunner};
+use sim::machine::{SimClock, SimMachine, SimRunner};
 use std::path::PathBuf;
 
 pub fn run(scenario: Option<PathBuf>, iface: &str) -> Result<(), String> {
@@ -21,7 +21,10 @@ pub fn run(scenario: Option<PathBuf>, iface: &str) -> Result<(), String> {
         sc.path.display(),
         nodes.join(" ")
     );
-    let runner = SimRunner::spawn(SimMachine::new(&sc), transport);
+    // Drives standing for hardware: their heartbeats run on the wall clock.
+    let mut machine = SimMachine::new(&sc);
+    machine.set_clock(SimClock::Monotonic);
+    let runner = SimRunner::spawn(machine, transport);
     // Runs until the transport fails or the process is stopped.
     runner
         .wait()

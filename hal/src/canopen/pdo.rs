@@ -381,6 +381,11 @@ impl PdoParameters {
         self.event_timer_ms
     }
 
+    /// Least time between two transmissions of an event-driven TPDO, 100 µs units.
+    pub fn inhibit_time_100us(&self) -> u16 {
+        self.inhibit_time_100us
+    }
+
     /// The active mapping (changes only when the count is written).
     pub fn mapping(&self) -> &PdoMapping {
         &self.mapping
