@@ -4,6 +4,7 @@
 //! error naming the file, the key and why, before anything moves.
 
 use crate::axis::Axis;
+pub use crate::modbus::config::ModbusBusConfig;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -46,10 +47,26 @@ pub struct AxisConfig {
     pub hirth: f64,
 }
 
+/// The fieldbus the axes are reached over: `[bus] kind = "canopen"` (CiA 402 drives)
+/// or `kind = "modbus"` (a PLC that owns the axes, see [`crate::modbus`]).
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum BusConfig {
+    #[serde(rename = "canopen")]
+    CanOpen(CanOpenBusConfig),
+    Modbus(ModbusBusConfig),
+}
+
+impl Default for BusConfig {
+    fn default() -> Self {
+        BusConfig::CanOpen(CanOpenBusConfig::default())
+    }
+}
+
 /// CANopen bus timing.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
-pub struct BusConfig {
+pub struct CanOpenBusConfig {
     /// Bit rate in bit/s.
     #[serde(default = "default_bitrate")]
     pub bitrate: u32,
@@ -89,7 +106,7 @@ fn default_max_load() -> f64 {
     70.0
 }
 
-impl Default for BusConfig {
+impl Default for CanOpenBusConfig {
     fn default() -> Self {
         Self {
             bitrate: default_bitrate(),
@@ -223,6 +240,36 @@ impl MachineConfig {
         Ok(cfg)
     }
 
+    /// The CANopen bus settings, when the axes are CiA 402 drives on CAN.
+    pub fn canopen_bus(&self) -> Option<&CanOpenBusConfig> {
+        match &self.bus {
+            BusConfig::CanOpen(b) => Some(b),
+            BusConfig::Modbus(_) => None,
+        }
+    }
+
+    /// The CANopen bus settings to change (tests and benchmarks tune the timing).
+    pub fn canopen_bus_mut(&mut self) -> Option<&mut CanOpenBusConfig> {
+        match &mut self.bus {
+            BusConfig::CanOpen(b) => Some(b),
+            BusConfig::Modbus(_) => None,
+        }
+    }
+
+    /// The CANopen bus settings, or the defaults for a machine on another bus (what a
+    /// simulated CAN bus of that machine runs with).
+    pub fn canopen_or_default(&self) -> CanOpenBusConfig {
+        self.canopen_bus().cloned().unwrap_or_default()
+    }
+
+    /// The Modbus settings, when a PLC owns the axes.
+    pub fn modbus_bus(&self) -> Option<&ModbusBusConfig> {
+        match &self.bus {
+            BusConfig::Modbus(b) => Some(b),
+            BusConfig::CanOpen(_) => None,
+        }
+    }
+
     pub fn axis(&self, axis: Axis) -> Option<&AxisConfig> {
         self.axes.iter().find(|a| a.name == axis)
     }
@@ -301,7 +348,40 @@ impl MachineConfig {
                 ));
             }
         }
-        let b = &self.bus;
+        match &self.bus {
+            BusConfig::CanOpen(b) => self.validate_canopen(b)?,
+            BusConfig::Modbus(m) => {
+                m.validate()
+                    .map_err(|e| self.invalid(format!("bus.{}", e.key), e.reason))?;
+                self.validate_modbus_reach(m)?;
+            }
+        }
+        self.validate_kinematics_and_probes()
+    }
+
+    /// Every software limit must fit the PLC's 32-bit counts.
+    fn validate_modbus_reach(&self, m: &ModbusBusConfig) -> Result<(), ConfigError> {
+        for a in &self.axes {
+            let per = if a.name.is_rotary() {
+                m.counts_per_deg
+            } else {
+                m.counts_per_mm
+            };
+            if a.min.abs().max(a.max.abs()) * per > i32::MAX as f64 {
+                return Err(self.invalid(
+                    if a.name.is_rotary() {
+                        "bus.counts_per_deg"
+                    } else {
+                        "bus.counts_per_mm"
+                    },
+                    format!("axis {} limits overflow the PLC's 32-bit position", a.name),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn validate_canopen(&self, b: &CanOpenBusConfig) -> Result<(), ConfigError> {
         if !(10_000..=1_000_000).contains(&b.bitrate) {
             return Err(self.invalid(
                 "bus.bitrate",
@@ -323,6 +403,10 @@ impl MachineConfig {
         if !(b.max_load_percent > 0.0 && b.max_load_percent <= 100.0) {
             return Err(self.invalid("bus.max_load_percent", "must be in (0, 100]"));
         }
+        Ok(())
+    }
+
+    fn validate_kinematics_and_probes(&self) -> Result<(), ConfigError> {
         let k = &self.kinematics;
         for (side, list) in [("table", &k.table), ("head", &k.head)] {
             for ax in list {
@@ -418,7 +502,7 @@ max_acceleration = 1000.0
     fn parses_minimal() {
         let c = MachineConfig::parse(MINI, Path::new("mini.toml")).unwrap();
         assert_eq!(c.axis_mask(), 0b111);
-        assert_eq!(c.bus.sync_period_us, 2000);
+        assert_eq!(c.canopen_bus().unwrap().sync_period_us, 2000);
     }
 
     #[test]

@@ -7,6 +7,7 @@
 //! - [`can`]: CAN frames and transports (SocketCAN, in-process bus).
 //! - [`canopen`], [`cia402`]: the CANopen master and CiA 402 drive profile as code
 //!   that does no I/O (frames in, frames out).
+//! - [`modbus`]: the PLC backend over Modbus TCP/RTU (mailbox codec, latch ring).
 //! - [`config`]: the machine description (axes, bus mapping, kinematics, probe table).
 
 pub mod axis;
@@ -18,6 +19,7 @@ pub mod config;
 pub mod contact_sample;
 pub mod machine;
 pub mod master;
+pub mod modbus;
 pub mod motion;
 pub mod rt;
 

@@ -117,10 +117,14 @@ impl Backend for SocketCan {
         let mut cfg = crate::machine_config(scenario);
         let env = |name: &str| std::env::var(name).ok().and_then(|v| v.parse().ok());
         if let Some(us) = env(CAN_SYNC_US_ENV) {
-            cfg.bus.sync_period_us = us;
+            if let Some(b) = cfg.canopen_bus_mut() {
+                b.sync_period_us = us;
+            }
         }
         if let Some(ms) = env(CAN_HEARTBEAT_TIMEOUT_MS_ENV) {
-            cfg.bus.heartbeat_timeout_ms = ms as u16;
+            if let Some(b) = cfg.canopen_bus_mut() {
+                b.heartbeat_timeout_ms = ms as u16;
+            }
         }
         let sim = SimRunner::spawn(SimMachine::new(scenario), open("simulated drives"));
         let options = MasterOptions {

@@ -63,9 +63,9 @@ fn emcy_mid_move_aborts_with_all_axes_stopped() {
 #[test]
 fn heartbeat_loss_is_detected_within_the_timeout() {
     let sc = with_fault("node = 2\nkind = \"silent\"\nafter_ms = 1000.0");
-    let timeout_ms = sc.machine.bus.heartbeat_timeout_ms as f64;
-    let producer_ms = sc.machine.bus.heartbeat_producer_ms as f64;
-    let period_ms = sc.machine.bus.sync_period_us as f64 / 1000.0;
+    let timeout_ms = sc.machine.canopen_or_default().heartbeat_timeout_ms as f64;
+    let producer_ms = sc.machine.canopen_or_default().heartbeat_producer_ms as f64;
+    let period_ms = sc.machine.canopen_or_default().sync_period_us as f64 / 1000.0;
     let mut m = CanInproc::open(&sc);
     let e = m
         .move_to(&AxisPositions::linear(LONG_MOVE), 6000.0)
@@ -94,7 +94,9 @@ fn heartbeat_loss_is_detected_within_the_timeout() {
 fn overloaded_bus_configuration_is_refused_before_anything_is_sent() {
     let sc = with_fault("node = 1\nkind = \"silent\"\nafter_ms = 1.0e9");
     let mut cfg = machine_config(&sc);
-    cfg.bus.sync_period_us = 1000;
+    if let Some(b) = cfg.canopen_bus_mut() {
+        b.sync_period_us = 1000;
+    }
     let bus = InprocBus::new();
     let mut listener = bus.endpoint();
     let options = MasterOptions {

@@ -552,11 +552,11 @@ fn check_segment(case: &Case, frames: &[CanFrame], results: &Path, r: &mut Repor
         let mut want: Vec<((u16, u8), u32)> = vec![
             (
                 (object::COMMUNICATION_CYCLE_PERIOD, 0),
-                cfg.bus.sync_period_us,
+                cfg.canopen_or_default().sync_period_us,
             ),
             (
                 (object::PRODUCER_HEARTBEAT_TIME, 0),
-                u32::from(cfg.bus.heartbeat_producer_ms),
+                u32::from(cfg.canopen_or_default().heartbeat_producer_ms),
             ),
             ((object::MODES_OF_OPERATION, 0), 8),
         ];

@@ -101,7 +101,9 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
     )
     .map_err(|e| e.to_string())?;
     let mut cfg = crate::session::machine_config(&scenario);
-    cfg.bus.sync_period_us = args.period_us;
+    if let Some(b) = cfg.canopen_bus_mut() {
+        b.sync_period_us = args.period_us;
+    }
     // Short moves of a few µm are acceleration-bound: a stiffer machine brings a
     // trigger (probe, stop, retract) down to about a dozen SYNC periods. The hot path
     // does not depend on it.
@@ -112,11 +114,13 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
     let mut notes = Vec::new();
     if args.can.is_none() {
         // The in-process bus has no bit rate: nothing to overload.
-        cfg.bus.max_load_percent = f64::INFINITY;
+        if let Some(b) = cfg.canopen_bus_mut() {
+            b.max_load_percent = f64::INFINITY;
+        }
         notes.push(format!(
             "in-process bus: no bit rate, the bus-load limit does not apply (this traffic would be {:.0} % of {} kbit/s)",
             load.percent,
-            cfg.bus.bitrate / 1000
+            cfg.canopen_or_default().bitrate / 1000
         ));
     }
 

@@ -101,13 +101,13 @@ impl CanMachine {
         S: SampleSink + 'static,
     {
         let bus_load = BusLoad::of(cfg);
-        if bus_load.percent > cfg.bus.max_load_percent {
+        if bus_load.percent > cfg.canopen_or_default().max_load_percent {
             return Err(MachineError::new(
                 ErrorKind::InvalidRequest,
                 format!(
                     "{}: {bus_load}; the limit is {:.0} %: lengthen bus.sync_period_us or raise the bit rate",
                     cfg.path.display(),
-                    cfg.bus.max_load_percent
+                    cfg.canopen_or_default().max_load_percent
                 ),
             ));
         }

@@ -59,7 +59,7 @@ pub struct BusLoad {
 impl BusLoad {
     pub fn of(cfg: &MachineConfig) -> Self {
         let n = cfg.axes.len();
-        let b = &cfg.bus;
+        let b = &cfg.canopen_or_default();
         let period_bits = b.bitrate as f64 * b.sync_period_us as f64 * 1e-6;
         let sync = CanFrame::wire_bits_worst_case(0) as f64;
         let per_drive = (CanFrame::wire_bits_worst_case(bytes(&RPDO1))

@@ -53,13 +53,13 @@ pub struct LoopConfig {
 impl LoopConfig {
     pub fn from_machine(cfg: &MachineConfig, pacing: Pacing) -> Self {
         Self {
-            period_ns: cfg.bus.sync_period_us as u64 * 1000,
+            period_ns: cfg.canopen_or_default().sync_period_us as u64 * 1000,
             pacing,
             in_position_window: 0.001,
             settle_timeout_ns: 2_000_000_000,
             enable_timeout_ns: 2_000_000_000,
             arm_timeout_ns: 200_000_000,
-            heartbeat_timeout_ns: cfg.bus.heartbeat_timeout_ms as u64 * 1_000_000,
+            heartbeat_timeout_ns: cfg.canopen_or_default().heartbeat_timeout_ms as u64 * 1_000_000,
         }
     }
 }

@@ -189,7 +189,7 @@ pub fn configure<T: CanTransport>(
     t: &mut T,
     cfg: &MachineConfig,
 ) -> Result<Vec<String>, MachineError> {
-    let timeout = Duration::from_millis(cfg.bus.sdo_timeout_ms as u64);
+    let timeout = Duration::from_millis(cfg.canopen_or_default().sdo_timeout_ms as u64);
     let mut drives = Vec::new();
     for axis in &cfg.axes {
         let name = match sdo_transfer(
@@ -212,7 +212,7 @@ pub fn configure<T: CanTransport>(
             axis,
             object::COMMUNICATION_CYCLE_PERIOD,
             0,
-            &cfg.bus.sync_period_us.to_le_bytes(),
+            &cfg.canopen_or_default().sync_period_us.to_le_bytes(),
             timeout,
         )?;
         sdo_download(
@@ -220,7 +220,7 @@ pub fn configure<T: CanTransport>(
             axis,
             object::PRODUCER_HEARTBEAT_TIME,
             0,
-            &cfg.bus.heartbeat_producer_ms.to_le_bytes(),
+            &cfg.canopen_or_default().heartbeat_producer_ms.to_le_bytes(),
             timeout,
         )?;
         sdo_download(

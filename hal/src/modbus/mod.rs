@@ -1,0 +1,15 @@
+//! The PLC backend: a PLC owns the axes and latches the probe in its own real-time
+//! task; the bridge commands moves and reads latched positions and status over Modbus
+//! TCP or RTU.
+//!
+//! - [`word_order`], [`mailbox`], [`latch_ring`]: the register map as a codec that
+//!   does no I/O.
+//! - [`config`]: the `[bus] kind = "modbus"` section.
+
+pub mod config;
+pub mod latch_ring;
+pub mod mailbox;
+pub mod word_order;
+
+pub use config::{CaptureKind, ModbusBusConfig, Transport};
+pub use word_order::WordOrder;
