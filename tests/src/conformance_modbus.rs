@@ -5,7 +5,7 @@
 use crate::conformance::Backend;
 use hal::config::{BusConfig, MachineConfig};
 use hal::modbus::{ModbusBusConfig, ModbusMachine, ModbusOptions};
-use hal::{AxisPositions, Contact, Machine, MachineError, NullSink, ProbeMove};
+use hal::{AxisPositions, Contact, Machine, MachineError, NullSink, ProbeMove, SampleSink};
 use sim::plc::{PlcPacing, PlcProgram, SimPlc};
 use sim::Scenario;
 use std::path::PathBuf;
@@ -58,6 +58,15 @@ pub fn with_bus(scenario: &Scenario, bus: ModbusBusConfig) -> MachineConfig {
 /// Starts the simulated PLC of `scenario` on TCP loopback (virtual clock) and connects
 /// a [`ModbusMachine`] to it; `tune` may change the bus settings of both first.
 pub fn open_tcp(scenario: &Scenario, tune: impl FnOnce(&mut ModbusBusConfig)) -> PlcHeld {
+    open_tcp_with(scenario, tune, NullSink)
+}
+
+/// As [`open_tcp`], publishing contacts to `sink`.
+pub fn open_tcp_with(
+    scenario: &Scenario,
+    tune: impl FnOnce(&mut ModbusBusConfig),
+    sink: impl SampleSink + 'static,
+) -> PlcHeld {
     let mut bus = modbus_bus(scenario);
     tune(&mut bus);
     let program = PlcProgram::new(scenario, &bus);
@@ -70,9 +79,8 @@ pub fn open_tcp(scenario: &Scenario, tune: impl FnOnce(&mut ModbusBusConfig)) ->
     .unwrap_or_else(|e| panic!("simulated PLC did not start: {e}"));
     let addr = plc.local_addr().expect("a TCP server has an address");
     bus.address = Some(addr.to_string());
-    let machine =
-        ModbusMachine::start(&with_bus(scenario, bus), NullSink, ModbusOptions::default())
-            .unwrap_or_else(|e| panic!("Modbus machine did not start: {e}"));
+    let machine = ModbusMachine::start(&with_bus(scenario, bus), sink, ModbusOptions::default())
+        .unwrap_or_else(|e| panic!("Modbus machine did not start: {e}"));
     PlcHeld {
         machine,
         plc,
@@ -181,6 +189,12 @@ impl Backend for ModbusRtu {
     fn available() -> Result<(), String> {
         match Command::new("socat").arg("-V").output() {
             Ok(o) if o.status.success() => Ok(()),
+            // CI installs it (scripts/test runs scripts/install-test-peers): never skip there.
+            _ if std::env::var_os("CI").is_some() => {
+                panic!(
+                    "socat is missing in CI: scripts/install-test-peers should have installed it"
+                )
+            }
             _ => Err("socat is not installed (scripts/install-test-peers installs it)".into()),
         }
     }

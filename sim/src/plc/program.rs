@@ -182,6 +182,10 @@ impl PlcProgram {
             return Err(ExceptionCode::IllegalDataAddress);
         }
         self.command[start - base..start - base + values.len()].copy_from_slice(values);
+        // The acknowledge is taken at once (a PLC copies it in its next cycle; on the
+        // virtual clock, time stands still while nothing moves).
+        let ack = hal::modbus::mailbox::cmd::LATCH_ACK;
+        self.status.latch_ack = self.command[ack];
         Ok(())
     }
 
