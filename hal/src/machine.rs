@@ -185,3 +185,22 @@ impl<M: Machine + ?Sized> Machine for &mut M {
         (**self).set_run(run_id)
     }
 }
+
+impl<M: Machine + ?Sized> Machine for Box<M> {
+    type Error = M::Error;
+    fn axes(&self) -> u8 {
+        (**self).axes()
+    }
+    fn positions(&mut self) -> Result<AxisPositions, Self::Error> {
+        (**self).positions()
+    }
+    fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), Self::Error> {
+        (**self).move_to(target, feed)
+    }
+    fn probe(&mut self, mv: &ProbeMove) -> Result<Contact, Self::Error> {
+        (**self).probe(mv)
+    }
+    fn set_run(&mut self, run_id: u64) {
+        (**self).set_run(run_id)
+    }
+}

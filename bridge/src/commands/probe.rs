@@ -26,7 +26,7 @@ pub fn run(args: &ProbeArgs) -> Result<(), String> {
         return Err(format!("--feed {}: must be > 0", args.feed));
     }
     let mut s = Session::open(&args.machine).map_err(|e| e.to_string())?;
-    for note in &s.startup.notes {
+    for note in &s.notes {
         eprintln!("note: {note}");
     }
     let rapid = s.config.probes.first().map_or(3000.0, |p| p.fmax);
