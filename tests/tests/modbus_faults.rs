@@ -238,3 +238,44 @@ fn plc_cycle_capture_removes_the_half_cycle_bias_and_reports_the_uncertainty() {
         .iter()
         .all(|s| s.flags & FLAG_HW_LATCH == 0));
 }
+
+#[test]
+fn poll_capture_refuses_to_measure_unless_allowed() {
+    let mut m = open_tcp(&plane(), |b| b.capture = CaptureKind::Poll);
+    let before = m.positions().unwrap();
+    let e = m
+        .probe(&ProbeMove {
+            direction: [0.0, 0.0, -1.0],
+            feed: 100.0,
+            max_distance: 5.0,
+        })
+        .unwrap_err();
+    assert_eq!(e.kind, ErrorKind::InvalidRequest, "{e}");
+    assert!(e.to_string().contains("bus.allow_poll"), "{e}");
+    assert_eq!(m.positions().unwrap(), before);
+    let mut m = open_tcp(&plane(), |b| {
+        b.capture = CaptureKind::Poll;
+        b.allow_poll = true;
+    });
+    let z = probe_down(&mut m).unwrap();
+    // Polled: up to a PLC cycle past the edge, never before it.
+    assert!(z <= Z0 + R && z > Z0 + R - 0.01, "{z}");
+}
+
+#[test]
+fn rtu_a_late_reply_is_drained_and_the_request_asked_again() {
+    use probebridge_tests::conformance_modbus::ModbusRtu;
+    if probebridge_tests::conformance::skipped::<ModbusRtu>("rtu late reply") {
+        return;
+    }
+    let mut m = ModbusRtu::open_with(&plane(), |b| b.timeout_ms = 100);
+    m.plc.with_program(|p| {
+        p.knobs.late_replies = 1;
+        p.knobs.late_ms = 150;
+    });
+    assert_contact(probe_down(&mut m).unwrap());
+    assert_contact(probe_down(&mut m).unwrap());
+    let s = m.machine.client_stats();
+    println!("rtu late reply: {s:?}");
+    assert_eq!((s.timeouts, s.transport_errors), (1, 0), "{s:?}");
+}

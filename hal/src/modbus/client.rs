@@ -4,7 +4,8 @@
 //! - every request under the configured timeout;
 //! - after a TCP timeout the connection is dropped and opened anew (a late reply would
 //!   otherwise be taken for the answer to the next transaction);
-//! - after an RTU timeout the line is drained and left silent for a frame gap;
+//! - after an RTU timeout the port is reopened and the line drained for another
+//!   timeout and until it has been silent for a frame gap;
 //! - a `ServerDeviceBusy` answer is retried after a poll period, `busy_retries` times.
 //!
 //! Exceptions come back as data (`Ok(Err(code))`); only transport failures are `Err`.
@@ -152,7 +153,9 @@ fn transport_error(what: &str, e: impl std::fmt::Display) -> MachineError {
     MachineError::new(ErrorKind::Bus, format!("{what}: {e}"))
 }
 
-async fn connect(bus: &ModbusBusConfig) -> Result<Context, MachineError> {
+/// Opens the connection. RTU: the line is drained first, for at least `quiet_for`
+/// (after a timeout: the time a late answer may still take).
+async fn connect(bus: &ModbusBusConfig, quiet_for: Duration) -> Result<Context, MachineError> {
     let slave = Slave(bus.unit);
     let timeout = Duration::from_millis(bus.timeout_ms as u64);
     match bus.transport {
@@ -185,12 +188,31 @@ async fn connect(bus: &ModbusBusConfig) -> Result<Context, MachineError> {
                 Parity::Even => tokio_serial::Parity::Even,
                 Parity::Odd => tokio_serial::Parity::Odd,
             };
-            let port =
+            let mut port =
                 tokio_serial::SerialStream::open(&tokio_serial::new(dev, bus.baud).parity(parity))
                     .map_err(|e| transport_error(&format!("cannot open {dev}"), e))?;
-            // Whatever a previous session left on the line is not an answer of ours.
+            // Whatever a previous session (or a late answer) left on the line is not an
+            // answer of ours: drain until the line has been silent for a frame gap.
             let _ = port.clear(tokio_serial::ClearBuffer::All);
+            drain(&mut port, bus, quiet_for).await;
             Ok(tokio_modbus::client::rtu::attach_slave(port, slave))
+        }
+    }
+}
+
+/// Reads and discards until `window` has passed and nothing arrived for a frame gap
+/// (at most `window` + `timeout_ms`).
+async fn drain(port: &mut tokio_serial::SerialStream, bus: &ModbusBusConfig, window: Duration) {
+    use tokio::io::AsyncReadExt;
+    let gap = Duration::from_micros(bus.frame_gap_us() as u64);
+    let start = tokio::time::Instant::now();
+    let give_up = start + window + Duration::from_millis(bus.timeout_ms as u64);
+    let mut buf = [0u8; 256];
+    while tokio::time::Instant::now() < give_up {
+        match tokio::time::timeout(gap, port.read(&mut buf)).await {
+            Ok(Ok(n)) if n > 0 => continue,
+            _ if start.elapsed() >= window => break,
+            _ => {}
         }
     }
 }
@@ -220,7 +242,9 @@ async fn serve(
     loop {
         if conn.is_none() {
             counters.reconnects.fetch_add(1, Ordering::Relaxed);
-            *conn = Some(connect(bus).await?);
+            // Connections are only dropped after a failure: on RTU a late answer may
+            // still be on its way.
+            *conn = Some(connect(bus, timeout).await?);
         }
         let Some(ctx) = conn.as_mut() else {
             continue;
@@ -244,11 +268,8 @@ async fn serve(
             Err(_) => {
                 counters.timeouts.fetch_add(1, Ordering::Relaxed);
                 *conn = None;
-                if bus.transport == Transport::Rtu {
-                    // Let the late answer (if any) finish and be discarded with the
-                    // port; the next frame starts after a silent gap.
-                    tokio::time::sleep(Duration::from_micros(bus.frame_gap_us() as u64)).await;
-                }
+                // RTU: the port is reopened and drained for another timeout (see
+                // `connect`) before the next request, which starts after a silent gap.
                 return Err(MachineError::new(
                     ErrorKind::Timeout,
                     format!("no Modbus answer within {} ms", bus.timeout_ms),
@@ -274,7 +295,7 @@ fn io_thread(
             return;
         }
     };
-    let mut conn = match rt.block_on(connect(bus)) {
+    let mut conn = match rt.block_on(connect(bus, Duration::ZERO)) {
         Ok(c) => Some(c),
         Err(e) => {
             let _ = answers.send(Err(e));

@@ -140,7 +140,7 @@ pub struct ModbusBusConfig {
     /// of the simulated PLC.
     #[serde(default = "default_plc_cycle_us")]
     pub plc_cycle_us: u32,
-    /// Let `poll` capture measure (set-up only; cycle 451 refuses it otherwise).
+    /// Let `poll` capture measure (set-up only; probing moves are refused otherwise).
     #[serde(default)]
     pub allow_poll: bool,
 }

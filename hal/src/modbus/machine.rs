@@ -602,6 +602,16 @@ impl Machine for ModbusMachine {
     }
 
     fn probe(&mut self, mv: &ProbeMove) -> Result<Contact, MachineError> {
+        if self.bus.capture == CaptureKind::Poll && !self.bus.allow_poll {
+            return Err(MachineError::new(
+                ErrorKind::InvalidRequest,
+                format!(
+                    "{}: bus.capture = \"poll\" is for set-up only: polled positions are not a latch; \
+                     set bus.allow_poll = true to measure with it anyway; nothing moved",
+                    self.config.path.display()
+                ),
+            ));
+        }
         let here = self.positions()?;
         let (dir, end) = guard::check_probe(&self.config, &here, mv)?;
         // Latches left from before (a stray edge) are acknowledged first, so the PLC
