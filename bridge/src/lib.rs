@@ -7,5 +7,6 @@ pub mod commands;
 pub mod configs;
 pub mod estimator;
 pub mod ipc;
+pub mod modbus_session;
 pub mod output;
 pub mod session;

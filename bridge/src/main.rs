@@ -29,6 +29,11 @@ struct MachineArgs {
     /// in-process bus.
     #[arg(long)]
     can: Option<String>,
+    /// Go over Modbus to a PLC that owns the axes: `--modbus HOST:PORT` (a PLC, or
+    /// `probebridge sim --modbus`), or `--modbus` alone for the built-in simulated PLC on
+    /// loopback. A machine whose [bus] kind is "modbus" needs no flag.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "", conflicts_with = "can")]
+    modbus: Option<String>,
     /// Pace the built-in simulator in real time instead of a virtual clock.
     #[arg(long)]
     realtime: bool,
@@ -46,6 +51,7 @@ impl MachineArgs {
             scenario: self.scenario.clone(),
             machine: self.machine.clone(),
             can: self.can.clone(),
+            modbus: self.modbus.clone(),
             realtime: self.realtime,
             service: self.service.clone(),
             candump: self.candump.clone(),
@@ -111,12 +117,22 @@ enum Cmd {
         #[arg(long)]
         kinematics: Option<PathBuf>,
     },
-    /// Run the simulated drives of a scenario alone on a SocketCAN interface.
+    /// Run the simulated drives of a scenario alone on a SocketCAN interface, or the
+    /// simulated PLC on Modbus TCP (--modbus HOST:PORT) or RTU (--modbus-rtu DEVICE).
     Sim {
         #[arg(long)]
         scenario: Option<PathBuf>,
+        #[arg(long, required_unless_present_any = ["modbus", "modbus_rtu"], conflicts_with_all = ["modbus", "modbus_rtu"])]
+        can: Option<String>,
+        /// Serve the simulated PLC's mailbox on Modbus TCP at HOST:PORT (port 0: any).
+        #[arg(long, value_name = "ADDR", conflicts_with = "modbus_rtu")]
+        modbus: Option<String>,
+        /// Serve the simulated PLC's mailbox on Modbus RTU at this serial device.
+        #[arg(long, value_name = "DEVICE")]
+        modbus_rtu: Option<String>,
+        /// Pace the simulated PLC in real time (default: moves run as fast as simulated).
         #[arg(long)]
-        can: String,
+        realtime: bool,
     },
     /// The estimator process: receives contacts over iceoryx2, fits, answers requests.
     Estimator {
@@ -192,7 +208,19 @@ fn main() -> ExitCode {
             kinematics,
         } => commands::check::run(&program, &machine.options(), kinematics),
         Cmd::Demo { machine } => commands::demo::run(&machine.options()).map(|()| 0),
-        Cmd::Sim { scenario, can } => commands::sim::run(scenario, &can).map(|()| 0),
+        Cmd::Sim {
+            scenario,
+            can,
+            modbus,
+            modbus_rtu,
+            realtime,
+        } => match (can, modbus, modbus_rtu) {
+            (Some(can), _, _) => commands::sim::run(scenario, &can),
+            (None, Some(addr), _) => commands::sim::run_plc_tcp(scenario, &addr, realtime),
+            (None, None, Some(dev)) => commands::sim::run_plc_rtu(scenario, &dev, realtime),
+            (None, None, None) => Err("give --can, --modbus or --modbus-rtu".into()),
+        }
+        .map(|()| 0),
         Cmd::Estimator {
             service,
             verbose,

@@ -11,6 +11,7 @@ use hal::config::MachineConfig;
 use hal::master::{CanMachine, MasterOptions, Pacing, StartupReport};
 use hal::{Machine, MachineError};
 use sim::machine::{SimClock, SimMachine, SimRunner};
+use sim::plc::SimPlc;
 use sim::scenario::Scenario;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -26,6 +27,9 @@ pub struct MachineOptions {
     pub machine: Option<PathBuf>,
     /// SocketCAN interface; `None` = built-in simulator on the in-process bus.
     pub can: Option<String>,
+    /// Modbus: `Some("")` = the built-in simulated PLC on loopback, `Some(ADDR)` = a
+    /// PLC at host:port; `None` = Modbus only when the machine's bus kind says so.
+    pub modbus: Option<String>,
     /// Pace the built-in simulator in real time instead of a virtual clock.
     pub realtime: bool,
     /// iceoryx2 service prefix for contact samples.
@@ -44,9 +48,12 @@ pub struct Session {
     pub config: MachineConfig,
     /// The simulation scenario, when the machine is (or runs as) the simulator.
     pub scenario: Option<Scenario>,
-    /// What the CANopen start-up found (bus load, drives, real-time notes).
-    pub startup: StartupReport,
+    /// What the CANopen start-up found (bus load, drives); `None` over Modbus.
+    pub startup: Option<StartupReport>,
+    /// What the operator should know about the session.
+    pub notes: Vec<String>,
     pub sim: Option<SimRunner>,
+    pub plc: Option<SimPlc>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -108,10 +115,23 @@ pub fn resolve_machine(
 
 impl Session {
     pub fn open(opts: &MachineOptions) -> Result<Self, SessionError> {
-        let (config, scenario) = resolve_machine(opts)?;
+        let (mut config, scenario) = resolve_machine(opts)?;
         let sink =
             ForwardingSink::spawn(&opts.service).map_err(|e| SessionError::Ipc(e.to_string()))?;
         let run_id = hal::clock::monotonic_ns();
+        if crate::modbus_session::wanted(opts, &config) {
+            let (machine, plc, notes) =
+                crate::modbus_session::open(opts, &mut config, scenario.as_ref(), sink, run_id)?;
+            return Ok(Self {
+                machine: Box::new(machine),
+                config,
+                scenario,
+                startup: None,
+                notes,
+                sim: None,
+                plc,
+            });
+        }
         let (transport, sim, pacing): (Box<dyn CanTransport>, Option<SimRunner>, Pacing) =
             match &opts.can {
                 Some(iface) => {
@@ -159,7 +179,9 @@ impl Session {
             machine: Box::new(machine),
             config,
             scenario,
-            startup,
+            notes: startup.notes.clone(),
+            startup: Some(startup),
+            plc: None,
             sim,
         })
     }

@@ -11,6 +11,8 @@ use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+pub use crate::modbus::config::ModbusBusConfig;
+
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
     #[error("cannot read {path}: {source}")]
@@ -60,8 +62,10 @@ impl AxisConfig {
     }
 }
 
-/// The fieldbus the drives are on: `[bus]` with `kind = "canopen"` and that bus's
-/// keys. Without a `[bus]` section a machine is on CANopen with the default timing.
+/// The fieldbus the axes are reached over: `[bus]` with `kind = "canopen"` (CiA 402
+/// drives) or `kind = "modbus"` (a PLC that owns the axes, see [`crate::modbus`]) and
+/// that bus's keys. Without a `[bus]` section a machine is on CANopen with the default
+/// timing.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(tag = "kind", rename_all = "lowercase")]
 #[non_exhaustive]
@@ -69,6 +73,8 @@ pub enum BusConfig {
     /// CiA 402 drives over CANopen; every axis names its drive's node.
     #[serde(rename = "canopen")]
     CanOpen(CanOpenBusConfig),
+    /// A PLC reached over Modbus TCP or RTU moves the axes and latches the probe.
+    Modbus(ModbusBusConfig),
 }
 
 impl Default for BusConfig {
@@ -82,6 +88,7 @@ impl BusConfig {
     pub fn kind(&self) -> &'static str {
         match self {
             BusConfig::CanOpen(_) => "canopen",
+            BusConfig::Modbus(_) => "modbus",
         }
     }
 }
@@ -228,6 +235,7 @@ impl MachineConfig {
     pub fn canopen_bus(&self) -> Option<&CanOpenBusConfig> {
         match &self.bus {
             BusConfig::CanOpen(b) => Some(b),
+            BusConfig::Modbus(_) => None,
         }
     }
 
@@ -235,6 +243,21 @@ impl MachineConfig {
     pub fn canopen_bus_mut(&mut self) -> Option<&mut CanOpenBusConfig> {
         match &mut self.bus {
             BusConfig::CanOpen(b) => Some(b),
+            BusConfig::Modbus(_) => None,
+        }
+    }
+
+    /// The CANopen bus settings, or the defaults for a machine on another bus (what a
+    /// simulated CAN bus of that machine runs with).
+    pub fn canopen_or_default(&self) -> CanOpenBusConfig {
+        self.canopen_bus().cloned().unwrap_or_default()
+    }
+
+    /// The Modbus settings, when a PLC owns the axes.
+    pub fn modbus_bus(&self) -> Option<&ModbusBusConfig> {
+        match &self.bus {
+            BusConfig::Modbus(b) => Some(b),
+            BusConfig::CanOpen(_) => None,
         }
     }
 
@@ -244,6 +267,24 @@ impl MachineConfig {
             key: key.into(),
             message: message.into(),
         }
+    }
+
+    /// Every software limit must fit the PLC's 32-bit counts.
+    fn validate_modbus_reach(&self, m: &ModbusBusConfig) -> Result<(), ConfigError> {
+        for a in &self.axes {
+            let (per, key) = if a.name.is_rotary() {
+                (m.counts_per_deg, "bus.counts_per_deg")
+            } else {
+                (m.counts_per_mm, "bus.counts_per_mm")
+            };
+            if a.min.abs().max(a.max.abs()) * per > i32::MAX as f64 {
+                return Err(self.invalid(
+                    key,
+                    format!("axis {} limits overflow the PLC's 32-bit position", a.name),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// CANopen: a node ID per axis, each once, and timing the bus can keep.
@@ -337,6 +378,11 @@ impl MachineConfig {
         }
         match &self.bus {
             BusConfig::CanOpen(b) => self.validate_canopen(b)?,
+            BusConfig::Modbus(m) => {
+                m.validate()
+                    .map_err(|e| self.invalid(format!("bus.{}", e.key), e.reason))?;
+                self.validate_modbus_reach(m)?;
+            }
         }
         let k = &self.kinematics;
         for (side, list) in [("table", &k.table), ("head", &k.head)] {

@@ -9,6 +9,7 @@
 //!   that does no I/O (frames in, frames out).
 //! - [`motion_guard`]: the checks every backend makes before it moves (software
 //!   limits, the probing path plus braking distance, feeds) and the collision rule.
+//! - [`modbus`]: the PLC backend over Modbus TCP/RTU (mailbox codec, latch ring).
 //! - [`config`]: the machine description (axes, bus mapping, kinematics, probe table).
 
 pub mod atomic_write;
@@ -21,6 +22,7 @@ pub mod config;
 pub mod contact_sample;
 pub mod machine;
 pub mod master;
+pub mod modbus;
 pub mod motion;
 pub mod motion_guard;
 pub mod rt;

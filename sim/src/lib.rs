@@ -10,12 +10,14 @@
 //! - [`world`]: all of it, stepped once per simulation step by the drive simulation.
 //! - [`drive`]: a simulated CiA 402 drive on CANopen (same codec as the master).
 //! - [`machine`]: all drives of a machine on a bus, stepped together per SYNC.
+//! - [`plc`]: a PLC owning the axes, with its mailbox on Modbus TCP/RTU.
 
 pub mod artefact;
 pub mod backlash;
 pub mod drive;
 pub mod kinematics;
 pub mod machine;
+pub mod plc;
 pub mod probe;
 pub mod scenario;
 pub mod world;

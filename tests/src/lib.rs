@@ -3,6 +3,7 @@
 
 pub mod alloc_count;
 pub mod conformance;
+pub mod conformance_modbus;
 pub mod loopback;
 pub mod probing_loop;
 pub mod spec451;

@@ -27,14 +27,20 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
     println!("probebridge demo: starting the estimator process ...");
     let estimator = EstimatorChild::spawn(&opts.service, Duration::from_secs(10))
         .map_err(|e| format!("cannot start the estimator: {e}"))?;
-    println!("starting the simulated machine and bringing the drives up over CANopen ...");
+    if opts.modbus.is_some() {
+        println!("starting the simulated machine behind a PLC and connecting over Modbus ...");
+    } else {
+        println!("starting the simulated machine and bringing the drives up over CANopen ...");
+    }
     let mut s = Session::open(&opts).map_err(|e| e.to_string())?;
     println!("  machine {}: {}", s.config.name, s.config.description);
-    for d in &s.startup.drives {
-        println!("  {d}");
+    if let Some(startup) = &s.startup {
+        for d in &startup.drives {
+            println!("  {d}");
+        }
+        println!("  {}", startup.bus_load);
     }
-    println!("  {}", s.startup.bus_load);
-    for note in &s.startup.notes {
+    for note in &s.notes {
         println!("  note: {note}");
     }
     let scenario = s

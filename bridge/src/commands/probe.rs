@@ -27,7 +27,7 @@ pub fn run(args: &ProbeArgs) -> Result<(), String> {
     }
     crate::output::check_output(args.json.as_deref())?;
     let mut s = Session::open(&args.machine).map_err(|e| e.to_string())?;
-    for note in &s.startup.notes {
+    for note in &s.notes {
         eprintln!("note: {note}");
     }
     let probes = cycles_config(&s.config, s.scenario.as_ref()).map_err(|e| e.to_string())?;

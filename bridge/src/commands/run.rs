@@ -65,7 +65,7 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
         None
     };
     let mut session = Session::open(&args.machine).map_err(|e| e.to_string())?;
-    for note in &session.startup.notes {
+    for note in &session.notes {
         eprintln!("note: {note}");
     }
     let total = program.cycles().count();

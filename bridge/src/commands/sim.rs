@@ -1,5 +1,6 @@
-//! `probebridge sim`: the simulated drives alone, on a SocketCAN interface, for a
-//! bridge in another process (or on another machine) to drive.
+//! `probebridge sim`: the simulated drives alone, on a SocketCAN interface, or the
+//! simulated PLC on Modbus TCP/RTU, for a bridge in another process (or on another
+//! machine) to drive.
 
 use crate::session::load_scenario;
 use hal::can::socketcan::SocketCanTransport;
@@ -30,4 +31,71 @@ pub fn run(scenario: Option<PathBuf>, iface: &str) -> Result<(), String> {
         .wait()
         .map(|_| ())
         .map_err(|e| format!("simulation stopped: {e}"))
+}
+
+fn plc_program(
+    scenario: Option<PathBuf>,
+) -> Result<
+    (
+        sim::Scenario,
+        sim::plc::PlcProgram,
+        hal::modbus::ModbusBusConfig,
+    ),
+    String,
+> {
+    let sc = load_scenario(scenario.as_deref()).map_err(|e| e.to_string())?;
+    let bus = sc
+        .machine
+        .modbus_bus()
+        .cloned()
+        .unwrap_or_else(|| hal::modbus::ModbusBusConfig::tcp(""));
+    let program = sim::plc::PlcProgram::new(&sc, &bus);
+    Ok((sc, program, bus))
+}
+
+fn pacing(realtime: bool) -> sim::plc::PlcPacing {
+    if realtime {
+        sim::plc::PlcPacing::RealTime
+    } else {
+        sim::plc::PlcPacing::Virtual
+    }
+}
+
+/// The simulated PLC on Modbus TCP at `addr` (port 0: any free port, printed).
+pub fn run_plc_tcp(scenario: Option<PathBuf>, addr: &str, realtime: bool) -> Result<(), String> {
+    let (sc, program, bus) = plc_program(scenario)?;
+    let bind: std::net::SocketAddr = addr
+        .parse()
+        .map_err(|e| format!("--modbus {addr}: not HOST:PORT ({e})"))?;
+    let plc = sim::plc::SimPlc::serve_tcp(program, bus.unit, bind, pacing(realtime))
+        .map_err(|e| format!("--modbus {addr}: {e}"))?;
+    let at = plc.local_addr().map_or_else(String::new, |a| a.to_string());
+    // The address on stdout, alone on its line, for a script that started us on port 0.
+    println!("modbus tcp {at}");
+    eprintln!(
+        "probebridge sim: machine {} ({}), simulated PLC unit {} on Modbus TCP {at}, word order {}, capture {}; stop with Ctrl-C",
+        sc.machine.name,
+        sc.path.display(),
+        bus.unit,
+        bus.word_order,
+        bus.capture.name()
+    );
+    plc.wait()
+        .map_err(|e| format!("simulated PLC stopped: {e}"))
+}
+
+/// The simulated PLC on Modbus RTU at the serial device `dev`.
+pub fn run_plc_rtu(scenario: Option<PathBuf>, dev: &str, realtime: bool) -> Result<(), String> {
+    let (sc, program, bus) = plc_program(scenario)?;
+    let plc = sim::plc::SimPlc::serve_rtu(program, bus.unit, dev, bus.baud, pacing(realtime))
+        .map_err(|e| format!("--modbus-rtu {dev}: {e}"))?;
+    eprintln!(
+        "probebridge sim: machine {} ({}), simulated PLC unit {} on Modbus RTU {dev} at {} baud; stop with Ctrl-C",
+        sc.machine.name,
+        sc.path.display(),
+        bus.unit,
+        bus.baud
+    );
+    plc.wait()
+        .map_err(|e| format!("simulated PLC stopped: {e}"))
 }

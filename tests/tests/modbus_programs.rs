@@ -1,0 +1,111 @@
+//! The NC programs of `configs/programs` give the same results over Modbus (the
+//! simulated PLC capturing with `hw_latch`, on TCP loopback) as over CANopen (the
+//! simulated CiA 402 drives on the in-process bus): every Q result to 1e-6. The pairs
+//! of program and scenario are those of the vcan cases (tests/vcan/cases).
+
+use cycles::program::Program;
+use cycles::results::ProgramReport;
+use cycles::runner::{run_program, RunOptions};
+use hal::{Machine, MachineError};
+use probebridge_tests::conformance::{Backend, CanInproc};
+use probebridge_tests::conformance_modbus::ModbusTcp;
+use probebridge_tests::{configs_dir, cycles_config};
+use std::path::PathBuf;
+
+fn run_on(
+    m: &mut impl Machine<Error = MachineError>,
+    program: &str,
+    sc: &sim::Scenario,
+    tag: &str,
+) -> ProgramReport {
+    let cfg = cycles_config(sc);
+    let path = configs_dir().join("programs").join(program);
+    let text = std::fs::read_to_string(&path).unwrap();
+    let program = Program::parse(&text, &cfg).unwrap_or_else(|e| panic!("{e}"));
+    let out: PathBuf =
+        std::env::temp_dir().join(format!("pb-modbus-programs-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    std::fs::create_dir_all(&out).unwrap();
+    let mut confirm = |_: &str| true;
+    let mut progress = |_| {};
+    let mut opts = RunOptions {
+        out_dir: out.clone(),
+        confirm: &mut confirm,
+        progress: &mut progress,
+        kinematics: Some(out.join("kinematics.toml")),
+        estimator: None,
+    };
+    let report = run_program(&program, m, &cfg, &mut opts);
+    let _ = std::fs::remove_dir_all(&out);
+    report
+}
+
+fn same_results(program: &str, scenario: &str) {
+    let sc = sim::Scenario::load(
+        &configs_dir().join("scenarios").join(scenario),
+        Some(&configs_dir().join("machines")),
+    )
+    .unwrap();
+    let can = run_on(&mut CanInproc::open(&sc), program, &sc, "can");
+    let modbus = run_on(&mut ModbusTcp::open(&sc), program, &sc, "modbus");
+    assert!(can.completed(), "{program} on CANopen: {}", can.to_json());
+    assert!(
+        modbus.completed(),
+        "{program} over Modbus: {}",
+        modbus.to_json()
+    );
+    assert_eq!(can.cycles.len(), modbus.cycles.len());
+    let mut compared = 0;
+    let mut worst: f64 = 0.0;
+    for (c, m) in can.cycles.iter().zip(&modbus.cycles) {
+        assert_eq!((c.block, c.cycle), (m.block, m.cycle));
+        assert_eq!(
+            c.q.keys().collect::<Vec<_>>(),
+            m.q.keys().collect::<Vec<_>>()
+        );
+        for (k, v) in &c.q {
+            let w = m.q[k];
+            assert!(
+                (v - w).abs() <= 1e-6,
+                "{program} cycle {} {k}: CANopen {v:.9}, Modbus {w:.9}",
+                c.cycle
+            );
+            worst = worst.max((v - w).abs());
+            compared += 1;
+        }
+    }
+    assert!(compared > 0, "{program}: no Q results to compare");
+    println!(
+        "{program} on {scenario}: {compared} Q values, largest difference CANopen vs Modbus {worst:.3e}"
+    );
+}
+
+#[test]
+fn cycle_431_plane_tilted() {
+    same_results("431-plane.h", "tilted-plane.toml");
+}
+
+#[test]
+fn cycle_431_plane_flat() {
+    same_results("431-plane.h", "plane-z10.toml");
+}
+
+#[test]
+fn cycle_444_freeform() {
+    same_results("444-freeform.h", "freeform.toml");
+}
+
+#[test]
+fn cycle_444_seed() {
+    same_results("444-seed.h", "seed-444.toml");
+}
+
+#[test]
+fn cycle_451_check() {
+    same_results("451-check.h", "demo-sphere.toml");
+}
+
+#[test]
+fn cycle_451_optimise() {
+    same_results("451-optimise.h", "demo-sphere.toml");
+}

@@ -1,0 +1,162 @@
+//! Our Modbus backend against an independent PLC double (`tests/modbus/plc_double.py`,
+//! pymodbus), written from the README's register table, not from our code: a probing
+//! move onto its plane, and cycle 431 on the tilted plane of
+//! `configs/scenarios/tilted-plane.toml`, with the double's word order CDAB.
+//!
+//! Python with pymodbus: `PROBEBRIDGE_PYTHON`, else `/opt/probebridge-venv/bin/python`
+//! (`scripts/install-test-peers` makes that venv). Skipped with a line saying why where
+//! neither is there, never in CI.
+
+use cycles::program::Program;
+use cycles::runner::{run_program, RunOptions};
+use hal::config::BusConfig;
+use hal::modbus::{ModbusBusConfig, ModbusMachine, ModbusOptions, WordOrder};
+use hal::{Axis, AxisPositions, Machine, NullSink, ProbeMove};
+use probebridge_tests::{configs_dir, machine_config};
+use std::io::{BufRead, BufReader};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+
+fn python() -> Option<PathBuf> {
+    let p = std::env::var_os("PROBEBRIDGE_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from("/opt/probebridge-venv/bin/python"));
+    let ok = Command::new(&p)
+        .args(["-c", "import pymodbus"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if ok {
+        return Some(p);
+    }
+    assert!(
+        std::env::var_os("CI").is_none(),
+        "{}: no pymodbus in CI; scripts/install-test-peers should have made the venv",
+        p.display()
+    );
+    eprintln!(
+        "SKIPPED: {} has no pymodbus (run scripts/install-test-peers)",
+        p.display()
+    );
+    None
+}
+
+struct Double(Child);
+
+impl Drop for Double {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Starts the double on `plane` (point, normal) with ball radius `r`: its address.
+fn start(py: &PathBuf, plane: [f64; 6], r: f64) -> (Double, String) {
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("modbus/plc_double.py");
+    let plane = plane.map(|v| v.to_string()).join(",");
+    let mut child = Command::new(py)
+        .arg(script)
+        .args(["--plane", &plane, "--radius", &r.to_string()])
+        .args(["--word-order", "CDAB"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("start the PLC double");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let addr = line
+        .trim()
+        .strip_prefix("modbus tcp ")
+        .unwrap_or_else(|| panic!("PLC double said {line:?}"))
+        .to_string();
+    (Double(child), addr)
+}
+
+fn machine(sc: &sim::Scenario, addr: &str) -> (ModbusMachine, hal::config::MachineConfig) {
+    let mut bus = ModbusBusConfig::tcp(addr);
+    bus.word_order = WordOrder::CDAB;
+    bus.timeout_ms = 1000;
+    let mut cfg = machine_config(sc);
+    cfg.bus = BusConfig::Modbus(bus);
+    let m = ModbusMachine::start(&cfg, NullSink, ModbusOptions::default()).unwrap();
+    (m, cfg)
+}
+
+fn tilted() -> sim::Scenario {
+    sim::Scenario::load(
+        &configs_dir().join("scenarios/tilted-plane.toml"),
+        Some(&configs_dir().join("machines")),
+    )
+    .unwrap()
+}
+
+#[test]
+fn probing_move_against_the_pymodbus_double() {
+    let Some(py) = python() else { return };
+    let (_double, addr) = start(&py, [0.0, 0.0, 10.0, 0.0, 0.0, 1.0], 3.0);
+    let (mut m, _) = machine(&tilted(), &addr);
+    m.move_to(&AxisPositions::linear([12.3, -4.5, 20.0]), 3000.0)
+        .unwrap();
+    let c = m
+        .probe(&ProbeMove {
+            direction: [0.0, 0.0, -1.0],
+            feed: 200.0,
+            max_distance: 10.0,
+        })
+        .unwrap();
+    for (a, want) in [(Axis::X, 12.3), (Axis::Y, -4.5), (Axis::Z, 13.0)] {
+        let got = c.positions.get(a).unwrap();
+        assert!((got - want).abs() <= 1e-6, "{a} {got}, want {want}");
+    }
+    assert_eq!(m.latch_acknowledged(), 1);
+    // Back off and probe again: the double re-armed after our acknowledge.
+    m.move_to(&AxisPositions::linear([0.0, 0.0, 20.0]), 3000.0)
+        .unwrap();
+    let c = m
+        .probe(&ProbeMove {
+            direction: [0.0, 0.0, -1.0],
+            feed: 200.0,
+            max_distance: 10.0,
+        })
+        .unwrap();
+    assert!((c.positions.get(Axis::Z).unwrap() - 13.0).abs() <= 1e-6);
+    assert_eq!(m.latch_acknowledged(), 2);
+}
+
+#[test]
+fn cycle_431_against_the_pymodbus_double() {
+    let Some(py) = python() else { return };
+    let sc = tilted();
+    let p = &sc.planes[0];
+    let n = p.normal;
+    let (_double, addr) = start(
+        &py,
+        [p.point[0], p.point[1], p.point[2], n[0], n[1], n[2]],
+        3.0,
+    );
+    let (mut m, _) = machine(&sc, &addr);
+    let cfg = probebridge_tests::cycles_config(&sc);
+    let text = std::fs::read_to_string(configs_dir().join("programs/431-plane.h")).unwrap();
+    let program = Program::parse(&text, &cfg).unwrap();
+    let out = std::env::temp_dir().join(format!("pb-pymodbus-431-{}", std::process::id()));
+    std::fs::create_dir_all(&out).unwrap();
+    let mut confirm = |_: &str| true;
+    let mut progress = |_| {};
+    let mut opts = RunOptions {
+        out_dir: out.clone(),
+        confirm: &mut confirm,
+        progress: &mut progress,
+        kinematics: Some(out.join("kinematics.toml")),
+        estimator: None,
+    };
+    let report = run_program(&program, &mut m, &cfg, &mut opts);
+    let _ = std::fs::remove_dir_all(&out);
+    assert!(report.completed(), "{}", report.to_json());
+    let q = &report.cycles[0].q;
+    println!(
+        "431 against the pymodbus double: Q158 {:.9} Q159 {:.9}",
+        q["Q158"], q["Q159"]
+    );
+    assert!((q["Q158"] - 5.0).abs() < 1e-5, "{q:?}");
+    assert!((q["Q159"] + 3.0).abs() < 1e-5, "{q:?}");
+}
