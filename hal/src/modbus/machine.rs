@@ -20,6 +20,7 @@ use crate::clock::monotonic_ns;
 use crate::config::MachineConfig;
 use crate::contact_sample::{ContactSample, SampleSink, FLAG_HW_LATCH};
 use crate::machine::{Contact, ErrorKind, Machine, MachineError, ProbeMove};
+use crate::motion_guard::MotionGuard;
 use std::time::{Duration, Instant};
 
 /// Attempts of an idempotent request that timed out or lost its connection.
@@ -71,6 +72,8 @@ pub struct CaptureInfo {
 pub struct ModbusMachine {
     client: ModbusClient,
     config: MachineConfig,
+    /// The checks every backend makes before it moves.
+    guard: MotionGuard,
     bus: ModbusBusConfig,
     layout: Layout,
     scale: Scale,
@@ -112,6 +115,7 @@ impl ModbusMachine {
         let client = ModbusClient::open(bus)?;
         let layout = bus.layout();
         let mut m = Self {
+            guard: MotionGuard::new(cfg),
             client,
             config: cfg.clone(),
             bus: bus.clone(),
@@ -490,92 +494,6 @@ impl ModbusMachine {
     }
 }
 
-/// The checks before any motion, in one place: the same as the CANopen backend makes
-/// (software limits of every target; a probing path plus its braking distance).
-mod guard {
-    use super::*;
-
-    pub fn check_limits(
-        cfg: &MachineConfig,
-        target: &AxisPositions,
-        what: &str,
-    ) -> Result<(), MachineError> {
-        for (axis, v) in target.iter() {
-            let Some(a) = cfg.axis(axis) else {
-                return Err(MachineError::new(
-                    ErrorKind::InvalidRequest,
-                    format!("{what}: this machine has no {axis} axis"),
-                ));
-            };
-            if !v.is_finite() || v < a.min || v > a.max {
-                return Err(MachineError::new(
-                    ErrorKind::SoftwareLimit,
-                    format!(
-                        "{what}: {axis}{v:+.4} is outside the software limits {:+.4} .. {:+.4}; nothing moved",
-                        a.min, a.max
-                    ),
-                ));
-            }
-        }
-        Ok(())
-    }
-
-    pub fn check_feed(feed: f64) -> Result<(), MachineError> {
-        if feed.is_finite() && feed > 0.0 {
-            Ok(())
-        } else {
-            Err(MachineError::new(
-                ErrorKind::InvalidRequest,
-                format!("feed {feed} must be > 0"),
-            ))
-        }
-    }
-
-    /// The unit direction of `mv`, after checking its path and braking distance from
-    /// `here` against the limits; and the end of the path.
-    pub fn check_probe(
-        cfg: &MachineConfig,
-        here: &AxisPositions,
-        mv: &ProbeMove,
-    ) -> Result<([f64; 3], AxisPositions), MachineError> {
-        let d = mv.direction;
-        let norm = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        if !(norm.is_finite() && norm > 1e-9) {
-            return Err(MachineError::new(
-                ErrorKind::InvalidRequest,
-                "probing direction is zero",
-            ));
-        }
-        let positive = |v: f64| v.is_finite() && v > 0.0;
-        if !positive(mv.feed) || !positive(mv.max_distance) {
-            return Err(MachineError::new(
-                ErrorKind::InvalidRequest,
-                format!(
-                    "probing feed {} and distance {} must be > 0",
-                    mv.feed, mv.max_distance
-                ),
-            ));
-        }
-        let dir = [d[0] / norm, d[1] / norm, d[2] / norm];
-        let mut brake = 0.0f64;
-        for (i, a) in Axis::LINEAR.iter().enumerate() {
-            if let Some(ac) = cfg.axis(*a) {
-                let v = mv.feed / 60.0 * dir[i].abs();
-                brake = brake.max(v * v / (2.0 * ac.max_acceleration));
-            }
-        }
-        let mut beyond = AxisPositions::new();
-        let mut end = AxisPositions::new();
-        for (i, a) in Axis::LINEAR.iter().enumerate() {
-            let h = here.get(*a).unwrap_or(0.0);
-            beyond.set(*a, h + dir[i] * (mv.max_distance + brake));
-            end.set(*a, h + dir[i] * mv.max_distance);
-        }
-        check_limits(cfg, &beyond, "probing move")?;
-        Ok((dir, end))
-    }
-}
-
 impl Machine for ModbusMachine {
     type Error = MachineError;
 
@@ -592,8 +510,7 @@ impl Machine for ModbusMachine {
     }
 
     fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), MachineError> {
-        guard::check_feed(feed)?;
-        guard::check_limits(&self.config, target, "move")?;
+        self.guard.check_move(target, feed)?;
         let (s, _) = self.run(CommandCode::Move, target, feed)?;
         match ResultCode::from_u16(s.result) {
             Some(ResultCode::Ok) => Ok(()),
@@ -613,7 +530,11 @@ impl Machine for ModbusMachine {
             ));
         }
         let here = self.positions()?;
-        let (dir, end) = guard::check_probe(&self.config, &here, mv)?;
+        let dir = self.guard.check_probe(&here, mv)?.direction;
+        let mut end = here;
+        for (i, a) in Axis::LINEAR.iter().enumerate() {
+            end.set(*a, here.get(*a).unwrap_or(0.0) + dir[i] * mv.max_distance);
+        }
         // Latches left from before (a stray edge) are acknowledged first, so the PLC
         // re-arms; a deflected probe refuses before anything is written.
         if self.tracker.pending(self.status.latch_count) != 0 {
