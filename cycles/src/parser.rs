@@ -796,6 +796,53 @@ fn cycle(
             }
         }
     }
+    fill_defaults(rb, table, &mut params, &written, diags);
+    let Some(tool) = st.tool.clone() else {
+        err(
+            diags,
+            line,
+            format!("{table}: no TOOL CALL of a touch probe before this cycle"),
+        );
+        return Statement::Other(rb.head.code.to_string());
+    };
+    if diags.len() > before {
+        return Statement::Other(rb.head.code.to_string());
+    }
+    let kind = match table.number {
+        431 => PlaneParams::from_params(&params, st.unit).map(CycleKind::MeasurePlane),
+        444 => Probing3dParams::from_params(&params, st.unit).map(CycleKind::Probing3d),
+        451 => KinematicsParams::from_params(&params, st.unit).map(CycleKind::MeasureKinematics),
+        _ => SaveParams::from_params(&params, st.unit).map(CycleKind::SaveKinematics),
+    };
+    match kind {
+        Ok(kind) => Statement::Cycle(Box::new(CycleCall {
+            head: CycleBlock {
+                cycle: table.number,
+                title,
+                line,
+                block: rb.head.number.unwrap_or(line as u32),
+                params,
+                tool,
+            },
+            kind,
+        })),
+        Err(problems) => {
+            diags.extend(problems);
+            Statement::Other(rb.head.code.to_string())
+        }
+    }
+}
+
+/// Left-out parameters take the table's default; a missing required one is an error
+/// (with a hint when the block ended early, a `~` forgotten).
+fn fill_defaults(
+    rb: &RawBlock,
+    table: &'static CycleTable,
+    params: &mut BTreeMap<String, Param>,
+    written: &[String],
+    diags: &mut Vec<Diagnostic>,
+) {
+    let line = rb.head.no;
     let mut missing = Vec::new();
     for spec in table.params {
         if params.contains_key(spec.name) || written.iter().any(|w| w == spec.name) {
@@ -836,40 +883,6 @@ fn cycle(
                     spec.name, spec.title
                 ),
             );
-        }
-    }
-    let Some(tool) = st.tool.clone() else {
-        err(
-            diags,
-            line,
-            format!("{table}: no TOOL CALL of a touch probe before this cycle"),
-        );
-        return Statement::Other(rb.head.code.to_string());
-    };
-    if diags.len() > before {
-        return Statement::Other(rb.head.code.to_string());
-    }
-    let kind = match table.number {
-        431 => PlaneParams::from_params(&params, st.unit).map(CycleKind::MeasurePlane),
-        444 => Probing3dParams::from_params(&params, st.unit).map(CycleKind::Probing3d),
-        451 => KinematicsParams::from_params(&params, st.unit).map(CycleKind::MeasureKinematics),
-        _ => SaveParams::from_params(&params, st.unit).map(CycleKind::SaveKinematics),
-    };
-    match kind {
-        Ok(kind) => Statement::Cycle(Box::new(CycleCall {
-            head: CycleBlock {
-                cycle: table.number,
-                title,
-                line,
-                block: rb.head.number.unwrap_or(line as u32),
-                params,
-                tool,
-            },
-            kind,
-        })),
-        Err(problems) => {
-            diags.extend(problems);
-            Statement::Other(rb.head.code.to_string())
         }
     }
 }
