@@ -190,19 +190,7 @@ pub fn save_kinematics(
 mod tests {
     use super::*;
     use crate::kinematics_file::prev_path;
-
-    fn cfg(dir: &Path) -> MachineConfig {
-        let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/machines/table-ac.toml");
-        let text = std::fs::read_to_string(src).unwrap();
-        MachineConfig::parse(&text, &dir.join("table-ac.toml")).unwrap()
-    }
-
-    fn tmp(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("pb-450-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
-    }
+    use crate::kinematics_file::tests::{cfg, tmp};
 
     #[test]
     fn cycle_450_save_show_restore_delete() {

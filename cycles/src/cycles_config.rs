@@ -31,11 +31,7 @@ struct Sections {
 impl CyclesConfig {
     /// Reads and validates the machine TOML at `path`: hal's part and the cycles'.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        Self::parse(&text, path)
+        Self::of(MachineConfig::load(path)?)
     }
 
     /// Parses and validates; `path` names the source in errors.

@@ -243,16 +243,18 @@ fn copy_atomic(from: &Path, to: &Path) -> Result<(), KinematicsFileError> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn cfg(dir: &Path) -> MachineConfig {
+    /// The table-ac machine, as if its configuration were in `dir`.
+    pub(crate) fn cfg(dir: &Path) -> MachineConfig {
         let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/machines/table-ac.toml");
         let text = std::fs::read_to_string(src).unwrap();
         MachineConfig::parse(&text, &dir.join("table-ac.toml")).unwrap()
     }
 
-    fn tmp(name: &str) -> PathBuf {
+    /// An empty folder for one test.
+    pub(crate) fn tmp(name: &str) -> PathBuf {
         let d = std::env::temp_dir().join(format!("pb-kin-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&d);
         std::fs::create_dir_all(&d).unwrap();

@@ -436,8 +436,55 @@ fn statement(
                 return tool_call(rest, true, line, st, cfg, diags)
                     .map_or_else(other, Statement::ToolCall);
             }
-            other()
+            other_block(code, line, diags)
         }
+    }
+}
+
+/// A block that is not a program frame, a TOOL CALL or a measuring cycle. Comments,
+/// `L` positioning blocks (checked before the run, [`crate::runner::preflight_program`])
+/// and blocks of M functions alone are accepted and run or skipped as such; anything
+/// else cannot run here and is refused, so that a mistyped block (`TCH PROB 431`,
+/// `CYCL DEFF`, `LL Z+100`) is never skipped without a word.
+fn other_block(code: &str, line: usize, diags: &mut Vec<Diagnostic>) -> Statement {
+    let accepted = match code.split_whitespace().next() {
+        // Only a comment.
+        None => true,
+        // `* - text`: a structure comment.
+        Some(w) if w.starts_with('*') => true,
+        Some(w) if w.eq_ignore_ascii_case("L") => true,
+        Some(_) => code.split_whitespace().all(is_m_function),
+    };
+    if !accepted {
+        let upper = code.to_ascii_uppercase();
+        let hint = if upper.starts_with("TCH") {
+            " (a touch-probe cycle is written TCH PROBE <number>)"
+        } else if upper.starts_with('L') {
+            " (a positioning block is written L X.. Y.. Z..)"
+        } else {
+            ""
+        };
+        let shown: String = code.chars().take(40).collect();
+        let more = if code.chars().count() > 40 { "..." } else { "" };
+        err(
+            diags,
+            line,
+            format!(
+                "{shown}{more}: not a block probebridge can run{hint}; it runs BEGIN/END PGM, TOOL CALL, TCH PROBE {} (or G{}), L positioning blocks, M functions and comments",
+                params::known_cycles(),
+                params::known_cycles().replace(", ", "/G")
+            ),
+        );
+    }
+    Statement::Other(code.to_string())
+}
+
+/// `M30`, `M3`: an M function (accepted, not run).
+fn is_m_function(word: &str) -> bool {
+    let mut c = word.chars();
+    matches!(c.next(), Some('M' | 'm')) && {
+        let rest = c.as_str();
+        !rest.is_empty() && rest.bytes().all(|b| b.is_ascii_digit())
     }
 }
 
@@ -796,6 +843,53 @@ fn cycle(
             }
         }
     }
+    fill_defaults(rb, table, &mut params, &written, diags);
+    let Some(tool) = st.tool.clone() else {
+        err(
+            diags,
+            line,
+            format!("{table}: no TOOL CALL of a touch probe before this cycle"),
+        );
+        return Statement::Other(rb.head.code.to_string());
+    };
+    if diags.len() > before {
+        return Statement::Other(rb.head.code.to_string());
+    }
+    let kind = match table.number {
+        431 => PlaneParams::from_params(&params, st.unit).map(CycleKind::MeasurePlane),
+        444 => Probing3dParams::from_params(&params, st.unit).map(CycleKind::Probing3d),
+        451 => KinematicsParams::from_params(&params, st.unit).map(CycleKind::MeasureKinematics),
+        _ => SaveParams::from_params(&params, st.unit).map(CycleKind::SaveKinematics),
+    };
+    match kind {
+        Ok(kind) => Statement::Cycle(Box::new(CycleCall {
+            head: CycleBlock {
+                cycle: table.number,
+                title,
+                line,
+                block: rb.head.number.unwrap_or(line as u32),
+                params,
+                tool,
+            },
+            kind,
+        })),
+        Err(problems) => {
+            diags.extend(problems);
+            Statement::Other(rb.head.code.to_string())
+        }
+    }
+}
+
+/// Left-out parameters take the table's default; a missing required one is an error
+/// (with a hint when the block ended early, a `~` forgotten).
+fn fill_defaults(
+    rb: &RawBlock,
+    table: &'static CycleTable,
+    params: &mut BTreeMap<String, Param>,
+    written: &[String],
+    diags: &mut Vec<Diagnostic>,
+) {
+    let line = rb.head.no;
     let mut missing = Vec::new();
     for spec in table.params {
         if params.contains_key(spec.name) || written.iter().any(|w| w == spec.name) {
@@ -836,40 +930,6 @@ fn cycle(
                     spec.name, spec.title
                 ),
             );
-        }
-    }
-    let Some(tool) = st.tool.clone() else {
-        err(
-            diags,
-            line,
-            format!("{table}: no TOOL CALL of a touch probe before this cycle"),
-        );
-        return Statement::Other(rb.head.code.to_string());
-    };
-    if diags.len() > before {
-        return Statement::Other(rb.head.code.to_string());
-    }
-    let kind = match table.number {
-        431 => PlaneParams::from_params(&params, st.unit).map(CycleKind::MeasurePlane),
-        444 => Probing3dParams::from_params(&params, st.unit).map(CycleKind::Probing3d),
-        451 => KinematicsParams::from_params(&params, st.unit).map(CycleKind::MeasureKinematics),
-        _ => SaveParams::from_params(&params, st.unit).map(CycleKind::SaveKinematics),
-    };
-    match kind {
-        Ok(kind) => Statement::Cycle(Box::new(CycleCall {
-            head: CycleBlock {
-                cycle: table.number,
-                title,
-                line,
-                block: rb.head.number.unwrap_or(line as u32),
-                params,
-                tool,
-            },
-            kind,
-        })),
-        Err(problems) => {
-            diags.extend(problems);
-            Statement::Other(rb.head.code.to_string())
         }
     }
 }

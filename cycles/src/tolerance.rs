@@ -19,37 +19,69 @@ pub struct Tolerance {
     pub lower: f64,
 }
 
+/// What is wrong with a QS400 text.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum ToleranceErrorKind {
+    /// No number at the start.
+    NoFirstLimit,
+    /// Something other than + or - between the two limits.
+    NoSeparator,
+    /// A sign without a number after it.
+    NoSecondLimit,
+    /// Text after the second limit.
+    TrailingText,
+}
+
+impl ToleranceErrorKind {
+    fn why(self) -> &'static str {
+        match self {
+            Self::NoFirstLimit => "no number at the start",
+            Self::NoSeparator => "expected + or - between the two limits",
+            Self::NoSecondLimit => "no number after the sign",
+            Self::TrailingText => "text after the second limit",
+        }
+    }
+}
+
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("QS400=\"{text}\": malformed tolerance ({why}); expected e.g. \"0.4-0.1\", \"0.4\", \"-0.1\", \"1-1\" or \" \"")]
+#[error("QS400=\"{text}\": malformed tolerance ({}); expected e.g. \"0.4-0.1\", \"0.4\", \"-0.1\", \"1-1\" or \" \"", kind.why())]
 pub struct ToleranceError {
     pub text: String,
-    pub why: &'static str,
+    pub kind: ToleranceErrorKind,
+}
+
+impl ToleranceError {
+    pub fn kind(&self) -> ToleranceErrorKind {
+        self.kind
+    }
 }
 
 impl Tolerance {
     /// Parses QS400; `Ok(None)` is "no tolerance".
     pub fn parse(text: &str) -> Result<Option<Tolerance>, ToleranceError> {
-        let err = |why| ToleranceError {
+        use ToleranceErrorKind as K;
+        let err = |kind| ToleranceError {
             text: text.to_string(),
-            why,
+            kind,
         };
         let s: String = text.chars().filter(|c| !c.is_whitespace()).collect();
         if s.is_empty() {
             return Ok(None);
         }
         let (first_sign, rest) = split_sign(&s);
-        let (a, rest) = split_number(rest).ok_or_else(|| err("no number at the start"))?;
+        let (a, rest) = split_number(rest).ok_or_else(|| err(K::NoFirstLimit))?;
         let a = first_sign * a;
         let (upper, lower) = if rest.is_empty() {
             (a.max(0.0), a.min(0.0))
         } else {
             let (sign, tail) = split_sign(rest);
             if tail.len() == rest.len() {
-                return Err(err("expected + or - between the two limits"));
+                return Err(err(K::NoSeparator));
             }
-            let (b, tail) = split_number(tail).ok_or_else(|| err("no number after the sign"))?;
+            let (b, tail) = split_number(tail).ok_or_else(|| err(K::NoSecondLimit))?;
             if !tail.is_empty() {
-                return Err(err("text after the second limit"));
+                return Err(err(K::TrailingText));
             }
             let b = sign * b;
             (a.max(b), a.min(b))
@@ -174,8 +206,16 @@ mod tests {
 
     #[test]
     fn malformed_is_refused() {
-        for s in ["abc", "0.4-", "1-2-3", "0.4*0.1", "1..2", "-"] {
-            assert!(Tolerance::parse(s).is_err(), "{s}");
+        use ToleranceErrorKind as K;
+        for (s, kind) in [
+            ("abc", K::NoFirstLimit),
+            ("0.4-", K::NoSecondLimit),
+            ("1-2-3", K::TrailingText),
+            ("0.4*0.1", K::NoSeparator),
+            ("1..2", K::NoFirstLimit),
+            ("-", K::NoFirstLimit),
+        ] {
+            assert_eq!(Tolerance::parse(s).unwrap_err().kind(), kind, "{s}");
         }
     }
 }

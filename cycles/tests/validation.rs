@@ -423,16 +423,69 @@ fn inch_programs_are_converted_to_mm() {
 }
 
 #[test]
-fn other_blocks_are_accepted_and_not_run() {
-    let text = "0 BEGIN PGM X MM\n1 BLK FORM 0.1 Z X+0 Y+0 Z-20\n2 BLK FORM 0.2 X+100 Y+100 Z+0\n\
-        * - structure\n3 ; a comment\n4 FN 0: Q1 = +5\n5 L Z+100 R0 FMAX M3\n6 CYCL DEF 200 BOHREN ~\n  Q200=+2 ;SICHERHEITS-ABST. ~\n  Q201=-20\n7 STOP\n8 M30\n9 END PGM X MM";
-    let p = Program::parse(text, &common::config()).unwrap();
+fn comments_l_blocks_and_m_functions_are_accepted_and_not_cycles() {
+    let text = "0 BEGIN PGM X MM\n* - structure\n1 ; a comment\n2 L Z+100 R0 FMAX M3\n\
+        3 M30\n4 m5 M9\n5 END PGM X MM";
+    let p = Program::parse(text, &common::config()).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(p.cycles().count(), 0);
     let others = p
         .blocks
         .iter()
         .filter(|b| matches!(b.statement, Statement::Other(_)))
         .count();
-    assert_eq!(others, 9);
+    assert_eq!(others, 5);
     assert_eq!(p.name.as_deref(), Some("X"));
+}
+
+#[test]
+fn blocks_that_cannot_run_are_refused_with_their_line() {
+    let text = "0 BEGIN PGM X MM\n1 BLK FORM 0.1 Z X+0 Y+0 Z-20\n2 FN 0: Q1 = +5\n\
+        3 CYCL DEF 200 BOHREN ~\n  Q200=+2 ;SICHERHEITS-ABST. ~\n  Q201=-20\n4 STOP\n5 END PGM X MM";
+    let d = check_program(text, &common::config());
+    let lines: Vec<usize> = d.iter().map(|d| d.line).collect();
+    assert_eq!(lines, [2, 3, 4, 7], "{d:?}");
+    assert!(
+        d[0].message
+            .starts_with("BLK FORM 0.1 Z X+0 Y+0 Z-20: not a block probebridge can run"),
+        "{}",
+        d[0]
+    );
+}
+
+/// Issue 13, finding 1: configs/programs/431-plane.h with its cycle or a move
+/// mistyped said "ok" and ran without the cycle.
+#[test]
+fn a_mistyped_block_is_an_error_at_its_line_never_skipped() {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/programs/431-plane.h");
+    let text = std::fs::read_to_string(path).unwrap();
+    let cfg = common::config();
+    assert_eq!(check_program(&text, &cfg), vec![]);
+    for (from, to, line, hint) in [
+        ("6 TCH PROBE 431", "6 TCH PROB 431", 7, "TCH PROBE <number>"),
+        ("6 TCH PROBE 431", "6 TCHPROBE 431", 7, "TCH PROBE <number>"),
+        ("6 TCH PROBE 431", "6 CYCL DEFF 431", 7, ""),
+        (
+            "7 L Z+100 R0 FMAX",
+            "7 LL Z+100 R0 FMAX",
+            20,
+            "L X.. Y.. Z..",
+        ),
+    ] {
+        let changed = text.replacen(from, to, 1);
+        assert_ne!(changed, text);
+        let d = check_program(&changed, &cfg);
+        assert_eq!(d.len(), 1, "{to}: {d:?}");
+        assert_eq!(d[0].line, line, "{to}: {}", d[0]);
+        assert!(
+            d[0].message.contains("not a block probebridge can run"),
+            "{}",
+            d[0]
+        );
+        assert!(d[0].message.contains(hint), "{}", d[0]);
+        assert!(
+            Program::parse(&changed, &cfg).is_err(),
+            "{to}: run refuses it too"
+        );
+    }
 }

@@ -119,6 +119,7 @@ fn error(map: &std::collections::BTreeMap<String, f64>, axis: Axis, part: ErrorP
         .unwrap_or(0.0)
 }
 
+/// The axis's table (before and after optimisation) and its positions.
 fn axis_section(
     s: &mut String,
     a: &AxisReport,
@@ -218,7 +219,12 @@ fn axis_section(
         ),
     );
     let _ = writeln!(s, "</table>");
+    positions_section(s, a);
+}
 
+/// Per position of an axis: its angles, sphere and deviations, and one plot per
+/// component.
+fn positions_section(s: &mut String, a: &AxisReport) {
     let _ = writeln!(
         s,
         "<table><tr><th>#</th><th class=\"l\">angles (deg)</th><th>centre X</th><th>Y</th><th>Z</th><th>radius</th><th>dev. before X</th><th>Y</th><th>Z</th><th>dev. after X</th><th>Y</th><th>Z</th></tr>"

@@ -4,7 +4,7 @@
 //!
 //! # Sequence
 //!
-//! Each step has its file: [`parameters`] (typed at parse time), [`plan`], [`measure`],
+//! Each step has its file: [`parameters`] (typed at parse time), [`plan`](mod@plan), [`measure`],
 //! [`identify`], [`evaluate`], [`report`], [`write_back`] and the [`measuring_log`].
 //!
 //! 1. Locate: the probe stands roughly over the sphere, about Q320 + SET_UP above it

@@ -115,9 +115,61 @@ pub fn plan(
         let s = rotary_slot(a).expect("rotary");
         incidence[s] = on_grid(params.ranges[s].incidence, hirth(a));
     }
+    let axes = measured_axes(&params, &present, cfg)?;
+    if params.retract_height == 0.0 {
+        if let Some(a) = present.iter().find(|a| hirth(**a) > 0.0) {
+            return Err(PlanError::new(PlanErrorKind::DirectMoveWithHirth, format!(
+                "Q408=0 (move directly) is not allowed with the Hirth axis {a} (grid {} deg): give a retraction height",
+                hirth(*a)
+            )));
+        }
+    }
+    let positioning_feed = match params.feed {
+        Feed::Fmax => probe.fmax,
+        Feed::Value(v) => v.min(probe.fmax),
+    };
+    let rotary_feed = match params.feed {
+        Feed::Fmax => probe.fmax,
+        Feed::Value(v) => v,
+    };
+    if positioning_feed <= 0.0 {
+        return Err(PlanError::new(
+            PlanErrorKind::ZeroFeed,
+            "Q253=0: the pre-positioning feed must be > 0",
+        ));
+    }
+    check_limits(&params, &present, &incidence, &axes, cfg)?;
+    if params.mode == Mode::MachineDatum {
+        let measured: Vec<Axis> = axes.iter().map(|a| a.axis).collect();
+        if machine_datum_targets(&chain, &measured).is_empty() {
+            return Err(PlanError::new(PlanErrorKind::NoMachineDatum, format!(
+                "Q406=3: none of the measured axes ({}) has a rotary axis nearer the machine bed in its kinematic chain whose machine datum could take up its orientation error; use Q406=2",
+                measured.iter().map(|a| a.name()).collect::<Vec<_>>().join(", ")
+            )));
+        }
+    }
+    Ok(KinematicsPlan {
+        params,
+        chain,
+        axes,
+        present,
+        incidence,
+        positioning_feed,
+        rotary_feed,
+    })
+}
+
+/// The axes Q414/Q418/Q422 ask for that the machine has, with their measuring
+/// positions; at least one.
+fn measured_axes(
+    params: &KinematicsParams,
+    present: &[Axis],
+    cfg: &MachineConfig,
+) -> Result<Vec<AxisPlan>, PlanError> {
+    let hirth = |a: Axis| cfg.axis(a).map_or(0.0, |c| c.hirth);
     let count_q = ["Q414", "Q418", "Q422"];
     let mut axes = Vec::new();
-    for &a in &present {
+    for &a in present {
         let s = rotary_slot(a).expect("rotary");
         let range = params.ranges[s];
         if range.points == 0 {
@@ -162,35 +214,25 @@ pub fn plan(
             ),
         ));
     }
-    if params.retract_height == 0.0 {
-        if let Some(a) = present.iter().find(|a| hirth(**a) > 0.0) {
-            return Err(PlanError::new(PlanErrorKind::DirectMoveWithHirth, format!(
-                "Q408=0 (move directly) is not allowed with the Hirth axis {a} (grid {} deg): give a retraction height",
-                hirth(*a)
-            )));
-        }
-    }
-    let positioning_feed = match params.feed {
-        Feed::Fmax => probe.fmax,
-        Feed::Value(v) => v.min(probe.fmax),
-    };
-    let rotary_feed = match params.feed {
-        Feed::Fmax => probe.fmax,
-        Feed::Value(v) => v,
-    };
-    if positioning_feed <= 0.0 {
-        return Err(PlanError::new(
-            PlanErrorKind::ZeroFeed,
-            "Q253=0: the pre-positioning feed must be > 0",
-        ));
-    }
-    // Every angle the cycle commands must be inside the software limits.
+    Ok(axes)
+}
+
+/// Every angle the cycle commands must be inside the software limits: the incidence
+/// angles, the positions, and the positions +/- Q432.
+fn check_limits(
+    params: &KinematicsParams,
+    present: &[Axis],
+    incidence: &Angles,
+    axes: &[AxisPlan],
+    cfg: &MachineConfig,
+) -> Result<(), PlanError> {
+    let hirth = |a: Axis| cfg.axis(a).map_or(0.0, |c| c.hirth);
     let limit_q = [
         ["Q411", "Q412", "Q413"],
         ["Q415", "Q416", "Q417"],
         ["Q419", "Q420", "Q421"],
     ];
-    for &a in &present {
+    for &a in present {
         let s = rotary_slot(a).expect("rotary");
         let c = cfg.axis(a).expect("present");
         let check = |v: f64, what: &str| -> Result<(), PlanError> {
@@ -219,22 +261,5 @@ pub fn plan(
             }
         }
     }
-    if params.mode == Mode::MachineDatum {
-        let measured: Vec<Axis> = axes.iter().map(|a| a.axis).collect();
-        if machine_datum_targets(&chain, &measured).is_empty() {
-            return Err(PlanError::new(PlanErrorKind::NoMachineDatum, format!(
-                "Q406=3: none of the measured axes ({}) has a rotary axis nearer the machine bed in its kinematic chain whose machine datum could take up its orientation error; use Q406=2",
-                measured.iter().map(|a| a.name()).collect::<Vec<_>>().join(", ")
-            )));
-        }
-    }
-    Ok(KinematicsPlan {
-        params,
-        chain,
-        axes,
-        present,
-        incidence,
-        positioning_feed,
-        rotary_feed,
-    })
+    Ok(())
 }

@@ -21,11 +21,32 @@ use hal::Axis;
 
 pub const VERSION: f64 = 1.0;
 
+/// What is wrong with the values at [`CodecError::at`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum CodecErrorKind {
+    /// Written by another version of this format.
+    Version,
+    /// The values end before the data does.
+    EndsEarly,
+    /// A count or code out of its range.
+    OutOfRange,
+    /// Values after the end of the data.
+    TrailingValues,
+}
+
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error("malformed identification data at value {at}: {what}")]
 pub struct CodecError {
     pub at: usize,
+    pub kind: CodecErrorKind,
     pub what: String,
+}
+
+impl CodecError {
+    pub fn kind(&self) -> CodecErrorKind {
+        self.kind
+    }
 }
 
 struct Reader<'a> {
@@ -34,15 +55,19 @@ struct Reader<'a> {
 }
 
 impl Reader<'_> {
-    fn err(&self, what: impl Into<String>) -> CodecError {
+    fn err(&self, kind: CodecErrorKind, what: impl Into<String>) -> CodecError {
         CodecError {
             at: self.at,
+            kind,
             what: what.into(),
         }
     }
 
     fn f(&mut self) -> Result<f64, CodecError> {
-        let x = *self.v.get(self.at).ok_or_else(|| self.err("ends early"))?;
+        let x = *self
+            .v
+            .get(self.at)
+            .ok_or_else(|| self.err(CodecErrorKind::EndsEarly, "ends early"))?;
         self.at += 1;
         Ok(x)
     }
@@ -51,7 +76,10 @@ impl Reader<'_> {
         let x = self.f()?;
         if !(x >= 0.0 && x.fract() == 0.0 && x <= max as f64) {
             self.at -= 1;
-            return Err(self.err(format!("{x} is not a count 0..{max}")));
+            return Err(self.err(
+                CodecErrorKind::OutOfRange,
+                format!("{x} is not a count 0..{max}"),
+            ));
         }
         Ok(x as usize)
     }
@@ -70,7 +98,10 @@ impl Reader<'_> {
 
     fn end(&self) -> Result<(), CodecError> {
         if self.at != self.v.len() {
-            return Err(self.err("unexpected values after the end"));
+            return Err(self.err(
+                CodecErrorKind::TrailingValues,
+                "unexpected values after the end",
+            ));
         }
         Ok(())
     }
@@ -107,7 +138,10 @@ pub fn encode_input(i: &IdentificationInput) -> Vec<f64> {
 fn version(r: &mut Reader) -> Result<(), CodecError> {
     let ver = r.f()?;
     if ver != VERSION {
-        return Err(r.err(format!("version {ver}, this build reads {VERSION}")));
+        return Err(r.err(
+            CodecErrorKind::Version,
+            format!("version {ver}, this build reads {VERSION}"),
+        ));
     }
     Ok(())
 }
@@ -301,7 +335,12 @@ pub fn decode_result(
                     2 => MeasurementProblem::TooFewPositions(arg),
                     3 => MeasurementProblem::NotFinite(arg),
                     4 => MeasurementProblem::Duplicate,
-                    _ => return Err(r.err(format!("unknown measurement problem {code}"))),
+                    _ => {
+                        return Err(r.err(
+                            CodecErrorKind::OutOfRange,
+                            format!("unknown measurement problem {code}"),
+                        ))
+                    }
                 };
                 IdentificationError::BadMeasurement { axis, problem }
             }
@@ -330,7 +369,12 @@ pub fn decode_result(
             6 => IdentificationError::Solver {
                 step: step(&mut r)?,
             },
-            c => return Err(r.err(format!("unknown error code {c}"))),
+            c => {
+                return Err(r.err(
+                    CodecErrorKind::OutOfRange,
+                    format!("unknown error code {c}"),
+                ))
+            }
         }),
     };
     r.end()?;
@@ -404,15 +448,20 @@ mod tests {
     fn malformed_data_is_refused_with_the_place() {
         let mut v = encode_input(&input());
         v[0] = 2.0;
-        assert!(decode_input(&v)
-            .unwrap_err()
-            .to_string()
-            .contains("version 2"));
+        assert_eq!(
+            decode_input(&v).unwrap_err().kind(),
+            CodecErrorKind::Version
+        );
         let v = encode_input(&input());
         let e = decode_input(&v[..v.len() - 1]).unwrap_err();
-        assert!(e.to_string().contains("ends early"), "{e}");
+        assert_eq!(e.kind(), CodecErrorKind::EndsEarly, "{e}");
+        let mut v = encode_input(&input());
+        v.push(0.0);
+        let e = decode_input(&v).unwrap_err();
+        assert_eq!(e.kind(), CodecErrorKind::TrailingValues, "{e}");
         let mut v = encode_input(&input());
         v[1] = 7.0;
-        assert_eq!(decode_input(&v).unwrap_err().at, 1);
+        let e = decode_input(&v).unwrap_err();
+        assert_eq!((e.at, e.kind()), (1, CodecErrorKind::OutOfRange), "{e}");
     }
 }

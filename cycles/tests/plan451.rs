@@ -1,0 +1,63 @@
+//! Cycle 451's plan refuses, before anything moves, what the machine cannot do; the
+//! error's kind says which check failed.
+
+use probebridge_cycles::cycle451::{plan, KinematicsParams, PlanErrorKind};
+use probebridge_cycles::kinematics::Mode;
+use probebridge_cycles::program::CycleKind;
+use probebridge_cycles::{CyclesConfig, Program};
+use std::path::PathBuf;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn table_ac() -> CyclesConfig {
+    CyclesConfig::load(&root().join("configs/machines/table-ac.toml")).unwrap()
+}
+
+/// configs/programs/451-check.h with `from` replaced by `to`.
+fn params(cfg: &CyclesConfig, from: &str, to: &str) -> KinematicsParams {
+    let text = std::fs::read_to_string(root().join("configs/programs/451-check.h")).unwrap();
+    let text = text.replacen(from, to, 1);
+    let p = Program::parse(&text, cfg).unwrap_or_else(|e| panic!("{e}"));
+    let call = p.cycles().next().unwrap();
+    let CycleKind::MeasureKinematics(k) = &call.kind else {
+        panic!("{:?}", call.kind)
+    };
+    k.clone()
+}
+
+#[test]
+fn plan_errors_have_their_kind() {
+    let cfg = table_ac();
+    let probe = &cfg.probes[0];
+    let ok = params(&cfg, "", "");
+    let planned = plan(&ok, probe, &cfg.machine).unwrap();
+    assert_eq!(planned.measured().len(), 2);
+    for (from, to, kind) in [
+        ("Q411=-90", "Q411=-150", PlanErrorKind::SoftwareLimit),
+        ("Q413=+0", "Q413=+130", PlanErrorKind::SoftwareLimit),
+        // Only A, the axis nearest the bed: no machine datum can take up its error.
+        ("Q422=+3", "Q422=+0", PlanErrorKind::NoMachineDatum),
+    ] {
+        let mut p = params(&cfg, from, to);
+        if kind == PlanErrorKind::NoMachineDatum {
+            // Mode 2 measures A alone; mode 3 cannot.
+            p.mode = Mode::PositionAndAngle;
+            plan(&p, probe, &cfg.machine).unwrap();
+            p.mode = Mode::MachineDatum;
+        }
+        let e = plan(&p, probe, &cfg.machine).unwrap_err();
+        assert_eq!(e.kind(), kind, "{to}: {e}");
+    }
+    // A rotary axis the machine lacks is not measured: B's points are ignored, and
+    // with A and C asking for none there is nothing to measure.
+    let mut none = ok.clone();
+    none.ranges[0].points = 0;
+    none.ranges[2].points = 0;
+    none.ranges[1].points = 3;
+    assert_eq!(
+        plan(&none, probe, &cfg.machine).unwrap_err().kind(),
+        PlanErrorKind::NoAxisToMeasure
+    );
+}
