@@ -193,6 +193,13 @@ enum BenchCmd {
         /// loop's minus one; 0: ordinary).
         #[arg(long)]
         drives_priority: Option<i32>,
+        /// Over Modbus TCP on loopback instead: the simulated PLC (its task cycle
+        /// --period-us) latches, the bridge polls its status every --poll-ms.
+        #[arg(long, conflicts_with_all = ["can", "direct"])]
+        modbus: bool,
+        /// Modbus: status poll period, ms.
+        #[arg(long, default_value_t = 1, requires = "modbus")]
+        poll_ms: u32,
     },
 }
 
@@ -265,6 +272,22 @@ fn main() -> ExitCode {
         Cmd::Bench(BenchCmd::Trigger {
             triggers,
             period_us,
+            json,
+            warmup,
+            modbus: true,
+            poll_ms,
+            ..
+        }) => commands::bench_modbus::run(&commands::bench_modbus::ModbusBenchArgs {
+            triggers,
+            warmup,
+            plc_cycle_us: period_us,
+            poll_ms,
+            json,
+        })
+        .map(|()| 0),
+        Cmd::Bench(BenchCmd::Trigger {
+            triggers,
+            period_us,
             can,
             json,
             direct,
@@ -272,6 +295,7 @@ fn main() -> ExitCode {
             rt_priority,
             estimator_priority,
             drives_priority,
+            ..
         }) => commands::bench::run(&commands::bench::BenchArgs {
             triggers,
             period_us,
