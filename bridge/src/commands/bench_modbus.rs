@@ -106,47 +106,13 @@ pub fn run(args: &ModbusBenchArgs) -> Result<(), String> {
         ..ModbusOptions::default()
     };
     let mut machine = ModbusMachine::start(&cfg, sink, options).map_err(|e| e.to_string())?;
-    let start = AxisPositions::linear([
-        bench::START_XY[0],
-        bench::START_XY[1],
-        bench::TOUCH_Z + bench::GAP,
-    ]);
-    machine
-        .move_to(&start, 5000.0)
-        .map_err(|e| format!("moving to the start: {e}"))?;
-    let probe = ProbeMove {
-        direction: [0.0, 0.0, -1.0],
-        feed: bench::FEED,
-        max_distance: bench::DISTANCE,
-    };
     eprintln!(
         "bench: {warmup} warm-up + {} measured triggers over Modbus TCP {} ...",
         args.triggers,
         bus.address.as_deref().unwrap_or("?")
     );
-    let mut t0_of = HashMap::with_capacity(total as usize);
-    let mut missing_t0 = 0u64;
     let began = Instant::now();
-    for k in 0..total {
-        let before = latches.count();
-        let contact = machine
-            .probe(&probe)
-            .map_err(|e| format!("trigger {}: {e}", k + 1))?;
-        let t0 = (latches.count() == before + 1)
-            .then(|| latches.get(before))
-            .flatten();
-        if k >= warmup {
-            match t0 {
-                Some(t0) => {
-                    t0_of.insert(contact.sequence, t0);
-                }
-                None => missing_t0 += 1,
-            }
-        }
-        machine
-            .move_to(&start, 5000.0)
-            .map_err(|e| format!("retract after trigger {}: {e}", k + 1))?;
-    }
+    let (t0_of, missing_t0) = triggers(&mut machine, &latches, warmup, total)?;
     let elapsed = began.elapsed();
     let client = machine.client_stats();
     let latch_stats = machine.latch_stats();
@@ -187,7 +153,92 @@ pub fn run(args: &ModbusBenchArgs) -> Result<(), String> {
             None => lost += 1,
         }
     }
-    let Some(trig) = Summary::of(&trigger) else {
+    report(
+        args,
+        warmup,
+        elapsed,
+        &Hops {
+            trigger,
+            to_bridge,
+            to_estimator,
+            lost,
+            missing_t0,
+        },
+        &client,
+        &latch_stats,
+    )
+}
+
+/// Runs `total` probing moves from just above the face; per measured trigger, its
+/// sample sequence and the PLC's latch instant.
+fn triggers(
+    machine: &mut ModbusMachine,
+    latches: &LatchLog,
+    warmup: u64,
+    total: u64,
+) -> Result<(HashMap<u64, u64>, u64), String> {
+    let start = AxisPositions::linear([
+        bench::START_XY[0],
+        bench::START_XY[1],
+        bench::TOUCH_Z + bench::GAP,
+    ]);
+    machine
+        .move_to(&start, 5000.0)
+        .map_err(|e| format!("moving to the start: {e}"))?;
+    let probe = ProbeMove {
+        direction: [0.0, 0.0, -1.0],
+        feed: bench::FEED,
+        max_distance: bench::DISTANCE,
+    };
+    let mut t0_of = HashMap::with_capacity(total as usize);
+    let mut missing_t0 = 0u64;
+    for k in 0..total {
+        let before = latches.count();
+        let contact = machine
+            .probe(&probe)
+            .map_err(|e| format!("trigger {}: {e}", k + 1))?;
+        let t0 = (latches.count() == before + 1)
+            .then(|| latches.get(before))
+            .flatten();
+        if k >= warmup {
+            match t0 {
+                Some(t0) => {
+                    t0_of.insert(contact.sequence, t0);
+                }
+                None => missing_t0 += 1,
+            }
+        }
+        machine
+            .move_to(&start, 5000.0)
+            .map_err(|e| format!("retract after trigger {}: {e}", k + 1))?;
+    }
+    Ok((t0_of, missing_t0))
+}
+
+struct Hops {
+    trigger: Vec<u64>,
+    to_bridge: Vec<u64>,
+    to_estimator: Vec<u64>,
+    lost: u64,
+    missing_t0: u64,
+}
+
+fn report(
+    args: &ModbusBenchArgs,
+    warmup: u64,
+    elapsed: Duration,
+    hops: &Hops,
+    client: &hal::modbus::client::ClientStats,
+    latch_stats: &hal::modbus::machine::LatchStats,
+) -> Result<(), String> {
+    let Hops {
+        trigger,
+        to_bridge,
+        to_estimator,
+        lost,
+        missing_t0,
+    } = hops;
+    let Some(trig) = Summary::of(trigger) else {
         return Err("no trigger sample reached the estimator".into());
     };
     println!(
@@ -205,11 +256,11 @@ pub fn run(args: &ModbusBenchArgs) -> Result<(), String> {
         "trigger -> estimator (PLC latch t0 to t1)",
         trig.row()
     );
-    let hop = Summary::of(&to_bridge);
+    let hop = Summary::of(to_bridge);
     if let Some(s) = hop {
         println!("{:<44}{}", "  PLC latch -> bridge has the contact", s.row());
     }
-    let ipc = Summary::of(&to_estimator);
+    let ipc = Summary::of(to_estimator);
     if let Some(s) = ipc {
         println!("{:<44}{}", "  bridge -> estimator", s.row());
     }
