@@ -142,7 +142,7 @@ fn a_reply_after_500_ms_is_a_timeout_or_waited_for() {
 #[test]
 fn a_slow_byte_by_byte_reply_is_assembled() {
     let Some(path) = server_path() else { return };
-    let (_s, c) = connect(&path, 500);
+    let (_s, c) = connect(&path, 1000);
     let t = Instant::now();
     let r = c.read(BYTE_SLEEP_5_MS, 1).unwrap().unwrap();
     println!(
