@@ -227,6 +227,16 @@ fn main() -> ExitCode {
             record_times,
             record_capacity,
         } => commands::estimator::run(&service, verbose, record_times, record_capacity).map(|()| 0),
+        Cmd::Bench(BenchCmd::Trigger(args)) if args.modbus => {
+            commands::bench_modbus::run(&commands::bench_modbus::ModbusBenchArgs {
+                triggers: args.triggers,
+                warmup: args.warmup,
+                plc_cycle_us: args.period_us,
+                poll_ms: args.poll_ms,
+                json: args.json,
+            })
+            .map(|()| 0)
+        }
         Cmd::Bench(BenchCmd::Trigger(args)) => commands::bench::run(&args).map(|()| 0),
     };
     match result {

@@ -98,8 +98,8 @@ impl LatchLog {
         (self.count() - n <= LATCH_LOG_CAPACITY as u64).then_some(t)
     }
 
-    /// Single writer: the simulation thread.
-    fn record(&self, t0_ns: u64) {
+    /// Single writer: the simulation thread (drives or PLC).
+    pub fn record(&self, t0_ns: u64) {
         let n = self.count.load(Ordering::Relaxed);
         self.t0_ns[(n % LATCH_LOG_CAPACITY as u64) as usize].store(t0_ns, Ordering::Relaxed);
         self.count.store(n + 1, Ordering::Release);

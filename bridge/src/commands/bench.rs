@@ -78,6 +78,13 @@ pub struct BenchArgs {
     /// loop's minus one; 0: ordinary).
     #[arg(long)]
     pub drives_priority: Option<i32>,
+    /// Over Modbus TCP on loopback instead: the simulated PLC (its task cycle
+    /// --period-us) latches, the bridge polls its status every --poll-ms.
+    #[arg(long, conflicts_with_all = ["can", "direct"])]
+    pub modbus: bool,
+    /// Modbus: status poll period, ms.
+    #[arg(long, default_value_t = 1, requires = "modbus")]
+    pub poll_ms: u32,
 }
 
 /// Whether process `pid` runs under SCHED_FIFO (field 41 of /proc/PID/stat).

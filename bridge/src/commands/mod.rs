@@ -1,6 +1,7 @@
 //! One module per `probebridge` subcommand.
 
 pub mod bench;
+pub mod bench_modbus;
 pub mod check;
 pub mod demo;
 pub mod estimator;

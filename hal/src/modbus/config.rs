@@ -245,6 +245,12 @@ impl ModbusBusConfig {
     }
 
     pub fn validate(&self) -> Result<(), Invalid> {
+        self.validate_link()?;
+        self.validate_blocks()
+    }
+
+    /// Transport, timing and scale.
+    fn validate_link(&self) -> Result<(), Invalid> {
         let bad = |key, reason: String| Err(Invalid { key, reason });
         match self.transport {
             Transport::Tcp => match &self.address {
@@ -288,6 +294,15 @@ impl ModbusBusConfig {
                 return bad(key, "must be > 0".into());
             }
         }
+        if self.plc_cycle_us == 0 {
+            return bad("plc_cycle_us", "must be > 0".into());
+        }
+        Ok(())
+    }
+
+    /// Request sizes, the ring, and where the blocks sit.
+    fn validate_blocks(&self) -> Result<(), Invalid> {
+        let bad = |key, reason: String| Err(Invalid { key, reason });
         if self.max_read == 0 || self.max_read > MODBUS_MAX_READ {
             return bad(
                 "max_read",
@@ -311,9 +326,6 @@ impl ModbusBusConfig {
                     self.ring_slots
                 ),
             );
-        }
-        if self.plc_cycle_us == 0 {
-            return bad("plc_cycle_us", "must be > 0".into());
         }
         if COMMAND_LEN > self.max_write {
             return bad(

@@ -11,9 +11,11 @@ pub struct Knobs {
     /// The next N requests are answered this late (past the client's timeout), ms.
     pub late_replies: u32,
     pub late_ms: u64,
-    /// The next request that reads the status block while a move runs closes the
-    /// connection instead of answering.
+    /// The first status read after the next command write closes the connection
+    /// instead of answering (the client is polling a command the PLC is carrying out).
     pub drop_connection_mid_move: bool,
+    /// Set by the server when the command write came in.
+    pub drop_armed: bool,
     /// The next N requests are answered with this exception.
     pub exceptions: u32,
     pub exception: Option<ExceptionCode>,

@@ -62,6 +62,7 @@ pub struct PlcProgram {
     command_sequence: u16,
     armed: bool,
     fault: Option<u16>,
+    latch_log: Option<std::sync::Arc<crate::machine::LatchLog>>,
     pub knobs: Knobs,
 }
 
@@ -116,12 +117,18 @@ impl PlcProgram {
             command_sequence: 0,
             armed: false,
             fault: None,
+            latch_log: None,
             knobs: Knobs::default(),
         };
         let here = p.actual();
         p.world.reset(&here);
         p.publish();
         p
+    }
+
+    /// Records the wall-clock instant of every latch into `log` (benchmarks).
+    pub fn set_latch_log(&mut self, log: std::sync::Arc<crate::machine::LatchLog>) {
+        self.latch_log = Some(log);
     }
 
     pub fn layout(&self) -> Layout {
@@ -359,6 +366,9 @@ impl PlcProgram {
         }
         if capture == CaptureKind::HwLatch {
             at_us = self.time_us - self.cycle_us + (frac * self.cycle_us as f64) as u64;
+        }
+        if let Some(log) = &self.latch_log {
+            log.record(hal::clock::monotonic_ns());
         }
         self.store(counts, at_us);
         if std::mem::take(&mut self.knobs.bounce) {

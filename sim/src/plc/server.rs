@@ -260,14 +260,22 @@ impl Service for PlcService {
         let mut plc = self.shared.lock();
         let late = plc.knobs.take_late();
         if let Some(kill) = &self.kill {
-            let status = plc.layout().status_base;
-            if plc.knobs.drop_connection_mid_move
-                && plc.is_busy()
-                && matches!(req.request, Request::ReadHoldingRegisters(a, _) if a == status)
-            {
-                plc.knobs.drop_connection_mid_move = false;
-                kill.store(true, Ordering::Release);
-                return Box::pin(std::future::ready(Ok(None)));
+            let layout = plc.layout();
+            match req.request {
+                Request::WriteMultipleRegisters(a, _)
+                    if a == layout.command_base && plc.knobs.drop_connection_mid_move =>
+                {
+                    plc.knobs.drop_armed = true;
+                }
+                Request::ReadHoldingRegisters(a, _)
+                    if a == layout.status_base && plc.knobs.drop_armed =>
+                {
+                    plc.knobs.drop_armed = false;
+                    plc.knobs.drop_connection_mid_move = false;
+                    kill.store(true, Ordering::Release);
+                    return Box::pin(std::future::ready(Ok(None)));
+                }
+                _ => {}
             }
         }
         let answer: Answer = match plc.knobs.take_exception() {
