@@ -55,6 +55,15 @@ pub enum ScenarioError {
     Machine { path: PathBuf, source: ConfigError },
 }
 
+impl ScenarioError {
+    /// The kind of the scenario's or its machine's error.
+    pub fn kind(&self) -> hal::config::ConfigErrorKind {
+        match self {
+            ScenarioError::File(e) | ScenarioError::Machine { source: e, .. } => e.kind(),
+        }
+    }
+}
+
 /// The real probe (what the probe table only approximates).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ProbeTruth {
