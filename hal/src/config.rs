@@ -30,6 +30,28 @@ pub enum ConfigError {
     },
 }
 
+/// What kind of [`ConfigError`] (and of `sim`'s scenario errors, which wrap it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum ConfigErrorKind {
+    /// The file could not be read.
+    Read,
+    /// Not TOML, or a key or value the format does not have.
+    Parse,
+    /// A value out of range or inconsistent with another.
+    Invalid,
+}
+
+impl ConfigError {
+    pub fn kind(&self) -> ConfigErrorKind {
+        match self {
+            ConfigError::Read { .. } => ConfigErrorKind::Read,
+            ConfigError::Parse { .. } => ConfigErrorKind::Parse,
+            ConfigError::Invalid { .. } => ConfigErrorKind::Invalid,
+        }
+    }
+}
+
 /// One axis and the CiA 402 drive that moves it.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -474,9 +496,10 @@ max_acceleration = 1000.0
 
     #[test]
     fn a_canopen_axis_without_node_is_refused() {
-        let e = MachineConfig::parse(&MINI.replace("node = 2\n", ""), Path::new("m.toml"))
-            .unwrap_err()
-            .to_string();
+        let e =
+            MachineConfig::parse(&MINI.replace("node = 2\n", ""), Path::new("m.toml")).unwrap_err();
+        assert_eq!(e.kind(), ConfigErrorKind::Invalid);
+        let e = e.to_string();
         assert!(
             e.contains("m.toml") && e.contains("axis[1] (Y).node") && e.contains("missing"),
             "{e}"

@@ -55,6 +55,15 @@ pub enum ScenarioError {
     Machine { path: PathBuf, source: ConfigError },
 }
 
+impl ScenarioError {
+    /// The kind of the scenario's or its machine's error.
+    pub fn kind(&self) -> hal::config::ConfigErrorKind {
+        match self {
+            ScenarioError::File(e) | ScenarioError::Machine { source: e, .. } => e.kind(),
+        }
+    }
+}
+
 /// The real probe (what the probe table only approximates).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ProbeTruth {
@@ -400,146 +409,10 @@ impl Scenario {
     }
 
     fn build(raw: RawScenario, path: &Path, machine: MachineConfig) -> Result<Self, ScenarioError> {
-        let bad = |key: &str, message: String| invalid(path, key, message);
-
-        let p = &raw.probe;
-        check_range(
-            path,
-            "probe.ball_radius",
-            p.ball_radius,
-            0.0,
-            MAX_BALL_RADIUS,
-            false,
-        )?;
-        check_range(path, "probe.noise", p.noise, 0.0, MAX_NOISE, true)?;
-        if !(p.pretravel.is_finite() && p.pretravel >= 0.0 && p.pretravel < p.ball_radius) {
-            return Err(bad(
-                "probe.pretravel",
-                format!(
-                    "{} must be >= 0 and smaller than ball_radius ({})",
-                    p.pretravel, p.ball_radius
-                ),
-            ));
-        }
-        if let Some(r) = p.table_radius {
-            check_range(path, "probe.table_radius", r, 0.0, MAX_BALL_RADIUS, false)?;
-        }
-        let probe = ProbeTruth {
-            ball_radius: p.ball_radius,
-            noise: p.noise,
-            pretravel: p.pretravel,
-            table_radius: p.table_radius,
-        };
-
-        let mut truth = Truth::default();
-        for (key, &value) in &raw.truth {
-            let Some((_, axis, field)) = Truth::KEYS.iter().find(|(k, ..)| k == key) else {
-                let hint = Truth::KEYS
-                    .iter()
-                    .find(|(k, ..)| k.eq_ignore_ascii_case(key))
-                    .map(|(k, ..)| format!(" (did you mean {k}?)"))
-                    .unwrap_or_default();
-                return Err(bad(
-                    &format!("truth.{key}"),
-                    format!("unknown key{hint}; accepted: {}", Truth::accepted_keys()),
-                ));
-            };
-            let key = format!("truth.{key}");
-            if machine.axis(*axis).is_none() {
-                return Err(bad(
-                    &key,
-                    format!("machine \"{}\" has no {axis} axis", machine.name),
-                ));
-            }
-            match field {
-                Field::Position(_) => check_abs(path, &key, value, MAX_POSITION_ERROR, "mm")?,
-                Field::Orientation(_) | Field::Zero => {
-                    check_abs(path, &key, value, MAX_ANGLE_ERROR, "deg")?
-                }
-                Field::Backlash => check_range(path, &key, value, 0.0, MAX_BACKLASH, true)?,
-                Field::Hirth => check_hirth(path, &key, value)?,
-            }
-            truth.set(&key["truth.".len()..], value);
-        }
-
-        let vec3 = |v: [f64; 3]| Vector3::new(v[0], v[1], v[2]);
-        let mut spheres = Vec::with_capacity(raw.sphere.len());
-        for (i, s) in raw.sphere.iter().enumerate() {
-            check_finite3(path, &format!("sphere[{i}].center"), s.center)?;
-            check_range(
-                path,
-                &format!("sphere[{i}].radius"),
-                s.radius,
-                0.0,
-                1e4,
-                false,
-            )?;
-            spheres.push(Sphere::new(vec3(s.center), s.radius).expect("validated above"));
-        }
-        let mut planes = Vec::with_capacity(raw.plane.len());
-        for (i, s) in raw.plane.iter().enumerate() {
-            check_finite3(path, &format!("plane[{i}].point"), s.point)?;
-            check_finite3(path, &format!("plane[{i}].normal"), s.normal)?;
-            planes
-                .push(Plane::new(vec3(s.point), vec3(s.normal)).ok_or_else(|| {
-                    bad(&format!("plane[{i}].normal"), "must not be zero".into())
-                })?);
-        }
-        let mut cylinders = Vec::with_capacity(raw.cylinder.len());
-        for (i, s) in raw.cylinder.iter().enumerate() {
-            check_finite3(path, &format!("cylinder[{i}].point"), s.point)?;
-            check_finite3(path, &format!("cylinder[{i}].direction"), s.direction)?;
-            check_range(
-                path,
-                &format!("cylinder[{i}].radius"),
-                s.radius,
-                0.0,
-                1e4,
-                false,
-            )?;
-            cylinders.push(
-                Cylinder::new(vec3(s.point), vec3(s.direction), s.radius).ok_or_else(|| {
-                    bad(
-                        &format!("cylinder[{i}].direction"),
-                        "must not be zero".into(),
-                    )
-                })?,
-            );
-        }
-
-        let mut faults = Vec::with_capacity(raw.fault.len());
-        for (i, f) in raw.fault.iter().enumerate() {
-            if !machine.axes.iter().any(|a| a.node == Some(f.node)) {
-                return Err(bad(
-                    &format!("fault[{i}].node"),
-                    format!(
-                        "no axis of machine \"{}\" is on node {}",
-                        machine.name, f.node
-                    ),
-                ));
-            }
-            check_range(
-                path,
-                &format!("fault[{i}].after_ms"),
-                f.after_ms,
-                0.0,
-                1e9,
-                true,
-            )?;
-            if f.code.is_some() && f.kind != FaultKind::Emcy {
-                return Err(bad(
-                    &format!("fault[{i}].code"),
-                    "only an \"emcy\" fault has an error code".into(),
-                ));
-            }
-            faults.push(Fault {
-                node: f.node,
-                kind: f.kind,
-                after_ms: f.after_ms,
-                code: f.code,
-            });
-        }
-
+        let probe = build_probe(&raw.probe, path)?;
+        let truth = build_truth(&raw.truth, path, &machine)?;
+        let (spheres, planes, cylinders) = build_artefacts(&raw, path)?;
+        let faults = build_faults(&raw.fault, path, &machine)?;
         Ok(Self {
             machine,
             seed: raw.seed,
@@ -552,6 +425,172 @@ impl Scenario {
             path: path.to_path_buf(),
         })
     }
+}
+
+/// `[probe]`: the real probe.
+fn build_probe(p: &RawProbe, path: &Path) -> Result<ProbeTruth, ScenarioError> {
+    let bad = |key: &str, message: String| invalid(path, key, message);
+    check_range(
+        path,
+        "probe.ball_radius",
+        p.ball_radius,
+        0.0,
+        MAX_BALL_RADIUS,
+        false,
+    )?;
+    check_range(path, "probe.noise", p.noise, 0.0, MAX_NOISE, true)?;
+    if !(p.pretravel.is_finite() && p.pretravel >= 0.0 && p.pretravel < p.ball_radius) {
+        return Err(bad(
+            "probe.pretravel",
+            format!(
+                "{} must be >= 0 and smaller than ball_radius ({})",
+                p.pretravel, p.ball_radius
+            ),
+        ));
+    }
+    if let Some(r) = p.table_radius {
+        check_range(path, "probe.table_radius", r, 0.0, MAX_BALL_RADIUS, false)?;
+    }
+    Ok(ProbeTruth {
+        ball_radius: p.ball_radius,
+        noise: p.noise,
+        pretravel: p.pretravel,
+        table_radius: p.table_radius,
+    })
+}
+
+/// `[truth]`: the machine's true errors, each on an axis the machine has.
+fn build_truth(
+    raw: &BTreeMap<String, f64>,
+    path: &Path,
+    machine: &MachineConfig,
+) -> Result<Truth, ScenarioError> {
+    let bad = |key: &str, message: String| invalid(path, key, message);
+    let mut truth = Truth::default();
+    for (key, &value) in raw {
+        let Some((_, axis, field)) = Truth::KEYS.iter().find(|(k, ..)| k == key) else {
+            let hint = Truth::KEYS
+                .iter()
+                .find(|(k, ..)| k.eq_ignore_ascii_case(key))
+                .map(|(k, ..)| format!(" (did you mean {k}?)"))
+                .unwrap_or_default();
+            return Err(bad(
+                &format!("truth.{key}"),
+                format!("unknown key{hint}; accepted: {}", Truth::accepted_keys()),
+            ));
+        };
+        let key = format!("truth.{key}");
+        if machine.axis(*axis).is_none() {
+            return Err(bad(
+                &key,
+                format!("machine \"{}\" has no {axis} axis", machine.name),
+            ));
+        }
+        match field {
+            Field::Position(_) => check_abs(path, &key, value, MAX_POSITION_ERROR, "mm")?,
+            Field::Orientation(_) | Field::Zero => {
+                check_abs(path, &key, value, MAX_ANGLE_ERROR, "deg")?
+            }
+            Field::Backlash => check_range(path, &key, value, 0.0, MAX_BACKLASH, true)?,
+            Field::Hirth => check_hirth(path, &key, value)?,
+        }
+        truth.set(&key["truth.".len()..], value);
+    }
+    Ok(truth)
+}
+
+type Artefacts = (Vec<Sphere>, Vec<Plane>, Vec<Cylinder>);
+
+/// `[[sphere]]`, `[[plane]]`, `[[cylinder]]`.
+fn build_artefacts(raw: &RawScenario, path: &Path) -> Result<Artefacts, ScenarioError> {
+    let bad = |key: &str, message: String| invalid(path, key, message);
+    let vec3 = |v: [f64; 3]| Vector3::new(v[0], v[1], v[2]);
+    let mut spheres = Vec::with_capacity(raw.sphere.len());
+    for (i, s) in raw.sphere.iter().enumerate() {
+        check_finite3(path, &format!("sphere[{i}].center"), s.center)?;
+        check_range(
+            path,
+            &format!("sphere[{i}].radius"),
+            s.radius,
+            0.0,
+            1e4,
+            false,
+        )?;
+        spheres.push(Sphere::new(vec3(s.center), s.radius).expect("validated above"));
+    }
+    let mut planes = Vec::with_capacity(raw.plane.len());
+    for (i, s) in raw.plane.iter().enumerate() {
+        check_finite3(path, &format!("plane[{i}].point"), s.point)?;
+        check_finite3(path, &format!("plane[{i}].normal"), s.normal)?;
+        planes.push(
+            Plane::new(vec3(s.point), vec3(s.normal))
+                .ok_or_else(|| bad(&format!("plane[{i}].normal"), "must not be zero".into()))?,
+        );
+    }
+    let mut cylinders = Vec::with_capacity(raw.cylinder.len());
+    for (i, s) in raw.cylinder.iter().enumerate() {
+        check_finite3(path, &format!("cylinder[{i}].point"), s.point)?;
+        check_finite3(path, &format!("cylinder[{i}].direction"), s.direction)?;
+        check_range(
+            path,
+            &format!("cylinder[{i}].radius"),
+            s.radius,
+            0.0,
+            1e4,
+            false,
+        )?;
+        cylinders.push(
+            Cylinder::new(vec3(s.point), vec3(s.direction), s.radius).ok_or_else(|| {
+                bad(
+                    &format!("cylinder[{i}].direction"),
+                    "must not be zero".into(),
+                )
+            })?,
+        );
+    }
+    Ok((spheres, planes, cylinders))
+}
+
+/// `[[fault]]`: each on a node of the machine.
+fn build_faults(
+    raw: &[RawFault],
+    path: &Path,
+    machine: &MachineConfig,
+) -> Result<Vec<Fault>, ScenarioError> {
+    let bad = |key: &str, message: String| invalid(path, key, message);
+    let mut faults = Vec::with_capacity(raw.len());
+    for (i, f) in raw.iter().enumerate() {
+        if !machine.axes.iter().any(|a| a.node == Some(f.node)) {
+            return Err(bad(
+                &format!("fault[{i}].node"),
+                format!(
+                    "no axis of machine \"{}\" is on node {}",
+                    machine.name, f.node
+                ),
+            ));
+        }
+        check_range(
+            path,
+            &format!("fault[{i}].after_ms"),
+            f.after_ms,
+            0.0,
+            1e9,
+            true,
+        )?;
+        if f.code.is_some() && f.kind != FaultKind::Emcy {
+            return Err(bad(
+                &format!("fault[{i}].code"),
+                "only an \"emcy\" fault has an error code".into(),
+            ));
+        }
+        faults.push(Fault {
+            node: f.node,
+            kind: f.kind,
+            after_ms: f.after_ms,
+            code: f.code,
+        });
+    }
+    Ok(faults)
 }
 
 /// Hirth grid of `axis` used by the physics: the truth's when given, else the

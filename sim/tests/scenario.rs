@@ -276,3 +276,25 @@ fn sphere_scenarios_put_the_sphere_where_they_say_at_zero() {
         assert!(d > 1e-3, "{name}: {d}");
     }
 }
+
+#[test]
+fn errors_carry_their_kind() {
+    use hal::config::ConfigErrorKind;
+    let parse = |body: &str| {
+        let text = format!("machine = \"table-ac\"\n{body}");
+        Scenario::parse_with_machine(&text, Path::new("bad.toml"), machine("table-ac"))
+            .map(|_| ())
+            .unwrap_err()
+            .kind()
+    };
+    assert_eq!(
+        parse("[probe]\nball_radius = 3.0\nnoize = 0.1\n"),
+        ConfigErrorKind::Parse
+    );
+    assert_eq!(
+        parse("[probe]\nball_radius = -3.0\n"),
+        ConfigErrorKind::Invalid
+    );
+    let missing = Scenario::load(Path::new("/nonexistent/scenario.toml"), None).unwrap_err();
+    assert_eq!(missing.kind(), ConfigErrorKind::Read);
+}

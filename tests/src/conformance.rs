@@ -1,6 +1,6 @@
 //! The `Machine` conformance suite: every backend (CANopen with simulated drives on the
 //! in-process bus, on SocketCAN, Modbus, ...) must pass the same checks. Instantiate
-//! it for a backend with [`machine_conformance!`].
+//! it for a backend with [`crate::machine_conformance!`].
 
 use hal::can::inproc::InprocBus;
 use hal::master::{CanMachine, MasterOptions, Pacing};

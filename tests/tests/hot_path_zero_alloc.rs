@@ -16,8 +16,9 @@
 //!   `ChunkMutSharedState`, freed at `send`), and the subscriber thread's receive.
 //!
 //! The loop runs on the virtual clock (lockstep pacing) so 100 000 triggers take
-//! seconds; the code on the hot path (`on_frame`, the latch, `transmit`, the sink) is the
-//! same under real-time pacing, which only adds clock reads and timed waits.
+//! seconds; the code on the hot path (`RtLoop::on_frame`, the latch, `RtLoop::tick`, the
+//! sink) is the same under real-time pacing, whose driver only adds clock reads and
+//! timed waits.
 
 use probebridge::ipc::{ContactSubscriber, ForwardingSink};
 use probebridge_tests::alloc_count::{count, Counting};

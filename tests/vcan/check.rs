@@ -30,6 +30,7 @@ use hal::canopen::cob_id::{classify, CobKind};
 use hal::canopen::object;
 use hal::canopen::pdo::mapping_index;
 use hal::cia402::touch_probe::TouchProbeStatus;
+use hal::config::{CanOpenBusConfig, MachineConfig};
 use hal::master::process_data::{self, ProcessData, Tpdo2};
 use serde_json::Value;
 use sim::machine::{SimClock, SimMachine};
@@ -583,6 +584,20 @@ fn check_segment(case: &Case, frames: &[CanFrame], results: &Path, r: &mut Repor
         return r.fail(format!("candump {name}: no frames recorded for this case"));
     }
 
+    check_startup(name, frames, &nodes, bus, r);
+    check_latches(case, cfg, frames, results, r);
+    check_replay(name, &sc, frames, r);
+}
+
+/// Start-up: NMT reset communication to all, every boot-up, the SDO configuration
+/// (cycle period, heartbeat, mode, the PDO layout), NMT start, then SYNC.
+fn check_startup(
+    name: &str,
+    frames: &[CanFrame],
+    nodes: &[u8],
+    bus: &CanOpenBusConfig,
+    r: &mut Report,
+) {
     // Power-on: the simulator's boot-ups. Start-up: NMT reset communication to all,
     // every boot-up, SDO configuration, NMT start, then SYNC.
     let first = frames
@@ -607,7 +622,7 @@ fn check_segment(case: &Case, frames: &[CanFrame], results: &Path, r: &mut Repor
             _ => None,
         })
         .collect();
-    for n in &nodes {
+    for n in nodes {
         r.check(booted.contains(n), || {
             format!(
                 "candump {name}: no boot-up {:03X}#00 of node {n} before the first SDO",
@@ -644,7 +659,7 @@ fn check_segment(case: &Case, frames: &[CanFrame], results: &Path, r: &mut Repor
     let entry = |e: &hal::canopen::MapEntry| {
         (u32::from(e.index) << 16) | (u32::from(e.sub) << 8) | u32::from(e.bits)
     };
-    for n in &nodes {
+    for n in nodes {
         let mut want: Vec<((u16, u8), u32)> = vec![
             ((object::COMMUNICATION_CYCLE_PERIOD, 0), bus.sync_period_us),
             (
@@ -671,7 +686,19 @@ fn check_segment(case: &Case, frames: &[CanFrame], results: &Path, r: &mut Repor
             });
         }
     }
+}
 
+/// The TPDO2 latch frames of every node; for `probe`, the latched values are the
+/// reported contact.
+fn check_latches(
+    case: &Case,
+    cfg: &MachineConfig,
+    frames: &[CanFrame],
+    results: &Path,
+    r: &mut Report,
+) {
+    let name = &case.name;
+    let nodes: Vec<u8> = cfg.axes.iter().map(|a| a.canopen_node()).collect();
     // Touch-probe latch frames (TPDO2: status 0x60B9 + latched 0x60BA).
     let mut latches: BTreeMap<u8, Vec<i32>> = BTreeMap::new();
     for f in frames {
@@ -711,11 +738,15 @@ fn check_segment(case: &Case, frames: &[CanFrame], results: &Path, r: &mut Repor
             }
         }
     }
+}
 
+/// Replay: the master's frames into a fresh simulator of the case's scenario give
+/// exactly the drive frames that were recorded.
+fn check_replay(name: &str, sc: &Scenario, frames: &[CanFrame], r: &mut Report) {
     // Replay: the master's frames into a fresh simulator, powered on and with its
     // timers polled after every frame as `probebridge sim` does, give the recorded
     // answers. Heartbeats (not boot-ups) run on the wall clock: left out on both sides.
-    let mut sim = SimMachine::new(&sc);
+    let mut sim = SimMachine::new(sc);
     sim.set_clock(SimClock::Monotonic);
     let mut replayed = Vec::new();
     sim.power_on(&mut |a| replayed.push(*a));

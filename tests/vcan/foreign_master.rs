@@ -144,6 +144,10 @@ fn args() -> Result<(String, PathBuf, String), String> {
     }
 }
 
+#[allow(
+    clippy::too_many_lines,
+    reason = "a test program: one check after another, read top to bottom"
+)]
 fn main() -> ExitCode {
     let (iface, machine, name) = match args() {
         Ok(a) => a,

@@ -27,7 +27,8 @@ use crate::ipc::{ContactPublisher, EstimatorChild, ForwardingSink};
 use hal::can::inproc::InprocBus;
 use hal::can::socketcan::SocketCanTransport;
 use hal::can::CanTransport;
-use hal::master::{BusLoad, CanMachine, MasterOptions, Pacing};
+use hal::config::MachineConfig;
+use hal::master::{BusLoad, CanMachine, LoopStats, MasterOptions, Pacing, StartupReport};
 use hal::{AxisPositions, ContactSample, Machine, ProbeMove, SampleSink};
 use serde_json::json;
 use sim::machine::{LatchLog, SimClock, SimMachine, SimRunner};
@@ -35,6 +36,7 @@ use sim::Scenario;
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Run IDs that tell the estimator's records apart.
@@ -99,6 +101,54 @@ fn is_fifo(pid: u32) -> bool {
         == Some(1)
 }
 
+/// Where the run keeps its files and names its services.
+struct Workspace {
+    prefix: String,
+    dir: PathBuf,
+    times_file: PathBuf,
+    estimator_log: PathBuf,
+}
+
+/// The processes and threads of one run, and which real-time settings they got.
+struct Rig {
+    estimator: EstimatorChild,
+    estimator_fifo: bool,
+    /// The simulated drives; taken and stopped once the machine has shut down.
+    sim: Option<SimRunner>,
+    sim_fifo: bool,
+    drive_priority: i32,
+    forwarder_priority: i32,
+    forwarder_fifo: bool,
+    machine: CanMachine,
+    startup: StartupReport,
+    floor: ContactPublisher,
+    /// This thread (the floor's sender) under SCHED_FIFO.
+    main_fifo: bool,
+    latches: Arc<LatchLog>,
+}
+
+/// What the trigger loop recorded.
+struct Measured {
+    /// Sequence of each measured contact -> its t0.
+    t0_of: HashMap<u64, u64>,
+    floor_seqs: Vec<u64>,
+    stop_ns: Vec<u64>,
+    stop_cycles: Vec<u64>,
+    missing_t0: u64,
+    elapsed: Duration,
+    loop_stats: LoopStats,
+}
+
+/// The latencies, matched with the estimator's receive times.
+struct Latencies {
+    trigger: Vec<u64>,
+    to_rt: Vec<u64>,
+    rt_to_estimator: Vec<u64>,
+    floor: Vec<u64>,
+    lost_triggers: u64,
+    lost_floor: u64,
+}
+
 pub fn run(args: &BenchArgs) -> Result<(), String> {
     if args.triggers == 0 {
         return Err("--triggers must be at least 1".into());
@@ -113,13 +163,41 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
     let warmup = args.warmup.unwrap_or((args.triggers / 10).clamp(1, 100));
     let total = warmup + args.triggers;
     let pid = std::process::id();
-    let prefix = format!("probebridge-bench-{pid}");
-    let work = std::env::temp_dir().join(format!("probebridge-bench-{pid}"));
-    std::fs::create_dir_all(&work).map_err(|e| format!("{}: {e}", work.display()))?;
-    let times_file = work.join("receive-times.txt");
-    let estimator_log = work.join("estimator.log");
+    let dir = std::env::temp_dir().join(format!("probebridge-bench-{pid}"));
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let ws = Workspace {
+        prefix: format!("probebridge-bench-{pid}"),
+        times_file: dir.join("receive-times.txt"),
+        estimator_log: dir.join("estimator.log"),
+        dir,
+    };
+    let (scenario, cfg, mut notes) = bench_machine(args)?;
+    let rig = start_rig(args, &ws, &scenario, &cfg, total)?;
+    notes.extend(rig.startup.notes.iter().cloned());
+    let (measured, rig) = measure(args, rig, warmup, total)?;
+    let records = collect_records(rig.estimator, &ws)?;
+    let latencies = match_records(&measured, &records);
+    let _ = std::fs::remove_dir_all(&ws.dir);
+    let report = Report {
+        args,
+        warmup,
+        notes,
+        startup: rig.startup,
+        sim_fifo: rig.sim_fifo,
+        drive_priority: rig.drive_priority,
+        forwarder_priority: rig.forwarder_priority,
+        forwarder_fifo: rig.forwarder_fifo,
+        estimator_fifo: rig.estimator_fifo,
+        main_fifo: rig.main_fifo,
+        measured,
+        latencies,
+    };
+    report.print_and_write()
+}
 
-    // The machine: table-ac with a flat face, SYNC at the requested period.
+/// The machine: table-ac with a flat face, SYNC at the requested period; notes for
+/// the report.
+fn bench_machine(args: &BenchArgs) -> Result<(Scenario, MachineConfig, Vec<String>), String> {
     let scenario_path = configs::configs_dir().join("scenarios/bench-trigger.toml");
     let scenario = Scenario::parse(
         bench::SCENARIO,
@@ -153,12 +231,24 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
         ));
     }
 
+    Ok((scenario, cfg, notes))
+}
+
+/// The estimator process (under SCHED_FIFO when asked) recording receive times;
+/// whether it got SCHED_FIFO.
+fn spawn_estimator(
+    args: &BenchArgs,
+    ws: &Workspace,
+    total: u64,
+) -> Result<(EstimatorChild, bool), String> {
+    let (prefix, times_file, estimator_log) =
+        (ws.prefix.as_str(), &ws.times_file, &ws.estimator_log);
     eprintln!("bench: starting the estimator process ...");
     let mut command = Command::new(std::env::current_exe().map_err(|e| e.to_string())?);
     command.args([
         "estimator",
         "--service",
-        &prefix,
+        prefix,
         "--record-times",
         &times_file.to_string_lossy(),
         "--record-capacity",
@@ -166,7 +256,7 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
             .max(DEFAULT_RECORD_CAPACITY as u64)
             .to_string(),
     ]);
-    let log = std::fs::File::create(&estimator_log)
+    let log = std::fs::File::create(estimator_log)
         .map_err(|e| format!("{}: {e}", estimator_log.display()))?;
     command.stderr(Stdio::from(log));
     if args.estimator_priority > 0 {
@@ -182,30 +272,51 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
             });
         }
     }
-    let mut estimator = EstimatorChild::spawn_command(command, &prefix, Duration::from_secs(10))
+    let estimator = EstimatorChild::spawn_command(command, prefix, Duration::from_secs(10))
         .map_err(|e| format!("cannot start the estimator: {e}"))?;
     let estimator_fifo = args.estimator_priority > 0 && is_fifo(estimator.id());
 
-    // Drives and bus.
+    Ok((estimator, estimator_fifo))
+}
+
+/// The bus between the bridge and the simulated drives: the in-process bus, or two
+/// sockets on `--can`.
+/// The bridge's end and the drives' end of the bench's bus.
+type Ends = (Box<dyn CanTransport>, Box<dyn CanTransport>);
+
+fn bench_transports(args: &BenchArgs) -> Result<Ends, String> {
+    Ok(match &args.can {
+        None => {
+            let bus = InprocBus::new();
+            (Box::new(bus.endpoint()), Box::new(bus.endpoint()))
+        }
+        Some(iface) => {
+            let open =
+                |who: &str| SocketCanTransport::open(iface).map_err(|e| format!("{who}: {e}"));
+            (
+                Box::new(open("bridge")?),
+                Box::new(open("simulated drives")?),
+            )
+        }
+    })
+}
+
+/// The estimator, the simulated drives, the bridge's sink and `CanMachine`, the floor
+/// publisher; every thread on the measured path under SCHED_FIFO where permitted.
+fn start_rig(
+    args: &BenchArgs,
+    ws: &Workspace,
+    scenario: &Scenario,
+    cfg: &MachineConfig,
+    total: u64,
+) -> Result<Rig, String> {
+    let prefix = ws.prefix.as_str();
+    let (estimator, estimator_fifo) = spawn_estimator(args, ws, total)?;
     let latches = LatchLog::new();
-    let mut sim_machine = SimMachine::new(&scenario);
+    let mut sim_machine = SimMachine::new(scenario);
     sim_machine.set_latch_log(latches.clone());
     sim_machine.set_clock(SimClock::Monotonic);
-    let (master_transport, sim_transport): (Box<dyn CanTransport>, Box<dyn CanTransport>) =
-        match &args.can {
-            None => {
-                let bus = InprocBus::new();
-                (Box::new(bus.endpoint()), Box::new(bus.endpoint()))
-            }
-            Some(iface) => {
-                let open =
-                    |who: &str| SocketCanTransport::open(iface).map_err(|e| format!("{who}: {e}"));
-                (
-                    Box::new(open("bridge")?),
-                    Box::new(open("simulated drives")?),
-                )
-            }
-        };
+    let (master_transport, sim_transport) = bench_transports(args)?;
     // The simulated drives stand for hardware: they should not wait for the scheduler
     // either (default: the real-time loop's priority minus one).
     let drive_priority = args.drives_priority.unwrap_or(args.rt_priority - 1);
@@ -218,9 +329,9 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
     let forwarder_priority = args.rt_priority - 2;
     let mut forwarder_fifo = false;
     let sink: Box<dyn SampleSink> = if args.direct {
-        Box::new(ContactPublisher::new(&prefix).map_err(|e| e.to_string())?)
+        Box::new(ContactPublisher::new(prefix).map_err(|e| e.to_string())?)
     } else {
-        let (sink, fifo) = ForwardingSink::spawn_realtime(&prefix, forwarder_priority.max(0))
+        let (sink, fifo) = ForwardingSink::spawn_realtime(prefix, forwarder_priority.max(0))
             .map_err(|e| e.to_string())?;
         forwarder_fifo = fifo;
         Box::new(sink)
@@ -236,15 +347,34 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
         args.can.as_deref().unwrap_or("in-process"),
         args.period_us
     );
-    let (mut machine, startup) =
-        CanMachine::start(&cfg, master_transport, sink, options).map_err(|e| e.to_string())?;
-    notes.extend(startup.notes.iter().cloned());
-    let mut floor = ContactPublisher::new(&prefix).map_err(|e| e.to_string())?;
+    let (machine, startup) =
+        CanMachine::start(cfg, master_transport, sink, options).map_err(|e| e.to_string())?;
+    let floor = ContactPublisher::new(prefix).map_err(|e| e.to_string())?;
     floor.update_connections().map_err(|e| e.to_string())?;
     // This thread publishes the floor samples: at the forwarder's priority, so the
     // floor's sender waits for the scheduler no more than the bridge's does.
     let main_fifo = forwarder_priority > 0 && hal::rt::set_fifo_priority(forwarder_priority);
 
+    Ok(Rig {
+        estimator,
+        estimator_fifo,
+        sim: Some(sim),
+        sim_fifo,
+        drive_priority,
+        forwarder_priority,
+        forwarder_fifo,
+        machine,
+        startup,
+        floor,
+        main_fifo,
+        latches,
+    })
+}
+
+/// The triggers: probe, the floor sample, retract; `warmup` first, not counted.
+fn measure(args: &BenchArgs, rig: Rig, warmup: u64, total: u64) -> Result<(Measured, Rig), String> {
+    let mut rig = rig;
+    let (machine, floor, latches) = (&mut rig.machine, &mut rig.floor, &rig.latches);
     let start = AxisPositions::linear([
         bench::START_XY[0],
         bench::START_XY[1],
@@ -317,9 +447,28 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
     let elapsed = began.elapsed();
     let loop_stats = machine.stats();
     machine.shutdown();
-    drop(machine);
-    drop(sim);
+    drop(rig.sim.take());
 
+    Ok((
+        Measured {
+            t0_of,
+            floor_seqs,
+            stop_ns,
+            stop_cycles,
+            missing_t0,
+            elapsed,
+            loop_stats,
+        },
+        rig,
+    ))
+}
+
+/// Stops the estimator and reads the receive times it recorded.
+fn collect_records(
+    mut estimator: EstimatorChild,
+    ws: &Workspace,
+) -> Result<Vec<ReceiveTime>, String> {
+    let estimator_log = &ws.estimator_log;
     // Let the estimator write its records and exit.
     let _ = estimator.client().shutdown(Duration::from_secs(5));
     let deadline = Instant::now() + Duration::from_secs(30);
@@ -333,8 +482,14 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
         std::thread::sleep(Duration::from_millis(20));
     }
     drop(estimator);
-    let records = ReceiveTimes::read(&times_file)
+    let records = ReceiveTimes::read(&ws.times_file)
         .map_err(|e| format!("{e} (estimator log: {})", estimator_log.display()))?;
+    Ok(records)
+}
+
+/// Each measured trigger and floor sample matched with the estimator's record of it.
+fn match_records(m: &Measured, records: &[ReceiveTime]) -> Latencies {
+    let t0_of = &m.t0_of;
     let by_key: HashMap<(u64, u64), ReceiveTime> = records
         .iter()
         .map(|r| ((r.run_id, r.sequence), *r))
@@ -357,181 +512,253 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
             None => lost_triggers += 1,
         }
     }
-    let mut floor_ns = Vec::with_capacity(floor_seqs.len());
+    let mut floor_ns = Vec::with_capacity(m.floor_seqs.len());
     let mut lost_floor = 0u64;
-    for seq in &floor_seqs {
+    for seq in &m.floor_seqs {
         match by_key.get(&(FLOOR_RUN, *seq)) {
             Some(r) => floor_ns.push(r.t1_ns.saturating_sub(r.trigger_ns)),
             None => lost_floor += 1,
         }
     }
-    let _ = std::fs::remove_dir_all(&work);
-
-    let (Some(trig), Some(fl)) = (Summary::of(&trigger), Summary::of(&floor_ns)) else {
-        return Err("no trigger or floor sample reached the estimator".into());
-    };
-    let bus_hop = Summary::of(&to_rt);
-    let ipc_hop = Summary::of(&rt_to_estimator);
-    let stop = Summary::of(&stop_ns);
-    let mut cycles_sorted = stop_cycles.clone();
-    cycles_sorted.sort_unstable();
-    let ratio_p50 = trig.p50_us / fl.p50_us;
-    let ratio_p99 = trig.p99_us / fl.p99_us;
-    let sink_name = if args.direct {
-        "ContactPublisher in the real-time thread (--direct)"
-    } else {
-        "ForwardingSink (forwarder thread publishes)"
-    };
-    let bus_name = args.can.clone().unwrap_or_else(|| "in-process".to_string());
-    let targets = json!({
-        "p99_le_20us": trig.p99_us <= 20.0,
-        "p99_9_le_50us": trig.p999_us <= 50.0,
-        "p50_within_2x_floor": ratio_p50 <= 2.0,
-    });
-
-    println!(
-        "probebridge bench trigger: {} triggers ({} warm-up not counted) in {:.1} s; SYNC {} us; {} bus; sink: {}",
-        args.triggers,
-        warmup,
-        elapsed.as_secs_f64(),
-        args.period_us,
-        bus_name,
-        sink_name
-    );
-    let granted = |b: bool| if b { "granted" } else { "NOT granted" };
-    let cpuidle = hal::rt::cpuidle_driver();
-    println!(
-        "SCHED_FIFO: real-time loop {} (priority {}), simulated drives {} ({}), {}, {}; memory {}; CPU wake-up latency {} (cpuidle driver: {}); {} CPUs",
-        granted(startup.realtime_priority),
-        args.rt_priority,
-        granted(sim_fifo),
-        drive_priority,
-        if args.direct {
-            "no forwarder (--direct)".to_string()
-        } else {
-            format!("forwarder {} ({forwarder_priority})", granted(forwarder_fifo))
-        },
-        if args.estimator_priority > 0 {
-            format!(
-                "estimator {} ({})",
-                granted(estimator_fifo),
-                args.estimator_priority
-            )
-        } else {
-            "estimator: ordinary process".to_string()
-        },
-        if startup.memory_locked { "locked" } else { "NOT locked" },
-        if startup.cpu_latency_held {
-            "held at 0 us"
-        } else {
-            "NOT held"
-        },
-        cpuidle.as_deref().unwrap_or("not reported"),
-        std::thread::available_parallelism().map_or(0, |n| n.get())
-    );
-    for n in &notes {
-        println!("note: {n}");
+    Latencies {
+        trigger,
+        to_rt,
+        rt_to_estimator,
+        floor: floor_ns,
+        lost_triggers,
+        lost_floor,
     }
-    println!();
-    println!("{:<44}{}", "", Summary::HEADER);
-    println!(
-        "{:<44}{}",
-        "trigger -> estimator (latch t0 to t1)",
-        trig.row()
-    );
-    if let Some(s) = bus_hop {
+}
+
+/// Everything the report prints and writes.
+struct Report<'a> {
+    args: &'a BenchArgs,
+    warmup: u64,
+    notes: Vec<String>,
+    startup: StartupReport,
+    sim_fifo: bool,
+    drive_priority: i32,
+    forwarder_priority: i32,
+    forwarder_fifo: bool,
+    estimator_fifo: bool,
+    main_fifo: bool,
+    measured: Measured,
+    latencies: Latencies,
+}
+
+/// The figures of the report.
+struct Figures {
+    trig: Summary,
+    fl: Summary,
+    bus_hop: Option<Summary>,
+    ipc_hop: Option<Summary>,
+    stop: Option<Summary>,
+    cycles_sorted: Vec<u64>,
+    ratio_p50: f64,
+    ratio_p99: f64,
+    bus_name: String,
+    cpuidle: Option<String>,
+}
+
+impl Report<'_> {
+    fn print_and_write(&self) -> Result<(), String> {
+        let l = &self.latencies;
+        let (Some(trig), Some(fl)) = (Summary::of(&l.trigger), Summary::of(&l.floor)) else {
+            return Err("no trigger or floor sample reached the estimator".into());
+        };
+        let mut cycles_sorted = self.measured.stop_cycles.clone();
+        cycles_sorted.sort_unstable();
+        let f = Figures {
+            ratio_p50: trig.p50_us / fl.p50_us,
+            ratio_p99: trig.p99_us / fl.p99_us,
+            trig,
+            fl,
+            bus_hop: Summary::of(&l.to_rt),
+            ipc_hop: Summary::of(&l.rt_to_estimator),
+            stop: Summary::of(&self.measured.stop_ns),
+            cycles_sorted,
+            bus_name: self
+                .args
+                .can
+                .clone()
+                .unwrap_or_else(|| "in-process".to_string()),
+            cpuidle: hal::rt::cpuidle_driver(),
+        };
+        self.print_settings(&f);
+        self.print_figures(&f);
+        if let Some(path) = &self.args.json {
+            crate::output::write_json(path, &self.json(&f))?;
+        }
+        Ok(())
+    }
+
+    /// What ran, and which real-time settings it got.
+    fn print_settings(&self, f: &Figures) {
+        let args = self.args;
+        let startup = &self.startup;
+        let sink_name = if args.direct {
+            "ContactPublisher in the real-time thread (--direct)"
+        } else {
+            "ForwardingSink (forwarder thread publishes)"
+        };
+        println!(
+            "probebridge bench trigger: {} triggers ({} warm-up not counted) in {:.1} s; SYNC {} us; {} bus; sink: {}",
+            args.triggers,
+            self.warmup,
+            self.measured.elapsed.as_secs_f64(),
+            args.period_us,
+            f.bus_name,
+            sink_name
+        );
+        let granted = |b: bool| if b { "granted" } else { "NOT granted" };
+        println!(
+            "SCHED_FIFO: real-time loop {} (priority {}), simulated drives {} ({}), {}, {}; memory {}; CPU wake-up latency {} (cpuidle driver: {}); {} CPUs",
+            granted(startup.realtime_priority),
+            args.rt_priority,
+            granted(self.sim_fifo),
+            self.drive_priority,
+            if args.direct {
+                "no forwarder (--direct)".to_string()
+            } else {
+                format!("forwarder {} ({})", granted(self.forwarder_fifo), self.forwarder_priority)
+            },
+            if args.estimator_priority > 0 {
+                format!(
+                    "estimator {} ({})",
+                    granted(self.estimator_fifo),
+                    args.estimator_priority
+                )
+            } else {
+                "estimator: ordinary process".to_string()
+            },
+            if startup.memory_locked { "locked" } else { "NOT locked" },
+            if startup.cpu_latency_held {
+                "held at 0 us"
+            } else {
+                "NOT held"
+            },
+            f.cpuidle.as_deref().unwrap_or("not reported"),
+            std::thread::available_parallelism().map_or(0, |n| n.get())
+        );
+        for n in &self.notes {
+            println!("note: {n}");
+        }
+    }
+
+    /// The latency table, the ratio to the floor, the targets, anything lost.
+    fn print_figures(&self, f: &Figures) {
+        let (trig, fl) = (&f.trig, &f.fl);
+        println!();
+        println!("{:<44}{}", "", Summary::HEADER);
         println!(
             "{:<44}{}",
-            "  latch -> real-time loop has the frame",
-            s.row()
+            "trigger -> estimator (latch t0 to t1)",
+            trig.row()
         );
-    }
-    if let Some(s) = ipc_hop {
-        println!("{:<44}{}", "  real-time loop -> estimator", s.row());
-    }
-    println!(
-        "{:<44}{}",
-        "floor: bare iceoryx2 hop, same processes",
-        fl.row()
-    );
-    if let Some(s) = stop {
+        if let Some(s) = &f.bus_hop {
+            println!(
+                "{:<44}{}",
+                "  latch -> real-time loop has the frame",
+                s.row()
+            );
+        }
+        if let Some(s) = &f.ipc_hop {
+            println!("{:<44}{}", "  real-time loop -> estimator", s.row());
+        }
         println!(
             "{:<44}{}",
-            "stop: latch frame in -> stop setpoint sent",
-            s.row()
+            "floor: bare iceoryx2 hop, same processes",
+            fl.row()
         );
-    }
-    println!();
-    println!(
-        "ratio to the floor: p50 {ratio_p50:.2}x, p99 {ratio_p99:.2}x; stop latency {} .. {} cycle(s) (p50 {})",
-        cycles_sorted.first().copied().unwrap_or(0),
-        cycles_sorted.last().copied().unwrap_or(0),
-        bench::percentile(&cycles_sorted, 50.0)
-    );
-    println!(
-        "targets: p99 <= 20 us: {}; p99.9 <= 50 us: {}; p50 within 2x the floor: {}",
-        yes_no(trig.p99_us <= 20.0),
-        yes_no(trig.p999_us <= 50.0),
-        yes_no(ratio_p50 <= 2.0)
-    );
-    let anomalies = lost_triggers + lost_floor + missing_t0 + loop_stats.publish_failures;
-    if anomalies > 0 || loop_stats.late_cycles > 0 || loop_stats.skipped_cycles > 0 {
+        if let Some(s) = &f.stop {
+            println!(
+                "{:<44}{}",
+                "stop: latch frame in -> stop setpoint sent",
+                s.row()
+            );
+        }
+        println!();
         println!(
-            "lost: {lost_triggers} trigger and {lost_floor} floor samples; {missing_t0} triggers without t0; {} publish failures; {} late cycles, {} SYNC slots skipped after stalls",
-            loop_stats.publish_failures, loop_stats.late_cycles, loop_stats.skipped_cycles
+            "ratio to the floor: p50 {:.2}x, p99 {:.2}x; stop latency {} .. {} cycle(s) (p50 {})",
+            f.ratio_p50,
+            f.ratio_p99,
+            f.cycles_sorted.first().copied().unwrap_or(0),
+            f.cycles_sorted.last().copied().unwrap_or(0),
+            bench::percentile(&f.cycles_sorted, 50.0)
         );
+        println!(
+            "targets: p99 <= 20 us: {}; p99.9 <= 50 us: {}; p50 within 2x the floor: {}",
+            yes_no(trig.p99_us <= 20.0),
+            yes_no(trig.p999_us <= 50.0),
+            yes_no(f.ratio_p50 <= 2.0)
+        );
+        let (l, m) = (&self.latencies, &self.measured);
+        let stats = &m.loop_stats;
+        let anomalies = l.lost_triggers + l.lost_floor + m.missing_t0 + stats.publish_failures;
+        if anomalies > 0 || stats.late_cycles > 0 || stats.skipped_cycles > 0 {
+            println!(
+                "lost: {} trigger and {} floor samples; {} triggers without t0; {} publish failures; {} late cycles, {} SYNC slots skipped after stalls",
+                l.lost_triggers, l.lost_floor, m.missing_t0, stats.publish_failures, stats.late_cycles, stats.skipped_cycles
+            );
+        }
     }
 
-    if let Some(path) = &args.json {
-        let doc = json!({
+    /// All figures as JSON (`--json`).
+    fn json(&self, f: &Figures) -> serde_json::Value {
+        let (args, startup, l, m) = (self.args, &self.startup, &self.latencies, &self.measured);
+        let (trig, fl) = (&f.trig, &f.fl);
+        let targets = json!({
+            "p99_le_20us": trig.p99_us <= 20.0,
+            "p99_9_le_50us": trig.p999_us <= 50.0,
+            "p50_within_2x_floor": f.ratio_p50 <= 2.0,
+        });
+        json!({
             "benchmark": "trigger",
             "triggers": args.triggers,
-            "warmup": warmup,
+            "warmup": self.warmup,
             "period_us": args.period_us,
-            "bus": bus_name,
+            "bus": f.bus_name,
             "sink": if args.direct { "direct" } else { "forwarding" },
-            "elapsed_s": elapsed.as_secs_f64(),
+            "elapsed_s": m.elapsed.as_secs_f64(),
             "cpus": std::thread::available_parallelism().map_or(0, |n| n.get()),
             "realtime": {
                 "sched_fifo": startup.realtime_priority,
                 "priority": args.rt_priority,
-                "simulated_drives_sched_fifo": sim_fifo,
-                "forwarder_sched_fifo": forwarder_fifo,
+                "simulated_drives_sched_fifo": self.sim_fifo,
+                "forwarder_sched_fifo": self.forwarder_fifo,
                 "estimator_priority": args.estimator_priority,
-                "estimator_sched_fifo": estimator_fifo,
-                "simulated_drives_priority": drive_priority,
-                "floor_sender_sched_fifo": main_fifo,
+                "estimator_sched_fifo": self.estimator_fifo,
+                "simulated_drives_priority": self.drive_priority,
+                "floor_sender_sched_fifo": self.main_fifo,
                 "memory_locked": startup.memory_locked,
                 "cpu_latency_held": startup.cpu_latency_held,
-                "cpuidle_driver": cpuidle,
-                "notes": notes,
+                "cpuidle_driver": f.cpuidle,
+                "notes": self.notes,
             },
             "trigger_latency_us": trig.to_json(),
-            "latch_to_rt_us": bus_hop.map(Summary::to_json),
-            "rt_to_estimator_us": ipc_hop.map(Summary::to_json),
+            "latch_to_rt_us": f.bus_hop.map(Summary::to_json),
+            "rt_to_estimator_us": f.ipc_hop.map(Summary::to_json),
             "floor_us": fl.to_json(),
-            "ratio_to_floor": { "p50": ratio_p50, "p99": ratio_p99 },
+            "ratio_to_floor": { "p50": f.ratio_p50, "p99": f.ratio_p99 },
             "stop_latency": {
-                "us": stop.map(Summary::to_json),
+                "us": f.stop.map(Summary::to_json),
                 "cycles": {
-                    "min": cycles_sorted.first(),
-                    "p50": bench::percentile(&cycles_sorted, 50.0),
-                    "max": cycles_sorted.last(),
+                    "min": f.cycles_sorted.first(),
+                    "p50": bench::percentile(&f.cycles_sorted, 50.0),
+                    "max": f.cycles_sorted.last(),
                 },
             },
             "lost": {
-                "trigger_samples": lost_triggers,
-                "floor_samples": lost_floor,
-                "triggers_without_t0": missing_t0,
-                "publish_failures": loop_stats.publish_failures,
+                "trigger_samples": l.lost_triggers,
+                "floor_samples": l.lost_floor,
+                "triggers_without_t0": m.missing_t0,
+                "publish_failures": m.loop_stats.publish_failures,
             },
-            "late_cycles": loop_stats.late_cycles,
-            "skipped_cycles": loop_stats.skipped_cycles,
+            "late_cycles": m.loop_stats.late_cycles,
+            "skipped_cycles": m.loop_stats.skipped_cycles,
             "targets": targets,
-        });
-        crate::output::write_json(path, &doc)?;
+        })
     }
-    Ok(())
 }
 
 fn yes_no(ok: bool) -> &'static str {

@@ -114,6 +114,21 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
             .move_to(&over, probe.fmax)
             .map_err(|e| e.to_string())?;
     }
+    report_sphere(&estimator, run_id, sphere, probe.radius)?;
+    drop(s);
+    kinematics(&opts, &estimator)
+}
+
+/// The sphere the estimator process fitted from run `run_id`'s contacts, against the
+/// scenario's truth.
+fn report_sphere(
+    estimator: &EstimatorChild,
+    run_id: u64,
+    sphere: sim::artefact::Sphere,
+    stylus_radius: f64,
+) -> Result<(), String> {
+    let c = sphere.center;
+    let r = sphere.radius;
     let fit = estimator
         .client()
         .fit_sphere(run_id, Duration::from_secs(5))
@@ -124,7 +139,7 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
             fit.error.describe()
         ));
     }
-    let radius = fit.radius - probe.radius;
+    let radius = fit.radius - stylus_radius;
     let dev = [
         fit.centre[0] - c[0],
         fit.centre[1] - c[1],
@@ -147,8 +162,46 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
         dev_len,
         (radius - r).abs()
     );
-    drop(s);
-    kinematics(&opts, &estimator)
+    Ok(())
+}
+
+/// The demo's NC program: tool `tool`, over the sphere, down to `above`, cycle 451
+/// mode 1 on the rotary axes the machine has (inside their limits), back up; and the
+/// axes it measures.
+fn demo451_program(
+    cfg: &hal::config::MachineConfig,
+    sphere: &sim::artefact::Sphere,
+    tool: &str,
+    above: f64,
+) -> (String, Vec<Axis>) {
+    let mut q = String::new();
+    let mut measured = Vec::new();
+    for (axis, base) in [(Axis::A, 411), (Axis::B, 415), (Axis::C, 419)] {
+        let (start, end, n) = demo_range(axis, cfg).unwrap_or((0.0, 0.0, 0));
+        if n > 0 {
+            measured.push(axis);
+        }
+        q.push_str(&format!(
+            "  Q{}={start:+} ~\n  Q{}={end:+} ~\n  Q{}=+0 ~\n  Q{}={n:+} ~\n",
+            base,
+            base + 1,
+            base + 2,
+            base + 3
+        ));
+    }
+    let c = sphere.center;
+    let text = format!(
+        "0 BEGIN PGM DEMO451 MM\n1 TOOL CALL \"{}\" Z\n2 L Z{:+} R0 FMAX\n3 L X{:+} Y{:+} R0 FMAX\n4 L Z{above:+} R0 FMAX\n\
+5 TCH PROBE 451 MEASURE KINEMATICS ~\n  Q406=+1 ;MODE ~\n  Q407={:+} ;SPHERE RADIUS ~\n  Q320=+0 ~\n  Q408=+0 ~\n\
+  Q253=+750 ~\n  Q380=+0 ~\n{q}  Q423=+4 ~\n  Q431=+0 ~\n  Q432=+0\n6 L Z{:+} R0 FMAX\n7 END PGM DEMO451 MM\n",
+        tool,
+        above + 50.0,
+        c[0],
+        c[1],
+        sphere.radius,
+        above + 50.0,
+    );
+    (text, measured)
 }
 
 /// The measuring range the demo gives each rotary axis (start, end, points), inside
@@ -188,34 +241,8 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
     }
     let before = ActiveKinematics::load(&kin, &cfg.machine).map_err(|e| e.to_string())?;
 
-    let mut q = String::new();
-    let mut measured = Vec::new();
-    for (axis, base) in [(Axis::A, 411), (Axis::B, 415), (Axis::C, 419)] {
-        let (start, end, n) = demo_range(axis, &cfg.machine).unwrap_or((0.0, 0.0, 0));
-        if n > 0 {
-            measured.push(axis);
-        }
-        q.push_str(&format!(
-            "  Q{}={start:+} ~\n  Q{}={end:+} ~\n  Q{}=+0 ~\n  Q{}={n:+} ~\n",
-            base,
-            base + 1,
-            base + 2,
-            base + 3
-        ));
-    }
-    let c = sphere.center;
-    let above = c[2] + sphere.radius + probe.radius + probe.set_up + 5.0;
-    let text = format!(
-        "0 BEGIN PGM DEMO451 MM\n1 TOOL CALL \"{}\" Z\n2 L Z{:+} R0 FMAX\n3 L X{:+} Y{:+} R0 FMAX\n4 L Z{above:+} R0 FMAX\n\
-5 TCH PROBE 451 MEASURE KINEMATICS ~\n  Q406=+1 ;MODE ~\n  Q407={:+} ;SPHERE RADIUS ~\n  Q320=+0 ~\n  Q408=+0 ~\n\
-  Q253=+750 ~\n  Q380=+0 ~\n{q}  Q423=+4 ~\n  Q431=+0 ~\n  Q432=+0\n6 L Z{:+} R0 FMAX\n7 END PGM DEMO451 MM\n",
-        probe.name,
-        above + 50.0,
-        c[0],
-        c[1],
-        sphere.radius,
-        above + 50.0,
-    );
+    let above = sphere.center[2] + sphere.radius + probe.radius + probe.set_up + 5.0;
+    let (text, measured) = demo451_program(&cfg.machine, &sphere, &probe.name, above);
     let program_path = dir.join("demo451.h");
     std::fs::write(&program_path, &text).map_err(|e| e.to_string())?;
     let program = Program::load(&program_path, &cfg).map_err(|e| e.to_string())?;
