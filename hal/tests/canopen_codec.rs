@@ -656,3 +656,66 @@ fn candump_round_trip() {
     assert_eq!(err.line, Some(2));
     assert_eq!(err.column, 18);
 }
+
+/// Our SDO client against the answers of a device that is not ours: python-canopen
+/// 2.4.1's SDO server (`LocalNode`, tests/vcan/foreign_device.py), frames captured from
+/// it. A 38-byte 0x1008 comes segmented, size indicated, the last segment with 4
+/// unused bytes; aborts carry the multiplexer.
+#[test]
+fn sdo_client_takes_what_python_canopen_answers() {
+    let mut c = SdoClient::new(1);
+    let first = c.upload(0x1008, 0).unwrap();
+    let mut log = vec![txt(&first)];
+    let answers = [
+        "581#4108100026000000",
+        "581#00707974686F6E2D",
+        "581#1063616E6F70656E",
+        "581#00204C6F63616C4E",
+        "581#106F646520436941",
+        "581#0020343032206472",
+        "581#1969766500000000",
+    ];
+    let mut outcome = None;
+    for a in answers {
+        match c.on_frame(&fr(a)) {
+            SdoClientEvent::Transmit(next) => log.push(txt(&next)),
+            SdoClientEvent::Done(o) => outcome = Some(o),
+            other => panic!("{a}: {other:?}"),
+        }
+    }
+    assert_eq!(
+        log,
+        [
+            "601#4008100000000000",
+            "601#6000000000000000",
+            "601#7000000000000000",
+            "601#6000000000000000",
+            "601#7000000000000000",
+            "601#6000000000000000",
+            "601#7000000000000000",
+        ]
+    );
+    match outcome {
+        Some(SdoOutcome::Uploaded(v)) => {
+            assert_eq!(v.as_slice(), b"python-canopen LocalNode CiA 402 drive")
+        }
+        other => panic!("{other:?}"),
+    }
+    for (index, sub, write, answer, code) in [
+        (0x2000, 0, false, "581#8000200000000206", 0x0602_0000),
+        (0x1018, 9, false, "581#8018100911000906", 0x0609_0011),
+        (0x1000, 0, true, "581#8000100002000106", 0x0601_0002),
+    ] {
+        let request = if write {
+            c.download(index, sub, &[0, 0, 0, 0])
+        } else {
+            c.upload(index, sub)
+        }
+        .unwrap();
+        assert_eq!(
+            c.on_frame(&fr(answer)),
+            SdoClientEvent::Done(SdoOutcome::Aborted(SdoAbortCode(code))),
+            "{request:?}"
+        );
+    }
+}

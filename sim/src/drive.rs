@@ -480,6 +480,10 @@ pub struct SimDrive {
     now_us: u64,
     /// Heartbeat producer: when the last heartbeat was due; `None`: not started.
     heartbeat_at_us: Option<u64>,
+    /// Event-driven TPDOs may be due: a frame was taken or a step made since the last
+    /// look, or one waits out its inhibit time. (Packing them after every frame on a
+    /// busy bus would cost the host for nothing.)
+    events_pending: bool,
     /// Stops answering anything (a node that fell off the bus).
     pub silent: bool,
 }
@@ -499,6 +503,7 @@ impl SimDrive {
             sent_at_us: [0; PDOS],
             now_us: 0,
             heartbeat_at_us: None,
+            events_pending: true,
             silent: false,
         }
     }
@@ -560,6 +565,7 @@ impl SimDrive {
                 if let Ok((cmd, node)) = hal::canopen::nmt::decode(f) {
                     if node == 0 || node == self.od.node {
                         self.on_nmt(cmd, tx);
+                        self.events_pending = true;
                     }
                 }
             }
@@ -569,6 +575,7 @@ impl SimDrive {
                 if let Some(r) = self.sdo.on_frame(f, &mut self.od) {
                     tx(&r);
                 }
+                self.events_pending = true;
             }
             _ if self.nmt == NmtState::Operational && !f.is_rtr() => {
                 let rx = &self.od.comm.rpdo;
@@ -577,6 +584,7 @@ impl SimDrive {
                     .position(|p| p.is_enabled() && p.cob_id() == f.cob_id())
                 {
                     self.on_rpdo(i, f.data());
+                    self.events_pending = true;
                 }
             }
             _ => {}
@@ -696,8 +704,14 @@ impl SimDrive {
         self.now_us = now_us;
         self.produce_heartbeat(tx);
         self.send_emcy(tx);
-        if self.nmt == NmtState::Operational {
-            self.send_tpdos(false, tx);
+        let timers = self
+            .od
+            .comm
+            .tpdo
+            .iter()
+            .any(|p| p.is_enabled() && p.transmission_type() >= 254 && p.event_timer_ms() > 0);
+        if self.nmt == NmtState::Operational && (self.events_pending || timers) {
+            self.events_pending = self.send_tpdos(false, tx);
         }
     }
 
@@ -737,12 +751,19 @@ impl SimDrive {
                 .filter(|_| period_us > 0)
                 .map(|t| t + period_us)
         };
+        let operational = self.nmt == NmtState::Operational;
         let timers = self.od.comm.tpdo.iter().enumerate().filter_map(|(i, p)| {
             let event = p.transmission_type() >= 254 && p.event_timer_ms() > 0;
-            (self.nmt == NmtState::Operational && p.is_enabled() && event)
+            (operational && p.is_enabled() && event)
                 .then(|| self.sent_at_us[i] + u64::from(p.event_timer_ms()) * 1000)
         });
-        heartbeat.into_iter().chain(timers).min()
+        // A change held back by the inhibit time goes out when it is over.
+        let inhibited = self.od.comm.tpdo.iter().enumerate().filter_map(|(i, p)| {
+            let event = p.transmission_type() >= 254 && p.inhibit_time_100us() > 0;
+            (operational && self.events_pending && p.is_enabled() && event)
+                .then(|| self.sent_at_us[i] + u64::from(p.inhibit_time_100us()) * 100)
+        });
+        heartbeat.into_iter().chain(timers).chain(inhibited).min()
     }
 
     /// Starts a simulation step: remembers where the axis starts from.
@@ -795,6 +816,8 @@ impl SimDrive {
         if self.silent {
             return;
         }
+        // The step may have changed mapped values.
+        self.events_pending = true;
         self.poll(now_us, tx);
         if self.nmt != NmtState::Operational {
             return;
@@ -804,7 +827,9 @@ impl SimDrive {
 
     /// `at_sync`: the synchronous TPDOs of this SYNC; else the event-driven ones that
     /// are due (data changed and the inhibit time over, or the event timer expired).
-    fn send_tpdos(&mut self, at_sync: bool, tx: &mut dyn FnMut(&CanFrame)) {
+    /// Returns whether an event-driven TPDO changed but waits out its inhibit time.
+    fn send_tpdos(&mut self, at_sync: bool, tx: &mut dyn FnMut(&CanFrame)) -> bool {
+        let mut held = false;
         for i in 0..PDOS {
             let c = &self.od.comm.tpdo[i];
             if !c.is_enabled() {
@@ -837,6 +862,7 @@ impl SimDrive {
                 _ => {
                     let inhibit_us = u64::from(c.inhibit_time_100us()) * 100;
                     let timer_us = u64::from(c.event_timer_ms()) * 1000;
+                    held |= changed && since_us < inhibit_us;
                     (changed && since_us >= inhibit_us) || (timer_us > 0 && since_us >= timer_us)
                 }
             };
@@ -849,5 +875,6 @@ impl SimDrive {
                 tx(&f);
             }
         }
+        held
     }
 }

@@ -337,3 +337,29 @@ fn emcy_goes_to_the_cob_id_of_0x1014_and_not_at_all_when_invalid() {
     b.expect("601#2314100090000080", "581#6014100000000000");
     b.expect("601#2B40600080000000", "581#6040600000000000");
 }
+
+#[test]
+fn event_driven_tpdo_waits_out_its_inhibit_time_and_repeats_by_its_event_timer() {
+    let mut b = Bench::new();
+    for (req, ans) in [
+        ("601#23011801810200C0", "581#6001180100000000"),
+        ("601#2F011802FF000000", "581#6001180200000000"),
+        // Inhibit time 10 ms (100 x 100 us), event timer 50 ms.
+        ("601#2B01180364000000", "581#6001180300000000"),
+        ("601#2B01180532000000", "581#6001180500000000"),
+        ("601#2F011A0000000000", "581#60011A0000000000"),
+        ("601#23011A011000B960", "581#60011A0100000000"),
+        ("601#2F011A0001000000", "581#60011A0000000000"),
+        ("601#2301180181020040", "581#6001180100000000"),
+    ] {
+        b.expect(req, ans);
+    }
+    assert!(b.rx("000#0101").is_empty());
+    assert_eq!(b.poll(100_000), ["281#0000"]);
+    b.expect("601#2BB8600011000000", "581#60B8600000000000");
+    assert!(b.poll(105_000).is_empty(), "inhibited until 110 ms");
+    assert_eq!(b.d.next_deadline_us(), Some(110_000));
+    assert_eq!(b.poll(110_000), ["281#0100"]);
+    assert!(b.poll(159_999).is_empty());
+    assert_eq!(b.poll(160_000), ["281#0100"], "the event timer repeats it");
+}
