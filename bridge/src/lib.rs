@@ -9,4 +9,5 @@ pub mod estimator;
 pub mod ipc;
 pub mod modbus_session;
 pub mod output;
+pub mod serve;
 pub mod session;

@@ -149,6 +149,13 @@ enum Cmd {
         #[arg(long, value_name = "N")]
         record_capacity: Option<usize>,
     },
+    /// The gateway service: the machine up once, measurements on request of the PLC
+    /// or HMI over a Modbus TCP face, readiness and watchdog for systemd.
+    Serve {
+        /// Gateway configuration (TOML).
+        #[arg(long, default_value = probebridge::serve::config::DEFAULT_PATH)]
+        config: PathBuf,
+    },
     /// Benchmarks.
     #[command(subcommand)]
     Bench(BenchCmd),
@@ -227,6 +234,7 @@ fn main() -> ExitCode {
             record_times,
             record_capacity,
         } => commands::estimator::run(&service, verbose, record_times, record_capacity).map(|()| 0),
+        Cmd::Serve { config } => probebridge::serve::run(&config),
         Cmd::Bench(BenchCmd::Trigger(args)) => commands::bench::run(&args).map(|()| 0),
     };
     match result {
