@@ -116,8 +116,7 @@ impl Core {
             }) => {
                 self.abort.store(0, Ordering::Release);
                 // The old results stop matching any request before the run starts.
-                self.map
-                    .set_results(seq.wrapping_sub(1), 0, &BTreeMap::new());
+                self.map.set_results(seq.wrapping_sub(1), &BTreeMap::new());
                 tracing::info!(
                     seq,
                     program = req.program,
@@ -131,10 +130,13 @@ impl Core {
                     confirm,
                 };
                 if self.jobs.send(ToMachine::Run(Box::new(job))).is_err() {
-                    self.hs.finish(Outcome::Error {
-                        kind: super::handshake::ERROR_KIND_CYCLE,
-                        code: 0,
-                    });
+                    self.hs.finish(
+                        Outcome::Error {
+                            kind: super::handshake::ERROR_KIND_CYCLE,
+                            code: 0,
+                        },
+                        0,
+                    );
                 }
             }
             Some(Action::Abort) => {
@@ -169,14 +171,14 @@ impl Core {
     }
 
     pub fn finish(&mut self, outcome: Outcome, cycle: u16, values: &BTreeMap<String, f64>) {
-        let seq = self.hs.finish(outcome);
+        let seq = self.hs.finish(outcome, cycle);
         let empty = BTreeMap::new();
         let values = if outcome == Outcome::Done {
             values
         } else {
             &empty
         };
-        self.map.set_results(seq, cycle, values);
+        self.map.set_results(seq, values);
         self.publish();
     }
 

@@ -235,6 +235,7 @@ impl Handshake {
             self.view.point = 0;
             self.view.error_kind = 0;
             self.view.error_code = 0;
+            self.view.cycle = 0;
         }
         self.refresh_bits();
         action
@@ -293,7 +294,8 @@ impl Handshake {
     }
 
     /// The run ended; returns the sequence its results belong to.
-    pub fn finish(&mut self, outcome: Outcome) -> u16 {
+    pub fn finish(&mut self, outcome: Outcome, cycle: u16) -> u16 {
+        self.view.cycle = if outcome == Outcome::Done { cycle } else { 0 };
         match outcome {
             Outcome::Done => {
                 self.state = State::Done;
@@ -370,7 +372,7 @@ mod tests {
         assert_eq!(h.view().ack_seq, 2);
         assert_eq!(h.view().ack_code, CODE_START | REFUSED);
         assert_eq!(h.view().reason, Refusal::Busy as u16);
-        assert_eq!(h.finish(Outcome::Done), 1);
+        assert_eq!(h.finish(Outcome::Done, 431), 1);
         assert_eq!(h.state(), State::Done);
         assert_eq!(h.view().bits & BIT_RESULTS_VALID, BIT_RESULTS_VALID);
     }
@@ -379,7 +381,7 @@ mod tests {
     fn error_must_be_acknowledged_before_the_next_start() {
         let (mut h, now) = ready();
         h.on_request(&req(CODE_START, 1, 0), now, Ok::<_, Refusal>);
-        h.finish(Outcome::Error { kind: 1, code: 0 });
+        h.finish(Outcome::Error { kind: 1, code: 0 }, 0);
         assert_eq!(
             h.on_request(&req(CODE_START, 2, 0), now, Ok::<_, Refusal>),
             None
@@ -428,7 +430,7 @@ mod tests {
         h.on_request(&req(CODE_START, 1, 1), later, Ok::<_, Refusal>);
         assert!(!h.heartbeat_lost(later + Duration::from_millis(900)));
         assert!(h.heartbeat_lost(later + Duration::from_millis(1100)));
-        h.finish(Outcome::Aborted(AbortReason::PlcHeartbeat));
+        h.finish(Outcome::Aborted(AbortReason::PlcHeartbeat), 0);
         assert_eq!(h.view().error_kind, ERROR_KIND_PLC_HEARTBEAT);
         assert_eq!(h.state(), State::Aborted);
     }

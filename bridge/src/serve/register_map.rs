@@ -153,7 +153,7 @@ impl RegisterMap {
             order,
             int_scale,
         };
-        m.set_results(0, 0, &BTreeMap::new());
+        m.set_results(0, &BTreeMap::new());
         m
     }
 
@@ -233,9 +233,10 @@ impl RegisterMap {
         self.regs[usize::from(ST_GATEWAY_HEARTBEAT)] = v;
     }
 
-    /// Writes the results of the run of request `seq` (`values` by slot name; missing
+    /// Writes the results of the run of request `seq` (the cycle they come from is in
+    /// the state block) (`values` by slot name; missing
     /// slots read NaN and [`DINT_MISSING`]), the result sequence last at both ends.
-    pub fn set_results(&mut self, seq: u16, cycle: u16, values: &BTreeMap<String, f64>) {
+    pub fn set_results(&mut self, seq: u16, values: &BTreeMap<String, f64>) {
         for (i, name) in slot_names().iter().enumerate() {
             let v = values.get(name).copied();
             let real = v.map_or(f32::NAN, |v| v as f32);
@@ -249,7 +250,6 @@ impl RegisterMap {
             self.regs[d] = a;
             self.regs[d + 1] = b;
         }
-        self.regs[usize::from(ST_CYCLE)] = cycle;
         self.regs[usize::from(RES_SEQ_HEAD)] = seq;
         self.regs[usize::from(RES_SEQ_TAIL)] = seq;
     }
@@ -312,7 +312,7 @@ mod tests {
             .into_iter()
             .collect();
         let mut m = RegisterMap::new(WordOrder::HighFirst, 10_000.0);
-        m.set_results(42, 431, &values);
+        m.set_results(42, &values);
         let q158 = RES_REAL + 2 * 17;
         // 5.0f32 = 0x40A0_0000; 5.0 x 10000 = 50000 = 0x0000_C350.
         assert_eq!(m.read(q158, 2).unwrap(), vec![0x40A0, 0x0000]);
@@ -325,9 +325,8 @@ mod tests {
         assert_eq!(m.read(RES_DINT, 2).unwrap(), vec![0x8000, 0x0000]);
         assert_eq!(m.get(RES_SEQ_HEAD), 42);
         assert_eq!(m.get(RES_SEQ_TAIL), 42);
-        assert_eq!(m.get(ST_CYCLE), 431);
         let mut low = RegisterMap::new(WordOrder::LowFirst, 10_000.0);
-        low.set_results(1, 431, &values);
+        low.set_results(1, &values);
         assert_eq!(low.read(q158, 2).unwrap(), vec![0x0000, 0x40A0]);
         assert_eq!(
             low.read(RES_DINT + 2 * 17, 2).unwrap(),
