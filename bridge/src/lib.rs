@@ -6,6 +6,7 @@ pub mod bench;
 pub mod commands;
 pub mod configs;
 pub mod estimator;
+pub mod history;
 pub mod ipc;
 pub mod modbus_session;
 pub mod output;

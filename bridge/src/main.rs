@@ -106,6 +106,9 @@ enum Cmd {
         /// <machine>.kinematics.toml beside the machine configuration.
         #[arg(long)]
         kinematics: Option<PathBuf>,
+        /// Record the run in this history file (SQLite, as `serve` keeps it).
+        #[arg(long, value_name = "FILE")]
+        history: Option<PathBuf>,
     },
     /// Parse and validate an NC program; nothing moves. Exit 0, or 2 with every error.
     Check {
@@ -156,6 +159,25 @@ enum Cmd {
         #[arg(long, default_value = probebridge::serve::config::DEFAULT_PATH)]
         config: PathBuf,
     },
+    /// The recorded measurements of a gateway (its history file).
+    History {
+        /// The history file; default: `history.sqlite` of the gateway configuration.
+        #[arg(long)]
+        db: Option<PathBuf>,
+        /// Gateway configuration naming the history file.
+        #[arg(long, default_value = probebridge::serve::config::DEFAULT_PATH)]
+        config: PathBuf,
+        /// Only this machine.
+        #[arg(long)]
+        machine: Option<String>,
+        /// Only runs started at or after this UTC date (YYYY-MM-DD or
+        /// YYYY-MM-DDTHH:MM:SSZ).
+        #[arg(long)]
+        since: Option<String>,
+        /// As JSON, with every result.
+        #[arg(long)]
+        json: bool,
+    },
     /// Benchmarks.
     #[command(subcommand)]
     Bench(BenchCmd),
@@ -201,6 +223,7 @@ fn main() -> ExitCode {
             json,
             yes,
             kinematics,
+            history,
         } => commands::run::run(&commands::run::RunArgs {
             program,
             machine: machine.options(),
@@ -208,6 +231,7 @@ fn main() -> ExitCode {
             json,
             yes,
             kinematics,
+            history,
         }),
         Cmd::Check {
             program,
@@ -234,6 +258,20 @@ fn main() -> ExitCode {
             record_times,
             record_capacity,
         } => commands::estimator::run(&service, verbose, record_times, record_capacity).map(|()| 0),
+        Cmd::History {
+            db,
+            config,
+            machine,
+            since,
+            json,
+        } => commands::history::run(&commands::history::HistoryArgs {
+            db,
+            config,
+            machine,
+            since,
+            json,
+        })
+        .map(|()| 0),
         Cmd::Serve { config } => probebridge::serve::run(&config),
         Cmd::Bench(BenchCmd::Trigger(args)) => commands::bench::run(&args).map(|()| 0),
     };

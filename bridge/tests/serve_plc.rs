@@ -50,6 +50,17 @@ impl Serve {
     /// its own; `plc` adds keys to the `[plc]` section.
     fn start(name: &str, scenario: &str, programs: &[(u16, &str)], plc: &str) -> Self {
         let dir = tmpdir(&format!("serve-{name}"));
+        Self::start_in(dir, name, scenario, programs, plc)
+    }
+
+    /// Starts in `dir` (again, after a restart: same configuration and history).
+    fn start_in(
+        dir: PathBuf,
+        name: &str,
+        scenario: &str,
+        programs: &[(u16, &str)],
+        plc: &str,
+    ) -> Self {
         let folder = dir.join("programs");
         std::fs::create_dir_all(&folder).unwrap();
         for (n, p) in programs {
@@ -65,10 +76,12 @@ impl Serve {
             &config,
             format!(
                 "[machine]\nscenario = {:?}\nservice = \"pbserve-{name}-{}\"\nkinematics = {:?}\n\
-                 [programs]\nfolder = \"programs\"\n[plc]\nlisten = \"127.0.0.1:0\"\n{plc}",
+                 [programs]\nfolder = \"programs\"\n[history]\nsqlite = {:?}\n\
+                 [plc]\nlisten = \"127.0.0.1:0\"\n{plc}",
                 scenario.to_str().unwrap(),
                 std::process::id(),
                 dir.join("kinematics.toml").to_str().unwrap(),
+                dir.join("history.sqlite").to_str().unwrap(),
             ),
         )
         .unwrap();
@@ -112,6 +125,11 @@ impl Serve {
         serde_json::from_slice(&out.stdout).unwrap()
     }
 
+    /// `probebridge history --db ... --json`.
+    fn history(&self) -> Vec<serde_json::Value> {
+        history_json(&self.dir.join("history.sqlite"))
+    }
+
     fn log(&self) -> String {
         std::fs::read_to_string(self.dir.join("serve.log")).unwrap_or_default()
     }
@@ -132,17 +150,43 @@ impl Drop for Serve {
     }
 }
 
+fn history_json(db: &Path) -> Vec<serde_json::Value> {
+    let out = run(bin()
+        .args(["history", "--db", db.to_str().unwrap(), "--json"])
+        .args(["--since", "2000-01-01"]));
+    assert!(out.status.success());
+    serde_json::from_slice::<serde_json::Value>(&out.stdout)
+        .unwrap()
+        .as_array()
+        .unwrap()
+        .clone()
+}
+
 /// The last successful cycle of `probebridge run --json` of the same program.
 fn run_json(program: &str, scenario: &str, name: &str) -> serde_json::Value {
     let dir = tmpdir(&format!("serve-ref-{name}"));
     let kin = dir.join("kinematics.toml");
+    let db = dir.join("history.sqlite");
     let (out, json) = run_program(
         &configs().join("programs").join(program),
         &configs().join("scenarios").join(scenario),
         &dir,
-        &["--yes", "--kinematics", kin.to_str().unwrap()],
+        &[
+            "--yes",
+            "--kinematics",
+            kin.to_str().unwrap(),
+            "--history",
+            db.to_str().unwrap(),
+        ],
     );
     assert!(out.status.success());
+    // `run --history` records the run as `serve` does.
+    let h = history_json(&db);
+    assert_eq!(h.len(), 1);
+    assert_eq!(
+        (h[0]["source"].as_str(), h[0]["status"].as_str()),
+        (Some("run"), Some("done"))
+    );
     let json = json.unwrap();
     json["cycles"]
         .as_array()
@@ -206,6 +250,33 @@ fn programs_started_by_number_give_the_results_of_run() {
         let got = serve.plc(&py, &["run", &number.to_string()]);
         let want = run_json(program, scenario, &name);
         assert_same_results(&got, &want);
+        // The history has the run: request, program, status, every Q result of every
+        // cycle, 451's errors by ISO name, the measuring logs.
+        let h = serve.history();
+        assert_eq!(h.len(), 1, "{h:?}");
+        let r = &h[0];
+        assert_eq!(r["status"], "done");
+        assert_eq!(r["program_number"], number);
+        assert_eq!(r["request_seq"], 1);
+        assert!(!r["protocols"].as_array().unwrap().is_empty(), "{r}");
+        let results = r["results"].as_array().unwrap();
+        for (q, v) in want["q"].as_object().unwrap() {
+            assert!(
+                results
+                    .iter()
+                    .any(|x| x["name"] == *q && x["value"] == *v && x["cycle"] == want["cycle"]),
+                "{q} in the history"
+            );
+        }
+        if number == 451 {
+            let iso = r["iso_errors"].as_array().unwrap();
+            assert_eq!(iso.len(), 10, "A and C, 5 each: {iso:?}");
+            let ey0c = iso.iter().find(|e| e["name"] == "EY0C").unwrap();
+            assert_eq!(
+                ey0c["after"], want["kinematics"]["errors_after"]["EY0C"],
+                "{ey0c}"
+            );
+        }
     }
 }
 
@@ -221,6 +292,9 @@ fn start_while_busy_is_refused_and_abort_stops_mid_cycle() {
     let out = serve.plc(&py, &["busy_abort", "451", "431"]);
     assert!(out["aborted_at_point"].as_u64().unwrap() < 42, "{out}");
     assert!(serve.log().contains("Aborted(Request)"), "{}", serve.log());
+    let h = serve.history();
+    assert_eq!(h.len(), 1);
+    assert_eq!(h[0]["status"], "aborted");
 }
 
 #[test]
@@ -279,6 +353,27 @@ fn sigterm_mid_cycle_aborts_and_exits_0() {
         log.contains("state=\"aborted\"") || log.contains("state=aborted"),
         "{log}"
     );
+    assert_eq!(serve.history()[0]["status"], "aborted");
+}
+
+#[test]
+fn kill_9_mid_451_leaves_the_run_interrupted_and_restarts_idle() {
+    let Some(py) = python() else { return };
+    let programs = [(451, "451-check.h")];
+    let plc = "heartbeat_timeout_ms = 0\n";
+    let mut serve = Serve::start("kill9", "demo-sphere.toml", &programs, plc);
+    serve.plc(&py, &["start_busy", "451"]);
+    serve.child.kill().unwrap();
+    serve.child.wait().unwrap();
+    let dir = serve.dir.clone();
+    drop(serve);
+    let serve = Serve::start_in(dir, "kill9", "demo-sphere.toml", &programs, plc);
+    let st = serve.plc(&py, &["state"]);
+    assert_eq!(st["state"], 0, "idle after the restart, never done: {st}");
+    let h = serve.history();
+    assert_eq!(h.len(), 1);
+    assert_eq!(h[0]["status"], "interrupted");
+    assert!(h[0]["results"].as_array().unwrap().is_empty());
 }
 
 #[test]
@@ -287,7 +382,7 @@ fn a_bad_config_names_the_key_and_nothing_starts() {
     let config = dir.join("gateway.toml");
     std::fs::write(
         &config,
-        "[machine]\nscenario = \"x.toml\"\n[programs]\nfolder = \".\"\n[plc]\nword_order = \"BADC\"\n",
+        "[machine]\nscenario = \"x.toml\"\n[programs]\nfolder = \".\"\n[history]\nenabled = false\n[plc]\nword_order = \"BADC\"\n",
     )
     .unwrap();
     let out = run(bin().args(["serve", "--config", config.to_str().unwrap()]));

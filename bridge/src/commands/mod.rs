@@ -4,6 +4,7 @@ pub mod bench;
 pub mod check;
 pub mod demo;
 pub mod estimator;
+pub mod history;
 pub mod probe;
 pub mod run;
 pub mod sim;

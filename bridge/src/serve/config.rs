@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 pub const DEFAULT_PATH: &str = "/etc/probebridge/gateway.toml";
+pub const DEFAULT_HISTORY: &str = "/var/lib/probebridge/history.sqlite";
 
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -18,6 +19,35 @@ pub struct GatewayConfig {
     pub programs: ProgramsSection,
     #[serde(default)]
     pub plc: PlcSection,
+    #[serde(default)]
+    pub history: HistorySection,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HistorySection {
+    /// Record every run (default: yes).
+    #[serde(default = "default_true")]
+    pub enabled: bool,
+    /// The SQLite file of this gateway.
+    #[serde(default = "default_sqlite")]
+    pub sqlite: PathBuf,
+}
+
+impl Default for HistorySection {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            sqlite: default_sqlite(),
+        }
+    }
+}
+
+fn default_true() -> bool {
+    true
+}
+fn default_sqlite() -> PathBuf {
+    PathBuf::from(DEFAULT_HISTORY)
 }
 
 #[derive(Clone, Debug, Deserialize)]
@@ -141,6 +171,7 @@ impl GatewayConfig {
             cfg.machine.kinematics.as_mut(),
             Some(&mut cfg.programs.folder),
             cfg.programs.out.as_mut(),
+            Some(&mut cfg.history.sqlite),
         ]
         .into_iter()
         .flatten()
@@ -188,6 +219,15 @@ impl GatewayConfig {
                 format!("{} is not a folder", self.programs.folder.display()),
             ));
         }
+        if self.history.enabled {
+            let folder = self.history.sqlite.parent().unwrap_or(Path::new("."));
+            if !folder.is_dir() {
+                return Err(self.invalid(
+                    "history.sqlite",
+                    format!("the folder {} does not exist", folder.display()),
+                ));
+            }
+        }
         self.listen()?;
         self.word_order()?;
         let p = &self.plc;
@@ -223,6 +263,13 @@ impl GatewayConfig {
         }
     }
 
+    /// The history file, when history is on.
+    pub fn history(&self) -> Option<&Path> {
+        self.history
+            .enabled
+            .then_some(self.history.sqlite.as_path())
+    }
+
     pub fn heartbeat_timeout(&self) -> Option<Duration> {
         (self.plc.heartbeat_timeout_ms > 0)
             .then(|| Duration::from_millis(self.plc.heartbeat_timeout_ms))
@@ -248,12 +295,21 @@ mod tests {
 
     fn parse(text: &str) -> Result<GatewayConfig, GatewayConfigError> {
         let dir = std::env::temp_dir();
-        GatewayConfig::parse(text, &dir.join("gateway.toml"))
+        let text = format!("{text}\n[history]\nsqlite = \"h.sqlite\"\n");
+        GatewayConfig::parse(&text, &dir.join("gateway.toml"))
     }
 
     #[test]
     fn minimal_config_takes_the_defaults() {
         let c = parse("[machine]\nscenario = \"s.toml\"\n[programs]\nfolder = \".\"\n").unwrap();
+        assert!(c.history().unwrap().starts_with(std::env::temp_dir()));
+        let e = GatewayConfig::parse(
+            "[machine]\nscenario = \"s\"\n[programs]\nfolder = \".\"\n[history]\nsqlite = \"/nonexistent/h.sqlite\"\n",
+            &std::env::temp_dir().join("gateway.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("history.sqlite"), "{e}");
         assert_eq!(c.plc.listen, "127.0.0.1:502");
         assert_eq!(c.heartbeat_timeout(), Some(Duration::from_secs(2)));
         assert!(c.machine.scenario.unwrap().is_absolute());

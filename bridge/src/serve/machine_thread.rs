@@ -6,6 +6,7 @@ use super::abortable::Abortable;
 use super::config::GatewayConfig;
 use super::gateway::{lock, Job, Shared, ToMachine};
 use super::handshake::{machine_error_kind, AbortReason, Outcome, ERROR_KIND_CYCLE};
+use crate::history::{History, RunStart};
 use crate::ipc::{EstimatorChild, IpcEstimator};
 use crate::session::Session;
 use cycles::progress::ProgressEvent;
@@ -36,19 +37,53 @@ pub fn run(
             return;
         }
     };
+    let mut history = match cfg.history().map(open_history).transpose() {
+        Ok(h) => h,
+        Err(e) => {
+            let _ = ready.send(Err(e));
+            return;
+        }
+    };
     let mut estimator = spawn_estimator(&opts.service);
     let _ = ready.send(Ok(session.notes.clone()));
     loop {
         match jobs.recv_timeout(Duration::from_millis(500)) {
             Ok(ToMachine::Run(job)) => {
                 supervise(&mut estimator, &opts.service);
-                measure(cfg, cycles, shared, &mut session, estimator.as_ref(), &job);
+                let ctx = Measure {
+                    cfg,
+                    cycles,
+                    shared,
+                    history: history.as_mut(),
+                };
+                measure(ctx, &mut session, estimator.as_ref(), &job);
             }
             Ok(ToMachine::Quit) | Err(RecvTimeoutError::Disconnected) => break,
             Err(RecvTimeoutError::Timeout) => supervise(&mut estimator, &opts.service),
         }
     }
     tracing::info!("machine thread: closing the machine");
+}
+
+/// Opens the history; runs a killed gateway left "running" become "interrupted".
+fn open_history(path: &std::path::Path) -> Result<History, String> {
+    let h = History::open(path).map_err(|e| e.to_string())?;
+    let n = h.close_interrupted().map_err(|e| e.to_string())?;
+    if n > 0 {
+        tracing::warn!(
+            runs = n,
+            "history: runs interrupted by an earlier stop of the gateway"
+        );
+    }
+    tracing::info!(path = %path.display(), "history");
+    Ok(h)
+}
+
+struct Measure<'a> {
+    cfg: &'a GatewayConfig,
+    cycles: &'a CyclesConfig,
+    shared: &'a Shared,
+    history: Option<&'a mut History>,
 }
 
 fn spawn_estimator(service: &str) -> Option<EstimatorChild> {
@@ -86,14 +121,25 @@ fn supervise(estimator: &mut Option<EstimatorChild>, service: &str) {
     }
 }
 
-fn measure(
-    cfg: &GatewayConfig,
-    cycles: &CyclesConfig,
-    shared: &Shared,
-    session: &mut Session,
-    estimator: Option<&EstimatorChild>,
-    job: &Job,
-) {
+fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChild>, job: &Job) {
+    let Measure {
+        cfg,
+        cycles,
+        shared,
+        history,
+    } = ctx;
+    let program_path = job.program.path.clone().unwrap_or_default();
+    let record = history.as_deref().and_then(|h| {
+        h.begin(&RunStart {
+            machine: &cycles.machine.name,
+            source: "serve",
+            request_seq: Some(job.seq),
+            program_number: Some(job.number),
+            program: &program_path,
+        })
+        .map_err(|e| tracing::error!("{e}"))
+        .ok()
+    });
     let total = job.program.cycles().count().max(1);
     let (mut started, mut points) = (0usize, 0u16);
     let mut progress = |ev: ProgressEvent| {
@@ -164,6 +210,16 @@ fn measure(
         stopped = report.stopped.as_deref().unwrap_or(""),
         "measurement finished"
     );
+    if let (Some(h), Some(id)) = (history, record) {
+        let status = match outcome {
+            Outcome::Done => "done",
+            Outcome::Error { .. } => "error",
+            Outcome::Aborted(_) => "aborted",
+        };
+        if let Err(e) = h.finish(id, status, &report) {
+            tracing::error!("{e}");
+        }
+    }
     lock(shared).finish(outcome, cycle, &values);
 }
 

@@ -192,6 +192,9 @@ def main():
         out = ack_error(plc, args[0], args[1])
     elif scenario == "second_connection":
         out = second_connection(plc, host, port)
+    elif scenario == "state":
+        st = plc.state()
+        out = {"state": st[3], "bits": st[4]}
     elif scenario == "start_busy":
         out = start_busy(plc, args[0])
     elif scenario == "heartbeat_loss":
