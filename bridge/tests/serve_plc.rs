@@ -50,7 +50,7 @@ impl Serve {
     /// its own; `plc` adds keys to the `[plc]` section.
     fn start(name: &str, scenario: &str, programs: &[(u16, &str)], plc: &str) -> Self {
         let dir = tmpdir(&format!("serve-{name}"));
-        Self::start_in(dir, name, scenario, programs, plc)
+        Self::start_in(dir, name, scenario, programs, plc, None)
     }
 
     /// Starts in `dir` (again, after a restart: same configuration and history).
@@ -60,6 +60,7 @@ impl Serve {
         scenario: &str,
         programs: &[(u16, &str)],
         plc: &str,
+        notify_socket: Option<&Path>,
     ) -> Self {
         let folder = dir.join("programs");
         std::fs::create_dir_all(&folder).unwrap();
@@ -86,7 +87,12 @@ impl Serve {
         )
         .unwrap();
         let log = std::fs::File::create(dir.join("serve.log")).unwrap();
-        let mut child = bin()
+        let mut cmd = bin();
+        if let Some(socket) = notify_socket {
+            cmd.env("NOTIFY_SOCKET", socket)
+                .env("WATCHDOG_USEC", "200000");
+        }
+        let mut child = cmd
             .args(["serve", "--config", config.to_str().unwrap()])
             .stdout(Stdio::piped())
             .stderr(log)
@@ -367,7 +373,7 @@ fn kill_9_mid_451_leaves_the_run_interrupted_and_restarts_idle() {
     serve.child.wait().unwrap();
     let dir = serve.dir.clone();
     drop(serve);
-    let serve = Serve::start_in(dir, "kill9", "demo-sphere.toml", &programs, plc);
+    let serve = Serve::start_in(dir, "kill9", "demo-sphere.toml", &programs, plc, None);
     let st = serve.plc(&py, &["state"]);
     assert_eq!(st["state"], 0, "idle after the restart, never done: {st}");
     let h = serve.history();
@@ -392,4 +398,34 @@ fn a_bad_config_names_the_key_and_nothing_starts() {
         err.contains("gateway.toml") && err.contains("plc.word_order"),
         "{err}"
     );
+}
+
+#[test]
+fn systemd_sees_ready_watchdog_and_status() {
+    let Some(py) = python() else { return };
+    let dir = tmpdir("serve-notify");
+    let socket = dir.join("notify.sock");
+    let listener = std::os::unix::net::UnixDatagram::bind(&socket).unwrap();
+    listener
+        .set_read_timeout(Some(std::time::Duration::from_secs(60)))
+        .unwrap();
+    let serve = Serve::start_in(
+        dir,
+        "notify",
+        "tilted-plane.toml",
+        &[(431, "431-plane.h")],
+        "",
+        Some(&socket),
+    );
+    let mut seen = String::new();
+    let mut buf = [0u8; 512];
+    while !(seen.contains("READY=1") && seen.contains("WATCHDOG=1")) {
+        let n = listener.recv(&mut buf).expect("a notification within 60 s");
+        seen.push_str(&String::from_utf8_lossy(&buf[..n]));
+        seen.push('\n');
+    }
+    assert!(seen.contains("STATUS="), "{seen}");
+    // And a PLC gets results from it.
+    let got = serve.plc(&py, &["run", "431"]);
+    assert_eq!(got["cycle"], 431);
 }
