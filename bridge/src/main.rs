@@ -177,6 +177,9 @@ enum Cmd {
         /// As JSON, with every result.
         #[arg(long)]
         json: bool,
+        /// Write the trend page (451's errors and dispersion over time, SVG) to FILE.
+        #[arg(long, value_name = "FILE")]
+        html: Option<PathBuf>,
     },
     /// Benchmarks.
     #[command(subcommand)]
@@ -264,12 +267,14 @@ fn main() -> ExitCode {
             machine,
             since,
             json,
+            html,
         } => commands::history::run(&commands::history::HistoryArgs {
             db,
             config,
             machine,
             since,
             json,
+            html,
         })
         .map(|()| 0),
         Cmd::Serve { config } => probebridge::serve::run(&config),

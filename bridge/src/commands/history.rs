@@ -11,6 +11,8 @@ pub struct HistoryArgs {
     pub machine: Option<String>,
     pub since: Option<String>,
     pub json: bool,
+    /// Write the trend page here.
+    pub html: Option<PathBuf>,
 }
 
 pub fn run(args: &HistoryArgs) -> Result<(), String> {
@@ -37,12 +39,16 @@ pub fn run(args: &HistoryArgs) -> Result<(), String> {
             since,
         })
         .map_err(|e| e.to_string())?;
+    if let Some(path) = &args.html {
+        crate::output::check_output(Some(path))?;
+        crate::output::write_atomic(path, crate::history::trend::trend_html(&runs).as_bytes())?;
+    }
     if args.json {
         println!(
             "{}",
             serde_json::to_string_pretty(&runs).map_err(|e| e.to_string())?
         );
-    } else {
+    } else if args.html.is_none() {
         print!("{}", to_text(&runs));
     }
     Ok(())

@@ -5,6 +5,7 @@
 //! leaves the run visible as "running", never half-written results.
 
 pub mod time;
+pub mod trend;
 
 use cycles::results::ProgramReport;
 use rusqlite::{params, Connection, OptionalExtension};
@@ -23,7 +24,8 @@ CREATE TABLE IF NOT EXISTS runs (
     program TEXT NOT NULL,
     status TEXT NOT NULL,
     message TEXT,
-    protocols TEXT NOT NULL DEFAULT '[]'
+    protocols TEXT NOT NULL DEFAULT '[]',
+    max_modification REAL
 );
 CREATE INDEX IF NOT EXISTS runs_machine_started ON runs (machine, started);
 CREATE TABLE IF NOT EXISTS results (
@@ -38,6 +40,13 @@ CREATE TABLE IF NOT EXISTS iso_errors (
     run_id INTEGER NOT NULL REFERENCES runs (id),
     block INTEGER NOT NULL,
     name TEXT NOT NULL,
+    before REAL NOT NULL,
+    after REAL NOT NULL
+);
+CREATE TABLE IF NOT EXISTS axis_dispersion (
+    run_id INTEGER NOT NULL REFERENCES runs (id),
+    block INTEGER NOT NULL,
+    axis TEXT NOT NULL,
     before REAL NOT NULL,
     after REAL NOT NULL
 );
@@ -59,6 +68,8 @@ pub struct RunStart<'a> {
     pub request_seq: Option<u16>,
     pub program_number: Option<u16>,
     pub program: &'a Path,
+    /// The machine's maxModification (the trend page's band).
+    pub max_modification: Option<f64>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -78,6 +89,14 @@ pub struct IsoErrorRow {
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct DispersionRow {
+    pub block: u32,
+    pub axis: String,
+    pub before: f64,
+    pub after: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct RunRow {
     pub id: i64,
     pub started: String,
@@ -92,6 +111,8 @@ pub struct RunRow {
     pub protocols: Vec<String>,
     pub results: Vec<ResultRow>,
     pub iso_errors: Vec<IsoErrorRow>,
+    pub max_modification: Option<f64>,
+    pub dispersion: Vec<DispersionRow>,
 }
 
 /// Which runs to list.
@@ -138,8 +159,8 @@ impl History {
     pub fn begin(&self, run: &RunStart) -> Result<i64, HistoryError> {
         self.conn
             .execute(
-                "INSERT INTO runs (started, machine, source, request_seq, program_number, program, status)
-                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, 'running')",
+                "INSERT INTO runs (started, machine, source, request_seq, program_number, program, status, max_modification)
+                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, 'running', ?7)",
                 params![
                     time::now_utc(),
                     run.machine,
@@ -147,6 +168,7 @@ impl History {
                     run.request_seq,
                     run.program_number,
                     run.program.display().to_string(),
+                    run.max_modification,
                 ],
             )
             .map_err(|e| self.err(e))?;
@@ -195,6 +217,13 @@ impl History {
                     )
                     .map_err(err)?;
                 }
+                for a in &k.axes {
+                    tx.execute(
+                        "INSERT INTO axis_dispersion (run_id, block, axis, before, after) VALUES (?1, ?2, ?3, ?4, ?5)",
+                        params![id, c.block, a.axis, a.dispersion_before, a.dispersion_after],
+                    )
+                    .map_err(err)?;
+                }
             }
         }
         tx.commit().map_err(err)
@@ -204,7 +233,7 @@ impl History {
         let mut stmt = self
             .conn
             .prepare(
-                "SELECT id, started, finished, machine, source, request_seq, program_number, program, status, message, protocols
+                "SELECT id, started, finished, machine, source, request_seq, program_number, program, status, message, protocols, max_modification
                  FROM runs WHERE (?1 IS NULL OR machine = ?1) AND (?2 IS NULL OR started >= ?2) ORDER BY started, id",
             )
             .map_err(|e| self.err(e))?;
@@ -225,6 +254,8 @@ impl History {
                     protocols: serde_json::from_str(&protocols).unwrap_or_default(),
                     results: Vec::new(),
                     iso_errors: Vec::new(),
+                    max_modification: r.get(11)?,
+                    dispersion: Vec::new(),
                 })
             })
             .map_err(|e| self.err(e))?;
@@ -233,6 +264,7 @@ impl History {
             let mut run = row.map_err(|e| self.err(e))?;
             run.results = self.results(run.id)?;
             run.iso_errors = self.iso_errors(run.id)?;
+            run.dispersion = self.dispersion(run.id)?;
             runs.push(run);
         }
         Ok(runs)
@@ -278,6 +310,26 @@ impl History {
         rows.collect::<Result<_, _>>().map_err(|e| self.err(e))
     }
 
+    fn dispersion(&self, id: i64) -> Result<Vec<DispersionRow>, HistoryError> {
+        let mut stmt = self
+            .conn
+            .prepare_cached(
+                "SELECT block, axis, before, after FROM axis_dispersion WHERE run_id = ?1 ORDER BY block, axis",
+            )
+            .map_err(|e| self.err(e))?;
+        let rows = stmt
+            .query_map([id], |r| {
+                Ok(DispersionRow {
+                    block: r.get(0)?,
+                    axis: r.get(1)?,
+                    before: r.get(2)?,
+                    after: r.get(3)?,
+                })
+            })
+            .map_err(|e| self.err(e))?;
+        rows.collect::<Result<_, _>>().map_err(|e| self.err(e))
+    }
+
     /// Runs still "running" (the gateway died during them) become "interrupted".
     pub fn close_interrupted(&self) -> Result<usize, HistoryError> {
         self.conn
@@ -314,6 +366,7 @@ pub fn record_run_start(
             request_seq: None,
             program_number: None,
             program: &program_path,
+            max_modification: Some(cfg.parameters.max_modification),
         })
         .map_err(|e| e.to_string())?;
     Ok(Some((h, id)))
@@ -378,6 +431,7 @@ mod tests {
             request_seq: Some(3),
             program_number: Some(431),
             program: Path::new("/p/431.h"),
+            max_modification: Some(0.05),
         };
         let id = h.begin(&start).unwrap();
         assert_eq!(h.list(&Filter::default()).unwrap()[0].status, "running");

@@ -136,6 +136,7 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
             request_seq: Some(job.seq),
             program_number: Some(job.number),
             program: &program_path,
+            max_modification: Some(cycles.parameters.max_modification),
         })
         .map_err(|e| tracing::error!("{e}"))
         .ok()
