@@ -24,7 +24,7 @@ pub fn trend_html(runs: &[RunRow]) -> String {
             errors
                 .entry(e.name.clone())
                 .or_default()
-                .push((r.started.clone(), e.before));
+                .push((r.started.clone(), e.after));
         }
         for d in &r.dispersion {
             dispersion
@@ -52,7 +52,7 @@ pub fn trend_html(runs: &[RunRow]) -> String {
         escape(&machines.into_iter().collect::<Vec<_>>().join(", ")),
         band.map_or("not recorded".into(), |b| format!("&#177;{b}")),
     );
-    html.push_str("<h2>ISO 230-7 errors (measured, before optimisation)</h2>\n");
+    html.push_str("<h2>ISO 230-7 errors identified by cycle 451</h2>\n");
     for (name, s) in &errors {
         chart(&mut html, name, s, band);
     }
@@ -65,11 +65,14 @@ pub fn trend_html(runs: &[RunRow]) -> String {
 }
 
 fn chart(html: &mut String, title: &str, s: &Series, band: Option<f64>) {
+    // The scale follows the data (a drift of microns stays visible), with zero in view;
+    // the band is clipped to it.
     let b = band.unwrap_or(0.0);
-    let lo = s.iter().map(|p| p.1).fold(-b, f64::min);
-    let hi = s.iter().map(|p| p.1).fold(b, f64::max);
-    let span = if hi - lo > 1e-12 { hi - lo } else { 1.0 };
-    let (lo, hi) = (lo - 0.05 * span, hi + 0.05 * span);
+    let lo = s.iter().map(|p| p.1).fold(0.0, f64::min);
+    let hi = s.iter().map(|p| p.1).fold(0.0, f64::max);
+    let span = if hi - lo > 1e-9 { hi - lo } else { 1e-3 };
+    let (lo, hi) = (lo - 0.1 * span, hi + 0.1 * span);
+    let clip = |v: f64| v.clamp(lo, hi);
     let y = |v: f64| PAD + (H - 2.0 * PAD) * (hi - v) / (hi - lo);
     let n = s.len().max(2) - 1;
     let x = |i: usize| PAD + (W - 2.0 * PAD) * i as f64 / n as f64;
@@ -84,9 +87,9 @@ fn chart(html: &mut String, title: &str, s: &Series, band: Option<f64>) {
         let _ = write!(
             html,
             "<rect class=\"band\" x=\"{PAD}\" y=\"{:.2}\" width=\"{:.2}\" height=\"{:.2}\"/>",
-            y(b),
+            y(clip(b)),
             W - 2.0 * PAD,
-            y(-b) - y(b)
+            y(clip(-b)) - y(clip(b))
         );
     }
     let _ = write!(
