@@ -106,6 +106,9 @@ enum Cmd {
         /// <machine>.kinematics.toml beside the machine configuration.
         #[arg(long)]
         kinematics: Option<PathBuf>,
+        /// Record the run in this history file (SQLite, as `serve` keeps it).
+        #[arg(long, value_name = "FILE")]
+        history: Option<PathBuf>,
     },
     /// Parse and validate an NC program; nothing moves. Exit 0, or 2 with every error.
     Check {
@@ -148,6 +151,35 @@ enum Cmd {
         /// Records kept without reallocating.
         #[arg(long, value_name = "N")]
         record_capacity: Option<usize>,
+    },
+    /// The gateway service: the machine up once, measurements on request of the PLC
+    /// or HMI over a Modbus TCP face, readiness and watchdog for systemd.
+    Serve {
+        /// Gateway configuration (TOML).
+        #[arg(long, default_value = probebridge::serve::config::DEFAULT_PATH)]
+        config: PathBuf,
+    },
+    /// The recorded measurements of a gateway (its history file).
+    History {
+        /// The history file; default: `history.sqlite` of the gateway configuration.
+        #[arg(long)]
+        db: Option<PathBuf>,
+        /// Gateway configuration naming the history file.
+        #[arg(long, default_value = probebridge::serve::config::DEFAULT_PATH)]
+        config: PathBuf,
+        /// Only this machine.
+        #[arg(long)]
+        machine: Option<String>,
+        /// Only runs started at or after this UTC date (YYYY-MM-DD or
+        /// YYYY-MM-DDTHH:MM:SSZ).
+        #[arg(long)]
+        since: Option<String>,
+        /// As JSON, with every result.
+        #[arg(long)]
+        json: bool,
+        /// Write the trend page (451's errors and dispersion over time, SVG) to FILE.
+        #[arg(long, value_name = "FILE")]
+        html: Option<PathBuf>,
     },
     /// Benchmarks.
     #[command(subcommand)]
@@ -194,6 +226,7 @@ fn main() -> ExitCode {
             json,
             yes,
             kinematics,
+            history,
         } => commands::run::run(&commands::run::RunArgs {
             program,
             machine: machine.options(),
@@ -201,6 +234,7 @@ fn main() -> ExitCode {
             json,
             yes,
             kinematics,
+            history,
         }),
         Cmd::Check {
             program,
@@ -237,6 +271,23 @@ fn main() -> ExitCode {
             })
             .map(|()| 0)
         }
+        Cmd::History {
+            db,
+            config,
+            machine,
+            since,
+            json,
+            html,
+        } => commands::history::run(&commands::history::HistoryArgs {
+            db,
+            config,
+            machine,
+            since,
+            json,
+            html,
+        })
+        .map(|()| 0),
+        Cmd::Serve { config } => probebridge::serve::run(&config),
         Cmd::Bench(BenchCmd::Trigger(args)) => commands::bench::run(&args).map(|()| 0),
     };
     match result {

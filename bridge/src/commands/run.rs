@@ -25,6 +25,8 @@ pub struct RunArgs {
     /// The active kinematics file (cycles 450/451); default: beside the machine
     /// configuration.
     pub kinematics: Option<PathBuf>,
+    /// Record the run in this history file.
+    pub history: Option<PathBuf>,
 }
 
 /// Exit status: 0 every cycle succeeded, 1 a cycle failed or stopped the program,
@@ -119,7 +121,12 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     if let Some(e) = ipc.as_mut() {
         opts.estimator = Some(e);
     }
+    let mut history = crate::history::record_run_start(args.history.as_deref(), &cfg, &program)?;
     let report = run_program(&program, &mut session.machine, &cfg, &mut opts);
+    if let Some((h, id)) = history.as_mut() {
+        let status = if report.completed() { "done" } else { "error" };
+        h.finish(*id, status, &report).map_err(|e| e.to_string())?;
+    }
     print!("{}", report.to_text());
     if let Some(path) = &args.json {
         write_atomic(path, report.to_json().as_bytes())?;

@@ -1,0 +1,55 @@
+//! `probebridge history`: the recorded runs of a gateway, as lines or JSON.
+
+use crate::history::{time::parse_since, to_text, Filter, History};
+use crate::serve::config::GatewayConfig;
+use std::path::{Path, PathBuf};
+
+pub struct HistoryArgs {
+    /// The SQLite file; default: the gateway configuration's `history.sqlite`.
+    pub db: Option<PathBuf>,
+    pub config: PathBuf,
+    pub machine: Option<String>,
+    pub since: Option<String>,
+    pub json: bool,
+    /// Write the trend page here.
+    pub html: Option<PathBuf>,
+}
+
+pub fn run(args: &HistoryArgs) -> Result<(), String> {
+    let since = args.since.as_deref().map(parse_since).transpose()?;
+    let db = match &args.db {
+        Some(p) => p.clone(),
+        None => {
+            let cfg = GatewayConfig::load(&args.config).map_err(|e| e.to_string())?;
+            cfg.history().map(Path::to_path_buf).ok_or_else(|| {
+                format!(
+                    "{}: history.enabled is false: no history",
+                    args.config.display()
+                )
+            })?
+        }
+    };
+    if !db.is_file() {
+        return Err(format!("{}: no history recorded there", db.display()));
+    }
+    let h = History::open(&db).map_err(|e| e.to_string())?;
+    let runs = h
+        .list(&Filter {
+            machine: args.machine.clone(),
+            since,
+        })
+        .map_err(|e| e.to_string())?;
+    if let Some(path) = &args.html {
+        crate::output::check_output(Some(path))?;
+        crate::output::write_atomic(path, crate::history::trend::trend_html(&runs).as_bytes())?;
+    }
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&runs).map_err(|e| e.to_string())?
+        );
+    } else if args.html.is_none() {
+        print!("{}", to_text(&runs));
+    }
+    Ok(())
+}

@@ -1,0 +1,346 @@
+//! The gateway configuration (`/etc/probebridge/gateway.toml`): which machine, where the
+//! programs are, and the PLC face. Unknown keys and out-of-range values are refused with
+//! the file, the key and the reason, before anything is opened.
+
+use serde::Deserialize;
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+pub const DEFAULT_PATH: &str = "/etc/probebridge/gateway.toml";
+pub const DEFAULT_HISTORY: &str = "/var/lib/probebridge/history.sqlite";
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GatewayConfig {
+    #[serde(skip)]
+    pub path: PathBuf,
+    pub machine: MachineSection,
+    pub programs: ProgramsSection,
+    #[serde(default)]
+    pub plc: PlcSection,
+    #[serde(default)]
+    pub history: HistorySection,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HistorySection {
+    /// Record every run (default: yes).
+    #[serde(default = "default_true")]
+    pub enabled: bool,
+    /// The SQLite file of this gateway.
+    #[serde(default = "default_sqlite")]
+    pub sqlite: PathBuf,
+}
+
+impl Default for HistorySection {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            sqlite: default_sqlite(),
+        }
+    }
+}
+
+fn default_true() -> bool {
+    true
+}
+fn default_sqlite() -> PathBuf {
+    PathBuf::from(DEFAULT_HISTORY)
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MachineSection {
+    /// Machine configuration of the real machine (its `[bus] kind` says CANopen or
+    /// Modbus).
+    pub config: Option<PathBuf>,
+    /// Or a simulation scenario: the built-in simulator.
+    pub scenario: Option<PathBuf>,
+    /// SocketCAN interface of a CANopen machine.
+    pub can: Option<String>,
+    /// Address of the PLC of a Modbus machine (overrides the machine file).
+    pub modbus: Option<String>,
+    /// The simulator paces moves in real time.
+    #[serde(default)]
+    pub realtime: bool,
+    /// iceoryx2 service prefix shared with the estimator process.
+    #[serde(default = "default_service")]
+    pub service: String,
+    /// The active kinematics file (cycles 450/451); default beside the machine file.
+    pub kinematics: Option<PathBuf>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProgramsSection {
+    /// Folder of the NC programs; number NNN selects `NNN.h`.
+    pub folder: PathBuf,
+    /// Where measuring logs go (default: the program folder).
+    pub out: Option<PathBuf>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlcSection {
+    /// Modbus TCP address of the PLC face; port 0 takes any free port.
+    #[serde(default = "default_listen")]
+    pub listen: String,
+    /// Word order of 32-bit values: "high_first" (ABCD) or "low_first" (CDAB).
+    #[serde(default = "default_word_order")]
+    pub word_order: String,
+    /// While busy, a PLC heartbeat unchanged for this long aborts the motion; 0: off.
+    #[serde(default = "default_heartbeat_timeout_ms")]
+    pub heartbeat_timeout_ms: u64,
+    /// Scale of the 32-bit integer copies of the results (value x scale, rounded).
+    #[serde(default = "default_int_scale")]
+    pub int_scale: f64,
+}
+
+impl Default for PlcSection {
+    fn default() -> Self {
+        Self {
+            listen: default_listen(),
+            word_order: default_word_order(),
+            heartbeat_timeout_ms: default_heartbeat_timeout_ms(),
+            int_scale: default_int_scale(),
+        }
+    }
+}
+
+fn default_service() -> String {
+    crate::commands::default_service()
+}
+fn default_listen() -> String {
+    "127.0.0.1:502".into()
+}
+fn default_word_order() -> String {
+    "high_first".into()
+}
+fn default_heartbeat_timeout_ms() -> u64 {
+    2000
+}
+fn default_int_scale() -> f64 {
+    10_000.0
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum GatewayConfigError {
+    #[error("cannot read {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: {message}")]
+    Parse { path: PathBuf, message: String },
+    #[error("{path}: {key}: {reason}")]
+    Invalid {
+        path: PathBuf,
+        key: String,
+        reason: String,
+    },
+}
+
+impl GatewayConfig {
+    pub fn load(path: &Path) -> Result<Self, GatewayConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| GatewayConfigError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses and validates; relative paths are taken from the file's folder.
+    pub fn parse(text: &str, path: &Path) -> Result<Self, GatewayConfigError> {
+        let mut cfg: GatewayConfig =
+            toml::from_str(text).map_err(|e| GatewayConfigError::Parse {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })?;
+        cfg.path = path.to_path_buf();
+        let base = path.parent().unwrap_or(Path::new("."));
+        let anchor = |p: &mut PathBuf| {
+            if p.is_relative() {
+                *p = base.join(&*p);
+            }
+        };
+        for p in [
+            cfg.machine.config.as_mut(),
+            cfg.machine.scenario.as_mut(),
+            cfg.machine.kinematics.as_mut(),
+            Some(&mut cfg.programs.folder),
+            cfg.programs.out.as_mut(),
+            Some(&mut cfg.history.sqlite),
+        ]
+        .into_iter()
+        .flatten()
+        {
+            anchor(p);
+        }
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    fn invalid(&self, key: &str, reason: impl Into<String>) -> GatewayConfigError {
+        GatewayConfigError::Invalid {
+            path: self.path.clone(),
+            key: key.into(),
+            reason: reason.into(),
+        }
+    }
+
+    fn validate(&self) -> Result<(), GatewayConfigError> {
+        let m = &self.machine;
+        match (&m.config, &m.scenario) {
+            (None, None) => {
+                return Err(self.invalid(
+                    "machine",
+                    "give machine.config (real machine) or machine.scenario (simulator)",
+                ))
+            }
+            (Some(_), Some(_)) => {
+                return Err(self.invalid(
+                    "machine.scenario",
+                    "give either machine.config or machine.scenario, not both",
+                ))
+            }
+            _ => {}
+        }
+        if m.can.is_some() && m.modbus.is_some() {
+            return Err(self.invalid("machine.modbus", "give either can or modbus, not both"));
+        }
+        if m.service.is_empty() || m.service.len() > 64 {
+            return Err(self.invalid("machine.service", "must be 1..64 characters"));
+        }
+        if !self.programs.folder.is_dir() {
+            return Err(self.invalid(
+                "programs.folder",
+                format!("{} is not a folder", self.programs.folder.display()),
+            ));
+        }
+        if self.history.enabled {
+            let folder = self.history.sqlite.parent().unwrap_or(Path::new("."));
+            if !folder.is_dir() {
+                return Err(self.invalid(
+                    "history.sqlite",
+                    format!("the folder {} does not exist", folder.display()),
+                ));
+            }
+        }
+        self.listen()?;
+        self.word_order()?;
+        let p = &self.plc;
+        if p.heartbeat_timeout_ms > 600_000 {
+            return Err(self.invalid(
+                "plc.heartbeat_timeout_ms",
+                "at most 600000 (0 turns the check off)",
+            ));
+        }
+        if !(p.int_scale.is_finite() && p.int_scale >= 1.0 && p.int_scale <= 1e9) {
+            return Err(self.invalid("plc.int_scale", "must be a number in 1..1e9"));
+        }
+        Ok(())
+    }
+
+    pub fn listen(&self) -> Result<SocketAddr, GatewayConfigError> {
+        self.plc.listen.parse().map_err(|e| {
+            self.invalid(
+                "plc.listen",
+                format!("{:?} is not an address HOST:PORT ({e})", self.plc.listen),
+            )
+        })
+    }
+
+    pub fn word_order(&self) -> Result<super::register_map::WordOrder, GatewayConfigError> {
+        match self.plc.word_order.as_str() {
+            "high_first" => Ok(super::register_map::WordOrder::HighFirst),
+            "low_first" => Ok(super::register_map::WordOrder::LowFirst),
+            other => Err(self.invalid(
+                "plc.word_order",
+                format!("{other:?}: expected \"high_first\" or \"low_first\""),
+            )),
+        }
+    }
+
+    /// The history file, when history is on.
+    pub fn history(&self) -> Option<&Path> {
+        self.history
+            .enabled
+            .then_some(self.history.sqlite.as_path())
+    }
+
+    pub fn heartbeat_timeout(&self) -> Option<Duration> {
+        (self.plc.heartbeat_timeout_ms > 0)
+            .then(|| Duration::from_millis(self.plc.heartbeat_timeout_ms))
+    }
+
+    /// How `Session::open` reaches the machine.
+    pub fn machine_options(&self) -> crate::session::MachineOptions {
+        crate::session::MachineOptions {
+            scenario: self.machine.scenario.clone(),
+            machine: self.machine.config.clone(),
+            can: self.machine.can.clone(),
+            modbus: self.machine.modbus.clone(),
+            realtime: self.machine.realtime,
+            service: self.machine.service.clone(),
+            candump: None,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<GatewayConfig, GatewayConfigError> {
+        let dir = std::env::temp_dir();
+        let text = format!("{text}\n[history]\nsqlite = \"h.sqlite\"\n");
+        GatewayConfig::parse(&text, &dir.join("gateway.toml"))
+    }
+
+    #[test]
+    fn minimal_config_takes_the_defaults() {
+        let c = parse("[machine]\nscenario = \"s.toml\"\n[programs]\nfolder = \".\"\n").unwrap();
+        assert!(c.history().unwrap().starts_with(std::env::temp_dir()));
+        let e = GatewayConfig::parse(
+            "[machine]\nscenario = \"s\"\n[programs]\nfolder = \".\"\n[history]\nsqlite = \"/nonexistent/h.sqlite\"\n",
+            &std::env::temp_dir().join("gateway.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("history.sqlite"), "{e}");
+        assert_eq!(c.plc.listen, "127.0.0.1:502");
+        assert_eq!(c.heartbeat_timeout(), Some(Duration::from_secs(2)));
+        assert!(c.machine.scenario.unwrap().is_absolute());
+    }
+
+    #[test]
+    fn unknown_key_is_refused_with_its_name() {
+        let e = parse("[machine]\nscenario = \"s\"\nspeed = 1\n[programs]\nfolder = \".\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("gateway.toml") && e.contains("speed"), "{e}");
+    }
+
+    #[test]
+    fn bad_values_name_the_key() {
+        let base = "[machine]\nscenario = \"s\"\n[programs]\nfolder = \".\"\n";
+        for (extra, key) in [
+            ("[plc]\nword_order = \"middle\"\n", "plc.word_order"),
+            ("[plc]\nlisten = \"localhost\"\n", "plc.listen"),
+            ("[plc]\nint_scale = 0.5\n", "plc.int_scale"),
+        ] {
+            let e = parse(&format!("{base}{extra}")).unwrap_err().to_string();
+            assert!(e.contains(key), "{e}");
+        }
+        let e = parse("[machine]\n[programs]\nfolder = \".\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("machine"), "{e}");
+        let e = parse("[machine]\nscenario = \"s\"\n[programs]\nfolder = \"/nonexistent/x\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("programs.folder"), "{e}");
+    }
+}

@@ -1,0 +1,219 @@
+//! What the PLC face and the machine thread share: the register map, the handshake,
+//! the connection that owns the writes, and the queue of one job to the machine thread.
+
+use super::handshake::{AbortReason, Action, Handshake, Outcome, Refusal, State};
+use super::register_map::{MapException, RegisterMap};
+use cycles::program::{Program, ProgramError};
+use cycles::CyclesConfig;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::mpsc::Sender;
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Instant;
+
+/// A measurement for the machine thread.
+pub struct Job {
+    pub seq: u16,
+    pub number: u16,
+    pub program: Program,
+    pub confirm: bool,
+}
+
+pub enum ToMachine {
+    Run(Box<Job>),
+    Quit,
+}
+
+/// Why a write was not taken.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WriteRefusal {
+    /// Another connection owns the writes.
+    Busy,
+    Map(MapException),
+}
+
+pub struct Core {
+    pub map: RegisterMap,
+    pub hs: Handshake,
+    programs: PathBuf,
+    cycles: CyclesConfig,
+    jobs: Sender<ToMachine>,
+    pub abort: Arc<AtomicU8>,
+    owner: Option<u64>,
+    heartbeat: u16,
+}
+
+pub type Shared = Arc<Mutex<Core>>;
+
+pub fn lock(shared: &Shared) -> MutexGuard<'_, Core> {
+    shared.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+impl Core {
+    pub fn new(
+        map: RegisterMap,
+        hs: Handshake,
+        programs: PathBuf,
+        cycles: CyclesConfig,
+        jobs: Sender<ToMachine>,
+    ) -> Self {
+        let mut c = Self {
+            map,
+            hs,
+            programs,
+            cycles,
+            jobs,
+            abort: Arc::new(AtomicU8::new(0)),
+            owner: None,
+            heartbeat: 0,
+        };
+        c.publish();
+        c
+    }
+
+    fn publish(&mut self) {
+        self.map.set_state(self.hs.view());
+    }
+
+    /// A write of connection `conn`: the first connection that writes owns the
+    /// request block until it disconnects.
+    pub fn write(&mut self, conn: u64, addr: u16, values: &[u16]) -> Result<(), WriteRefusal> {
+        if self.owner.is_some_and(|o| o != conn) {
+            return Err(WriteRefusal::Busy);
+        }
+        self.map.write(addr, values).map_err(WriteRefusal::Map)?;
+        self.owner = Some(conn);
+        self.on_request(Instant::now());
+        Ok(())
+    }
+
+    pub fn disconnected(&mut self, conn: u64) {
+        if self.owner == Some(conn) {
+            self.owner = None;
+        }
+    }
+
+    fn on_request(&mut self, now: Instant) {
+        let req = self.map.request();
+        let (folder, cfg) = (&self.programs, &self.cycles);
+        let action = self
+            .hs
+            .on_request(&req, now, |n| resolve_program(folder, cfg, n));
+        if self.hs.view().reason != 0 && self.hs.view().ack_seq == req.seq && action.is_none() {
+            tracing::info!(
+                seq = req.seq,
+                code = req.code,
+                reason = self.hs.view().reason,
+                "request refused"
+            );
+        }
+        match action {
+            Some(Action::Start {
+                seq,
+                program,
+                confirm,
+            }) => {
+                self.abort.store(0, Ordering::Release);
+                // The old results stop matching any request before the run starts.
+                self.map.set_results(seq.wrapping_sub(1), &BTreeMap::new());
+                tracing::info!(
+                    seq,
+                    program = req.program,
+                    params = ?req.params,
+                    "measurement started"
+                );
+                let job = Job {
+                    seq,
+                    number: req.program,
+                    program,
+                    confirm,
+                };
+                if self.jobs.send(ToMachine::Run(Box::new(job))).is_err() {
+                    self.hs.finish(
+                        Outcome::Error {
+                            kind: super::handshake::ERROR_KIND_CYCLE,
+                            code: 0,
+                        },
+                        0,
+                    );
+                }
+            }
+            Some(Action::Abort) => {
+                tracing::info!(seq = req.seq, "abort requested by the PLC");
+                self.request_abort(AbortReason::Request);
+            }
+            None => {}
+        }
+        self.publish();
+    }
+
+    /// Aborts the running measurement (the first reason wins).
+    pub fn request_abort(&self, reason: AbortReason) {
+        let _ = self
+            .abort
+            .compare_exchange(0, reason as u8, Ordering::AcqRel, Ordering::Acquire);
+    }
+
+    /// The periodic tick: gateway heartbeat, PLC heartbeat supervision.
+    pub fn tick(&mut self, now: Instant) {
+        self.heartbeat = self.heartbeat.wrapping_add(1);
+        self.map.set_gateway_heartbeat(self.heartbeat);
+        if self.hs.heartbeat_lost(now) && self.abort.load(Ordering::Acquire) == 0 {
+            tracing::warn!("PLC heartbeat stale while busy: aborting the motion");
+            self.request_abort(AbortReason::PlcHeartbeat);
+        }
+    }
+
+    pub fn progress(&mut self, permille: u16, point: u16) {
+        self.hs.progress(permille, point);
+        self.publish();
+    }
+
+    pub fn finish(&mut self, outcome: Outcome, cycle: u16, values: &BTreeMap<String, f64>) {
+        let seq = self.hs.finish(outcome, cycle);
+        let empty = BTreeMap::new();
+        let values = if outcome == Outcome::Done {
+            values
+        } else {
+            &empty
+        };
+        self.map.set_results(seq, values);
+        self.publish();
+    }
+
+    pub fn set_machine_ok(&mut self, ok: bool) {
+        self.hs.set_machine_ok(ok);
+        self.publish();
+    }
+
+    pub fn state(&self) -> State {
+        self.hs.state()
+    }
+}
+
+/// Program number NNN is `NNN.h` in the program folder (at least three digits).
+pub fn resolve_program(
+    folder: &std::path::Path,
+    cfg: &CyclesConfig,
+    number: u16,
+) -> Result<Program, Refusal> {
+    let path = folder.join(format!("{number:03}.h"));
+    if !path.is_file() {
+        tracing::warn!("no program {}", path.display());
+        return Err(Refusal::UnknownProgram);
+    }
+    match Program::load(&path, cfg) {
+        Ok(p) => Ok(p),
+        Err(ProgramError::Invalid { path, errors }) => {
+            for d in &errors.0 {
+                tracing::warn!("{}: {d}", path.display());
+            }
+            Err(Refusal::InvalidProgram)
+        }
+        Err(e) => {
+            tracing::warn!("{e}");
+            Err(Refusal::UnknownProgram)
+        }
+    }
+}

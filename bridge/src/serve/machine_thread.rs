@@ -1,0 +1,247 @@
+//! The machine thread: it opens the machine once, keeps the estimator process running
+//! (restarting it when it dies), and runs one measurement at a time through the same
+//! `cycles::runner::run_program` as `probebridge run`.
+
+use super::abortable::Abortable;
+use super::config::GatewayConfig;
+use super::gateway::{lock, Job, Shared, ToMachine};
+use super::handshake::{machine_error_kind, AbortReason, Outcome, ERROR_KIND_CYCLE};
+use crate::history::{History, RunStart};
+use crate::ipc::{EstimatorChild, IpcEstimator};
+use crate::session::Session;
+use cycles::progress::ProgressEvent;
+use cycles::results::{CycleResult, ProgramReport, Status};
+use cycles::runner::{run_program, RunOptions};
+use cycles::CyclesConfig;
+use std::collections::BTreeMap;
+use std::sync::atomic::Ordering;
+use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
+use std::time::Duration;
+
+const ESTIMATOR_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// Runs on its own thread until `Quit` (or the sender goes away). Says on `ready`
+/// whether the machine came up.
+pub fn run(
+    cfg: &GatewayConfig,
+    cycles: &CyclesConfig,
+    shared: &Shared,
+    jobs: &Receiver<ToMachine>,
+    ready: &Sender<Result<Vec<String>, String>>,
+) {
+    let opts = cfg.machine_options();
+    let mut session = match Session::open(&opts) {
+        Ok(s) => s,
+        Err(e) => {
+            let _ = ready.send(Err(format!("cannot open the machine: {e}")));
+            return;
+        }
+    };
+    let mut history = match cfg.history().map(open_history).transpose() {
+        Ok(h) => h,
+        Err(e) => {
+            let _ = ready.send(Err(e));
+            return;
+        }
+    };
+    let mut estimator = spawn_estimator(&opts.service);
+    let _ = ready.send(Ok(session.notes.clone()));
+    loop {
+        match jobs.recv_timeout(Duration::from_millis(500)) {
+            Ok(ToMachine::Run(job)) => {
+                supervise(&mut estimator, &opts.service);
+                let ctx = Measure {
+                    cfg,
+                    cycles,
+                    shared,
+                    history: history.as_mut(),
+                };
+                measure(ctx, &mut session, estimator.as_ref(), &job);
+            }
+            Ok(ToMachine::Quit) | Err(RecvTimeoutError::Disconnected) => break,
+            Err(RecvTimeoutError::Timeout) => supervise(&mut estimator, &opts.service),
+        }
+    }
+    tracing::info!("machine thread: closing the machine");
+}
+
+/// Opens the history; runs a killed gateway left "running" become "interrupted".
+fn open_history(path: &std::path::Path) -> Result<History, String> {
+    let h = History::open(path).map_err(|e| e.to_string())?;
+    let n = h.close_interrupted().map_err(|e| e.to_string())?;
+    if n > 0 {
+        tracing::warn!(
+            runs = n,
+            "history: runs interrupted by an earlier stop of the gateway"
+        );
+    }
+    tracing::info!(path = %path.display(), "history");
+    Ok(h)
+}
+
+struct Measure<'a> {
+    cfg: &'a GatewayConfig,
+    cycles: &'a CyclesConfig,
+    shared: &'a Shared,
+    history: Option<&'a mut History>,
+}
+
+fn spawn_estimator(service: &str) -> Option<EstimatorChild> {
+    match EstimatorChild::spawn(service, ESTIMATOR_TIMEOUT) {
+        Ok(c) => {
+            tracing::info!(pid = c.id(), service, "estimator process started");
+            Some(c)
+        }
+        Err(e) => {
+            tracing::error!(
+                "cannot start the estimator process: {e}; cycle 451 computes in the gateway"
+            );
+            None
+        }
+    }
+}
+
+/// Restarts the estimator process when it has died.
+fn supervise(estimator: &mut Option<EstimatorChild>, service: &str) {
+    let dead = match estimator.as_mut().map(EstimatorChild::try_wait) {
+        Some(Ok(None)) => false,
+        Some(Ok(Some(status))) => {
+            tracing::warn!("estimator process exited ({status}); restarting it");
+            true
+        }
+        Some(Err(e)) => {
+            tracing::warn!("estimator process: {e}; restarting it");
+            true
+        }
+        None => true,
+    };
+    if dead {
+        *estimator = None;
+        *estimator = spawn_estimator(service);
+    }
+}
+
+fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChild>, job: &Job) {
+    let Measure {
+        cfg,
+        cycles,
+        shared,
+        history,
+    } = ctx;
+    let program_path = job.program.path.clone().unwrap_or_default();
+    let record = history.as_deref().and_then(|h| {
+        h.begin(&RunStart {
+            machine: &cycles.machine.name,
+            source: "serve",
+            request_seq: Some(job.seq),
+            program_number: Some(job.number),
+            program: &program_path,
+            max_modification: Some(cycles.parameters.max_modification),
+        })
+        .map_err(|e| tracing::error!("{e}"))
+        .ok()
+    });
+    let total = job.program.cycles().count().max(1);
+    let (mut started, mut points) = (0usize, 0u16);
+    let mut progress = |ev: ProgressEvent| {
+        match ev {
+            ProgressEvent::CycleStarted { block, cycle, .. } => {
+                started += 1;
+                tracing::info!(block, cycle, "cycle started");
+            }
+            ProgressEvent::Contact { .. } => points = points.saturating_add(1),
+            ProgressEvent::MeasuringLog { path, .. } => {
+                tracing::info!(path = %path.display(), "measuring log written");
+            }
+            _ => return,
+        }
+        let permille = (started.saturating_sub(1) * 1000 / total) as u16;
+        lock(shared).progress(permille, points);
+    };
+    let confirm_all = job.confirm;
+    let mut confirm = |text: &str| {
+        tracing::info!(confirmed = confirm_all, "confirmation asked: {text}");
+        confirm_all
+    };
+    let out_dir = cfg
+        .programs
+        .out
+        .clone()
+        .unwrap_or_else(|| cfg.programs.folder.clone());
+    let mut opts = RunOptions {
+        out_dir,
+        confirm: &mut confirm,
+        progress: &mut progress,
+        kinematics: cfg.machine.kinematics.clone(),
+        estimator: None,
+    };
+    let mut ipc = estimator.map(|e| IpcEstimator {
+        client: e.client(),
+        timeout: ESTIMATOR_TIMEOUT,
+    });
+    if let Some(e) = ipc.as_mut() {
+        opts.estimator = Some(e);
+    }
+    let abort = lock(shared).abort.clone();
+    let mut machine = Abortable {
+        inner: &mut *session.machine,
+        abort: abort.clone(),
+        last_error: None,
+    };
+    let report = run_program(&job.program, &mut machine, cycles, &mut opts);
+    let outcome = match AbortReason::from_u8(abort.load(Ordering::Acquire)) {
+        Some(r) => Outcome::Aborted(r),
+        None if report.completed() => Outcome::Done,
+        None => match machine.last_error {
+            Some((kind, code)) => Outcome::Error {
+                kind: machine_error_kind(kind),
+                code: code.unwrap_or(0),
+            },
+            None => Outcome::Error {
+                kind: ERROR_KIND_CYCLE,
+                code: 0,
+            },
+        },
+    };
+    let (cycle, values) = last_results(&report);
+    tracing::info!(
+        seq = job.seq,
+        program = job.number,
+        outcome = ?outcome,
+        stopped = report.stopped.as_deref().unwrap_or(""),
+        "measurement finished"
+    );
+    if let (Some(h), Some(id)) = (history, record) {
+        let status = match outcome {
+            Outcome::Done => "done",
+            Outcome::Error { .. } => "error",
+            Outcome::Aborted(_) => "aborted",
+        };
+        if let Err(e) = h.finish(id, status, &report) {
+            tracing::error!("{e}");
+        }
+    }
+    lock(shared).finish(outcome, cycle, &values);
+}
+
+/// The results the registers show: the last cycle's Q parameters, and for 451 the
+/// errors before and after by ISO name.
+pub fn last_results(report: &ProgramReport) -> (u16, BTreeMap<String, f64>) {
+    let Some(last) = report.cycles.iter().rev().find(|c| c.status == Status::Ok) else {
+        return (0, BTreeMap::new());
+    };
+    (last.cycle, result_values(last))
+}
+
+pub fn result_values(c: &CycleResult) -> BTreeMap<String, f64> {
+    let mut v = c.q.clone();
+    if let Some(k) = &c.kinematics {
+        for (name, e) in &k.errors_before {
+            v.insert(format!("before.{name}"), *e);
+        }
+        for (name, e) in &k.errors_after {
+            v.insert(format!("after.{name}"), *e);
+        }
+    }
+    v
+}

@@ -1,0 +1,208 @@
+"""A machine PLC playing against `probebridge serve`, written from the README's
+"Gateway service" register table. Usage: plc.py HOST PORT SCENARIO [ARGS]; prints one
+JSON object on stdout; exits 1 with the failed check on stderr."""
+
+import json
+import socket
+import struct
+import sys
+import time
+
+from pymodbus.client import ModbusTcpClient
+
+REQ, SEQ, PROGRAM, FLAGS, PARAMS, HEARTBEAT = 0, 1, 2, 3, 4, 20
+ACK_SEQ, ACK_CODE, REASON, STATE, BITS, PROGRESS, ERR_KIND, ERR_CODE, POINT = range(32, 41)
+RES_HEAD, RES_REAL, RES_DINT, RES_TAIL = 64, 65, 197, 329
+START, ABORT, ACK = 1, 2, 3
+IDLE, BUSY, DONE, ERROR, ABORTED = range(5)
+NAMES = (
+    [f"Q{n}" for n in range(141, 176)]
+    + ["Q183"]
+    + [f"{w}.{n}" for w in ("before", "after") for n in
+       ("EY0A EZ0A EB0A EC0A EA0A EZ0B EX0B EC0B EA0B EB0B EX0C EY0C EA0C EB0C EC0C".split())]
+)
+TIMEOUT = 180.0
+
+
+def check(cond, what):
+    if not cond:
+        print(f"FAILED: {what}", file=sys.stderr)
+        sys.exit(1)
+
+
+class Plc:
+    def __init__(self, host, port):
+        self.c = ModbusTcpClient(host, port=port)
+        check(self.c.connect(), "connect")
+        self.seq = 0
+        self.hb = 0
+
+    def read(self, addr, count):
+        r = self.c.read_holding_registers(addr, count=count)
+        check(not r.isError(), f"read {addr}+{count}: {r}")
+        return r.registers
+
+    def beat(self):
+        self.hb = (self.hb + 1) & 0xFFFF
+        r = self.c.write_register(HEARTBEAT, self.hb)
+        check(not r.isError(), f"heartbeat write: {r}")
+
+    def request(self, code, program=0, flags=0):
+        self.seq = self.seq % 65535 + 1
+        self.hb = (self.hb + 1) & 0xFFFF
+        block = [code, self.seq, program, flags] + [0] * 16 + [self.hb]
+        r = self.c.write_registers(REQ, block)
+        check(not r.isError(), f"request write: {r}")
+        st = self.read(ACK_SEQ, 9)
+        check(st[0] == self.seq, f"acknowledge of seq {self.seq}: {st}")
+        return st
+
+    def state(self):
+        return self.read(ACK_SEQ, 9)
+
+    def wait(self, pred, beat=True):
+        deadline = time.monotonic() + TIMEOUT
+        while time.monotonic() < deadline:
+            if beat:
+                self.beat()
+            st = self.state()
+            if pred(st):
+                return st
+        check(False, "timed out waiting")
+
+    def results(self, seq):
+        regs = self.read(64, 125) + self.read(189, 125) + self.read(314, 16)
+        head, tail = regs[0], regs[RES_TAIL - 64]
+        check(head == tail == seq, f"result sequence {head}/{tail} for request {seq}")
+        real, dint = {}, {}
+        for i, name in enumerate(NAMES):
+            a = RES_REAL - 64 + 2 * i
+            f = struct.unpack(">f", struct.pack(">HH", regs[a], regs[a + 1]))[0]
+            if f == f:
+                real[name] = f
+            d = RES_DINT - 64 + 2 * i
+            v = struct.unpack(">i", struct.pack(">HH", regs[d], regs[d + 1]))[0]
+            if v != -(2 ** 31):
+                dint[name] = v
+        return real, dint
+
+
+def run(plc, program):
+    st = plc.request(START, program, flags=1)
+    check(st[1] == START, f"start accepted: {st}")
+    seq = plc.seq
+    st = plc.wait(lambda s: s[3] != BUSY)
+    check(st[3] == DONE, f"program {program} done: {st}")
+    check(st[4] & 0b100100 == 0b100100, f"done and results-valid bits: {st[4]:#x}")
+    real, dint = plc.results(seq)
+    cycle = plc.read(43, 1)[0]
+    return {"cycle": cycle, "real": real, "dint": dint}
+
+
+def busy_abort(plc, program, other):
+    st = plc.request(START, program, flags=1)
+    check(st[1] == START, f"start accepted: {st}")
+    start_seq = plc.seq
+    plc.wait(lambda s: s[3] == BUSY and s[8] >= 1)
+    st = plc.request(START, other)
+    check(st[1] == START | 0x8000 and st[2] == 1, f"start while busy refused (busy): {st}")
+    st = plc.request(ABORT)
+    check(st[1] == ABORT, f"abort accepted: {st}")
+    st = plc.wait(lambda s: s[3] != BUSY)
+    check(st[3] == ABORTED and st[6] == 20, f"aborted by request: {st}")
+    check(st[4] & 0b100100 == 0, f"neither done nor results valid: {st[4]:#x}")
+    head, tail = plc.read(RES_HEAD, 1)[0], plc.read(RES_TAIL, 1)[0]
+    check(head == tail == start_seq, "result sequence of the aborted run")
+    return {"aborted_at_point": st[8]}
+
+
+def ack_error(plc, failing, good):
+    st = plc.request(START, failing, flags=1)
+    check(st[1] == START, f"start accepted: {st}")
+    st = plc.wait(lambda s: s[3] != BUSY)
+    check(st[3] == ERROR and st[6] != 0, f"program {failing} ends in error: {st}")
+    check(st[4] & 0b1000 and not st[4] & 0b1, f"error bit, not ready: {st[4]:#x}")
+    st = plc.request(START, good)
+    check(st[1] == START | 0x8000 and st[2] == 5, f"start refused until acknowledged: {st}")
+    st = plc.request(ACK)
+    check(st[1] == ACK and st[3] == IDLE and st[6] == 0, f"acknowledged: {st}")
+    check(st[4] & 0b1, f"ready after acknowledge: {st[4]:#x}")
+    st = plc.request(START, 999)
+    check(st[1] == START | 0x8000 and st[2] == 3, f"unknown program refused: {st}")
+    return {"error_kind": 0}
+
+
+def raw_read(host, port, addr, count):
+    """FC3 as bytes on a socket of its own; the exception code, or None."""
+    with socket.create_connection((host, port), timeout=10) as s:
+        s.sendall(struct.pack(">HHHBBHH", 1, 0, 6, 1, 3, addr, count))
+        head = s.recv(7)
+        check(len(head) == 7, "MBAP header")
+        body = s.recv(struct.unpack(">H", head[4:6])[0] - 1)
+        return body[1] if body[0] == 0x83 else None
+
+
+def second_connection(plc, host, port):
+    plc.beat()  # the first connection owns the writes
+    other = ModbusTcpClient(host, port=port)
+    check(other.connect(), "second connect")
+    r = other.write_register(HEARTBEAT, 7)
+    check(r.isError() and r.exception_code == 6, f"second writer: ServerDeviceBusy: {r}")
+    r = other.read_holding_registers(ACK_SEQ, count=9)
+    check(not r.isError(), "second connection reads")
+    other.close()
+    r = plc.c.write_register(STATE, 1)
+    check(r.isError() and r.exception_code == 2, f"read-only write: {r}")
+    r = plc.c.write_register(25, 1)
+    check(r.isError() and r.exception_code == 2, f"write outside the map: {r}")
+    r = plc.c.read_holding_registers(21, count=1)
+    check(r.isError() and r.exception_code == 2, f"read outside the map: {r}")
+    # pymodbus refuses such counts itself: send the frames by hand.
+    for count in (0, 126):
+        code = raw_read(host, port, 64, count)
+        check(code == 3, f"read of {count} registers: exception {code}")
+    return {}
+
+
+def heartbeat_loss(plc, program):
+    st = plc.request(START, program, flags=1)
+    check(st[1] == START, f"start accepted: {st}")
+    plc.wait(lambda s: s[3] == BUSY and s[8] >= 1)
+    st = plc.wait(lambda s: s[3] != BUSY, beat=False)
+    check(st[3] == ABORTED and st[6] == 21, f"aborted for the PLC heartbeat: {st}")
+    return {}
+
+
+def start_busy(plc, program):
+    st = plc.request(START, program, flags=1)
+    check(st[1] == START, f"start accepted: {st}")
+    plc.wait(lambda s: s[3] == BUSY and s[8] >= 1)
+    return {}
+
+
+def main():
+    host, port, scenario = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+    args = [int(a) for a in sys.argv[4:]]
+    plc = Plc(host, port)
+    if scenario == "run":
+        out = run(plc, args[0])
+    elif scenario == "busy_abort":
+        out = busy_abort(plc, args[0], args[1])
+    elif scenario == "ack_error":
+        out = ack_error(plc, args[0], args[1])
+    elif scenario == "second_connection":
+        out = second_connection(plc, host, port)
+    elif scenario == "state":
+        st = plc.state()
+        out = {"state": st[3], "bits": st[4]}
+    elif scenario == "start_busy":
+        out = start_busy(plc, args[0])
+    elif scenario == "heartbeat_loss":
+        out = heartbeat_loss(plc, args[0])
+    else:
+        check(False, f"unknown scenario {scenario}")
+    print(json.dumps(out))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,431 @@
+//! `probebridge serve` on the simulator with a pymodbus "PLC" (`tests/gateway/plc.py`,
+//! written from the README's register table): programs 431, 444 and 451 started by
+//! number give the results of `probebridge run --json` to the registers' precision;
+//! refusal while busy, abort mid-cycle, acknowledge after an error, a second
+//! connection refused, PLC heartbeat loss, SIGTERM mid-cycle.
+//!
+//! Python with pymodbus: `PROBEBRIDGE_PYTHON`, else `/opt/probebridge-venv/bin/python`
+//! (`scripts/install-test-peers`). Skipped with a line saying why where neither is
+//! there, never in CI.
+
+mod common;
+
+use common::*;
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+fn python() -> Option<PathBuf> {
+    let p = std::env::var_os("PROBEBRIDGE_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from("/opt/probebridge-venv/bin/python"));
+    let ok = Command::new(&p)
+        .args(["-c", "import pymodbus"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if ok {
+        return Some(p);
+    }
+    assert!(
+        std::env::var_os("CI").is_none(),
+        "{}: no pymodbus in CI; scripts/install-test-peers should have made the venv",
+        p.display()
+    );
+    eprintln!(
+        "SKIPPED: {} has no pymodbus (run scripts/install-test-peers)",
+        p.display()
+    );
+    None
+}
+
+/// A running `probebridge serve`; SIGTERM on drop.
+struct Serve {
+    child: Child,
+    port: u16,
+    dir: PathBuf,
+}
+
+impl Serve {
+    /// Serves `scenario` with the programs `(number, shipped program)` in a folder of
+    /// its own; `plc` adds keys to the `[plc]` section.
+    fn start(name: &str, scenario: &str, programs: &[(u16, &str)], plc: &str) -> Self {
+        let dir = tmpdir(&format!("serve-{name}"));
+        Self::start_in(dir, name, scenario, programs, plc, None)
+    }
+
+    /// Starts in `dir` (again, after a restart: same configuration and history).
+    fn start_in(
+        dir: PathBuf,
+        name: &str,
+        scenario: &str,
+        programs: &[(u16, &str)],
+        plc: &str,
+        notify_socket: Option<&Path>,
+    ) -> Self {
+        let folder = dir.join("programs");
+        std::fs::create_dir_all(&folder).unwrap();
+        for (n, p) in programs {
+            std::fs::copy(
+                configs().join("programs").join(p),
+                folder.join(format!("{n}.h")),
+            )
+            .unwrap();
+        }
+        let scenario = configs().join("scenarios").join(scenario);
+        let config = dir.join("gateway.toml");
+        std::fs::write(
+            &config,
+            format!(
+                "[machine]\nscenario = {:?}\nservice = \"pbserve-{name}-{}\"\nkinematics = {:?}\n\
+                 [programs]\nfolder = \"programs\"\n[history]\nsqlite = {:?}\n\
+                 [plc]\nlisten = \"127.0.0.1:0\"\n{plc}",
+                scenario.to_str().unwrap(),
+                std::process::id(),
+                dir.join("kinematics.toml").to_str().unwrap(),
+                dir.join("history.sqlite").to_str().unwrap(),
+            ),
+        )
+        .unwrap();
+        let log = std::fs::File::create(dir.join("serve.log")).unwrap();
+        let mut cmd = bin();
+        if let Some(socket) = notify_socket {
+            cmd.env("NOTIFY_SOCKET", socket)
+                .env("WATCHDOG_USEC", "200000");
+        }
+        let mut child = cmd
+            .args(["serve", "--config", config.to_str().unwrap()])
+            .stdout(Stdio::piped())
+            .stderr(log)
+            .spawn()
+            .unwrap();
+        // The service says its bound address once the machine is up.
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let Some(addr) = line.trim().strip_prefix("probebridge serve: listening on ") else {
+            let _ = child.kill();
+            let mut log = String::new();
+            let _ =
+                std::fs::File::open(dir.join("serve.log")).map(|mut f| f.read_to_string(&mut log));
+            panic!("serve did not come up: {line:?}\n{log}");
+        };
+        let port = addr.rsplit(':').next().unwrap().parse().unwrap();
+        Self { child, port, dir }
+    }
+
+    fn plc(&self, py: &Path, args: &[&str]) -> serde_json::Value {
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/gateway/plc.py");
+        let out = Command::new(py)
+            .arg(script)
+            .args(["127.0.0.1", &self.port.to_string()])
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "PLC {args:?}: {}\nserve log:\n{}",
+            String::from_utf8_lossy(&out.stderr),
+            self.log()
+        );
+        serde_json::from_slice(&out.stdout).unwrap()
+    }
+
+    /// `probebridge history --db ... --json`.
+    fn history(&self) -> Vec<serde_json::Value> {
+        history_json(&self.dir.join("history.sqlite"))
+    }
+
+    fn log(&self) -> String {
+        std::fs::read_to_string(self.dir.join("serve.log")).unwrap_or_default()
+    }
+
+    /// SIGTERM; the exit status.
+    fn stop(&mut self) -> std::process::ExitStatus {
+        // SAFETY: kill(2) on our own child's pid.
+        unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
+        self.child.wait().unwrap()
+    }
+}
+
+impl Drop for Serve {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            self.stop();
+        }
+    }
+}
+
+fn history_json(db: &Path) -> Vec<serde_json::Value> {
+    let out = run(bin()
+        .args(["history", "--db", db.to_str().unwrap(), "--json"])
+        .args(["--since", "2000-01-01"]));
+    assert!(out.status.success());
+    serde_json::from_slice::<serde_json::Value>(&out.stdout)
+        .unwrap()
+        .as_array()
+        .unwrap()
+        .clone()
+}
+
+/// The last successful cycle of `probebridge run --json` of the same program.
+fn run_json(program: &str, scenario: &str, name: &str) -> serde_json::Value {
+    let dir = tmpdir(&format!("serve-ref-{name}"));
+    let kin = dir.join("kinematics.toml");
+    let db = dir.join("history.sqlite");
+    let (out, json) = run_program(
+        &configs().join("programs").join(program),
+        &configs().join("scenarios").join(scenario),
+        &dir,
+        &[
+            "--yes",
+            "--kinematics",
+            kin.to_str().unwrap(),
+            "--history",
+            db.to_str().unwrap(),
+        ],
+    );
+    assert!(out.status.success());
+    // `run --history` records the run as `serve` does.
+    let h = history_json(&db);
+    assert_eq!(h.len(), 1);
+    assert_eq!(
+        (h[0]["source"].as_str(), h[0]["status"].as_str()),
+        (Some("run"), Some("done"))
+    );
+    let json = json.unwrap();
+    json["cycles"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .rev()
+        .find(|c| c["status"] == "ok")
+        .unwrap()
+        .clone()
+}
+
+/// Every Q result (and 451's errors by ISO name) equals the run's, to float32's
+/// precision and to the DINT's scale of 1e4.
+fn assert_same_results(plc: &serde_json::Value, run: &serde_json::Value) {
+    let mut expected: Vec<(String, f64)> = run["q"]
+        .as_object()
+        .unwrap()
+        .iter()
+        .map(|(k, v)| (k.clone(), v.as_f64().unwrap()))
+        .collect();
+    if let Some(k) = run.get("kinematics") {
+        for when in ["before", "after"] {
+            for (n, v) in k[format!("errors_{when}")].as_object().unwrap() {
+                expected.push((format!("{when}.{n}"), v.as_f64().unwrap()));
+            }
+        }
+    }
+    assert_eq!(plc["cycle"], run["cycle"]);
+    assert!(!expected.is_empty());
+    for (name, v) in &expected {
+        let real = plc["real"][name]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{name} missing"));
+        assert!(
+            (real - v).abs() <= 1e-6 * v.abs().max(1.0),
+            "{name}: register {real}, run {v}"
+        );
+        let dint = plc["dint"][name].as_i64().unwrap();
+        assert!(
+            (dint as f64 - v * 1e4).abs() <= 0.5 + 1e-6,
+            "{name}: DINT {dint}, run {v}"
+        );
+    }
+    assert_eq!(
+        plc["real"].as_object().unwrap().len(),
+        expected.len(),
+        "no extra results: {plc}"
+    );
+}
+
+#[test]
+fn programs_started_by_number_give_the_results_of_run() {
+    let Some(py) = python() else { return };
+    for (number, program, scenario) in [
+        (431, "431-plane.h", "tilted-plane.toml"),
+        (444, "444-freeform.h", "freeform.toml"),
+        (451, "451-check.h", "demo-sphere.toml"),
+    ] {
+        let name = format!("results-{number}");
+        let serve = Serve::start(&name, scenario, &[(number, program)], "");
+        let got = serve.plc(&py, &["run", &number.to_string()]);
+        let want = run_json(program, scenario, &name);
+        assert_same_results(&got, &want);
+        // The history has the run: request, program, status, every Q result of every
+        // cycle, 451's errors by ISO name, the measuring logs.
+        let h = serve.history();
+        assert_eq!(h.len(), 1, "{h:?}");
+        let r = &h[0];
+        assert_eq!(r["status"], "done");
+        assert_eq!(r["program_number"], number);
+        assert_eq!(r["request_seq"], 1);
+        assert!(!r["protocols"].as_array().unwrap().is_empty(), "{r}");
+        let results = r["results"].as_array().unwrap();
+        for (q, v) in want["q"].as_object().unwrap() {
+            assert!(
+                results
+                    .iter()
+                    .any(|x| x["name"] == *q && x["value"] == *v && x["cycle"] == want["cycle"]),
+                "{q} in the history"
+            );
+        }
+        if number == 451 {
+            let iso = r["iso_errors"].as_array().unwrap();
+            assert_eq!(iso.len(), 10, "A and C, 5 each: {iso:?}");
+            let ey0c = iso.iter().find(|e| e["name"] == "EY0C").unwrap();
+            assert_eq!(
+                ey0c["after"], want["kinematics"]["errors_after"]["EY0C"],
+                "{ey0c}"
+            );
+        }
+    }
+}
+
+#[test]
+fn start_while_busy_is_refused_and_abort_stops_mid_cycle() {
+    let Some(py) = python() else { return };
+    let serve = Serve::start(
+        "busy",
+        "demo-sphere.toml",
+        &[(451, "451-check.h"), (431, "431-plane.h")],
+        "",
+    );
+    let out = serve.plc(&py, &["busy_abort", "451", "431"]);
+    assert!(out["aborted_at_point"].as_u64().unwrap() < 42, "{out}");
+    assert!(serve.log().contains("Aborted(Request)"), "{}", serve.log());
+    let h = serve.history();
+    assert_eq!(h.len(), 1);
+    assert_eq!(h[0]["status"], "aborted");
+}
+
+#[test]
+fn an_error_must_be_acknowledged() {
+    let Some(py) = python() else { return };
+    // The freeform program probes where demo-sphere has nothing: the probe does not
+    // trigger.
+    let serve = Serve::start(
+        "ackerr",
+        "demo-sphere.toml",
+        &[(444, "444-freeform.h"), (451, "451-check.h")],
+        "",
+    );
+    serve.plc(&py, &["ack_error", "444", "451"]);
+}
+
+#[test]
+fn a_second_connection_cannot_write_and_the_map_is_guarded() {
+    let Some(py) = python() else { return };
+    let serve = Serve::start("second", "demo-sphere.toml", &[], "");
+    serve.plc(&py, &["second_connection"]);
+}
+
+#[test]
+fn plc_heartbeat_loss_aborts_the_motion() {
+    let Some(py) = python() else { return };
+    let serve = Serve::start(
+        "heartbeat",
+        "demo-sphere.toml",
+        &[(451, "451-check.h")],
+        "heartbeat_timeout_ms = 300\n",
+    );
+    serve.plc(&py, &["heartbeat_loss", "451"]);
+    assert!(
+        serve.log().contains("PLC heartbeat stale"),
+        "{}",
+        serve.log()
+    );
+}
+
+#[test]
+fn sigterm_mid_cycle_aborts_and_exits_0() {
+    let Some(py) = python() else { return };
+    let mut serve = Serve::start(
+        "sigterm",
+        "demo-sphere.toml",
+        &[(451, "451-check.h")],
+        "heartbeat_timeout_ms = 0\n",
+    );
+    serve.plc(&py, &["start_busy", "451"]);
+    let status = serve.stop();
+    assert_eq!(status.code(), Some(0), "{}", serve.log());
+    let log = serve.log();
+    assert!(log.contains("Aborted(Shutdown)"), "{log}");
+    assert!(
+        log.contains("state=\"aborted\"") || log.contains("state=aborted"),
+        "{log}"
+    );
+    assert_eq!(serve.history()[0]["status"], "aborted");
+}
+
+#[test]
+fn kill_9_mid_451_leaves_the_run_interrupted_and_restarts_idle() {
+    let Some(py) = python() else { return };
+    let programs = [(451, "451-check.h")];
+    let plc = "heartbeat_timeout_ms = 0\n";
+    let mut serve = Serve::start("kill9", "demo-sphere.toml", &programs, plc);
+    serve.plc(&py, &["start_busy", "451"]);
+    serve.child.kill().unwrap();
+    serve.child.wait().unwrap();
+    let dir = serve.dir.clone();
+    drop(serve);
+    let serve = Serve::start_in(dir, "kill9", "demo-sphere.toml", &programs, plc, None);
+    let st = serve.plc(&py, &["state"]);
+    assert_eq!(st["state"], 0, "idle after the restart, never done: {st}");
+    let h = serve.history();
+    assert_eq!(h.len(), 1);
+    assert_eq!(h[0]["status"], "interrupted");
+    assert!(h[0]["results"].as_array().unwrap().is_empty());
+}
+
+#[test]
+fn a_bad_config_names_the_key_and_nothing_starts() {
+    let dir = tmpdir("serve-badcfg");
+    let config = dir.join("gateway.toml");
+    std::fs::write(
+        &config,
+        "[machine]\nscenario = \"x.toml\"\n[programs]\nfolder = \".\"\n[history]\nenabled = false\n[plc]\nword_order = \"BADC\"\n",
+    )
+    .unwrap();
+    let out = run(bin().args(["serve", "--config", config.to_str().unwrap()]));
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("gateway.toml") && err.contains("plc.word_order"),
+        "{err}"
+    );
+}
+
+#[test]
+fn systemd_sees_ready_watchdog_and_status() {
+    let Some(py) = python() else { return };
+    let dir = tmpdir("serve-notify");
+    let socket = dir.join("notify.sock");
+    let listener = std::os::unix::net::UnixDatagram::bind(&socket).unwrap();
+    listener
+        .set_read_timeout(Some(std::time::Duration::from_secs(60)))
+        .unwrap();
+    let serve = Serve::start_in(
+        dir,
+        "notify",
+        "tilted-plane.toml",
+        &[(431, "431-plane.h")],
+        "",
+        Some(&socket),
+    );
+    let mut seen = String::new();
+    let mut buf = [0u8; 512];
+    while !(seen.contains("READY=1") && seen.contains("WATCHDOG=1")) {
+        let n = listener.recv(&mut buf).expect("a notification within 60 s");
+        seen.push_str(&String::from_utf8_lossy(&buf[..n]));
+        seen.push('\n');
+    }
+    assert!(seen.contains("STATUS="), "{seen}");
+    // And a PLC gets results from it.
+    let got = serve.plc(&py, &["run", "431"]);
+    assert_eq!(got["cycle"], 431);
+}
