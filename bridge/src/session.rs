@@ -155,7 +155,19 @@ impl Session {
                             answer_timeout: Duration::from_millis(200),
                         }
                     };
-                    let sim = SimRunner::spawn(machine, bus.endpoint());
+                    // In real time the simulated drives stand in for hardware, which a
+                    // loaded gateway never starves: just below the real-time loop (as
+                    // `bench trigger` runs them), so their heartbeats keep time.
+                    let drives_priority = if opts.realtime {
+                        MasterOptions::default().rt_priority - 1
+                    } else {
+                        0
+                    };
+                    let sim = SimRunner::spawn_with_init(machine, bus.endpoint(), move || {
+                        if drives_priority > 0 {
+                            hal::rt::set_fifo_priority(drives_priority);
+                        }
+                    });
                     (Box::new(bus.endpoint()), Some(sim), pacing)
                 }
             };
