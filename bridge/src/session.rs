@@ -89,6 +89,11 @@ pub fn cycles_config(
         for p in &mut c.probes {
             p.radius = sc.probe_table_radius();
         }
+        if let Some(n) = sc.preset {
+            c.start_with_preset(n).map_err(|e| {
+                SessionError::Scenario(format!("{}: preset: {e}", sc.path.display()))
+            })?;
+        }
     }
     Ok(c)
 }
