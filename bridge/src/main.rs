@@ -106,6 +106,10 @@ enum Cmd {
         /// <machine>.kinematics.toml beside the machine configuration.
         #[arg(long)]
         kinematics: Option<PathBuf>,
+        /// Preset table of the machine (cycles 247, 451); default:
+        /// <machine>.presets.toml beside the machine configuration.
+        #[arg(long)]
+        presets: Option<PathBuf>,
     },
     /// Parse and validate an NC program; nothing moves. Exit 0, or 2 with every error.
     Check {
@@ -116,6 +120,10 @@ enum Cmd {
         /// <machine>.kinematics.toml beside the machine configuration.
         #[arg(long)]
         kinematics: Option<PathBuf>,
+        /// Preset table the program's cycle 247 is checked against; default:
+        /// <machine>.presets.toml beside the machine configuration.
+        #[arg(long)]
+        presets: Option<PathBuf>,
     },
     /// Run the simulated drives of a scenario alone on a SocketCAN interface, or the
     /// simulated PLC on Modbus TCP (--modbus HOST:PORT) or RTU (--modbus-rtu DEVICE).
@@ -194,6 +202,7 @@ fn main() -> ExitCode {
             json,
             yes,
             kinematics,
+            presets,
         } => commands::run::run(&commands::run::RunArgs {
             program,
             machine: machine.options(),
@@ -201,12 +210,14 @@ fn main() -> ExitCode {
             json,
             yes,
             kinematics,
+            presets,
         }),
         Cmd::Check {
             program,
             machine,
             kinematics,
-        } => commands::check::run(&program, &machine.options(), kinematics),
+            presets,
+        } => commands::check::run(&program, &machine.options(), kinematics, presets.as_deref()),
         Cmd::Demo { machine } => commands::demo::run(&machine.options()).map(|()| 0),
         Cmd::Sim {
             scenario,
