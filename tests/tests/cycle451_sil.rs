@@ -739,3 +739,64 @@ fn q431_3_writes_the_preset_row_at_the_sphere_centre() {
     }
     assert_eq!(spheres_measured(&v), 4);
 }
+
+/// The shipped examples of presets and cycle 450 run on demo-sphere.toml.
+#[test]
+fn the_preset_and_save_restore_examples_run() {
+    let sc = demo_sphere();
+    let read =
+        |name: &str| std::fs::read_to_string(configs_dir().join("programs").join(name)).unwrap();
+    // The shipped preset table (row 1: the sphere centre), in a temporary copy.
+    let mut cfg = cycles_config(&sc);
+    let shipped = configs_dir().join("machines/table-ac.presets.toml");
+    let path = cfg.presets.path.clone();
+    cfg.presets = cycles::preset_table::PresetTable::load(&shipped, &cfg.machine).unwrap();
+    cfg.presets.path = path;
+
+    // Q431 = 0 after cycle 247: from 100 mm away, Q147..Q149 relative to preset 1.
+    let dir = temp_dir("example-247");
+    let r = run_with(&read("451-preset-247.h"), &sc, &cfg, &dir, true);
+    ok_cycle(&r);
+    let v = json(&r);
+    for q in ["Q147", "Q148", "Q149"] {
+        assert!(
+            v["q"][q].as_f64().unwrap().abs() < 1e-6,
+            "{q}: {}",
+            v["q"][q]
+        );
+    }
+    assert!(!cfg.presets.path.exists(), "mode 0 writes no preset");
+
+    // Q431 = 3, mode 1: the active row (0) is written with the sphere centre.
+    let dir = temp_dir("example-q431-3");
+    let r = run_with(&read("451-preset-set.h"), &sc, &cfg, &dir, true);
+    ok_cycle(&r);
+    let table = cycles::preset_table::PresetTable::load(&cfg.presets.path, &cfg.machine).unwrap();
+    assert_eq!(table.active, 0);
+    for (got, want) in table.active_row().xyz().iter().zip([50.0, -30.0, 80.0]) {
+        assert!((got - want).abs() < 1e-6, "{:?}", table.active_row());
+    }
+    assert_eq!(
+        table.row(1),
+        cfg.presets.row(1),
+        "only the active row changes"
+    );
+
+    // 450 saves, 451 mode 1 changes, 450 restores: the file as it was, byte for byte.
+    let dir = temp_dir("example-450");
+    let kin = dir.join("kinematics.toml");
+    // As probebridge writes it (a restore writes that form).
+    let before = cycles::kinematics_file::ActiveKinematics {
+        machine: "table-ac".into(),
+        errors: [("EB0A".to_string(), 0.001), ("EX0C".to_string(), 0.002)].into(),
+        path: kin.clone(),
+    };
+    before.write().unwrap();
+    let text = std::fs::read_to_string(&kin).unwrap();
+    let r = run_with(&read("450-save-restore.h"), &sc, &cfg, &dir, true);
+    assert!(r.report.completed(), "{:?}", r.report.stopped);
+    assert_eq!(r.report.cycles.len(), 3);
+    let k451 = r.report.cycles[1].kinematics.as_ref().unwrap();
+    assert!(k451.written, "451 changed the kinematics in between");
+    assert_eq!(std::fs::read_to_string(&kin).unwrap(), text);
+}
