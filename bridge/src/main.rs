@@ -109,6 +109,10 @@ enum Cmd {
         /// Record the run in this history file (SQLite, as `serve` keeps it).
         #[arg(long, value_name = "FILE")]
         history: Option<PathBuf>,
+        /// Preset table of the machine (cycles 247, 451); default:
+        /// <machine>.presets.toml beside the machine configuration.
+        #[arg(long)]
+        presets: Option<PathBuf>,
     },
     /// Parse and validate an NC program; nothing moves. Exit 0, or 2 with every error.
     Check {
@@ -119,6 +123,10 @@ enum Cmd {
         /// <machine>.kinematics.toml beside the machine configuration.
         #[arg(long)]
         kinematics: Option<PathBuf>,
+        /// Preset table the program's cycle 247 is checked against; default:
+        /// <machine>.presets.toml beside the machine configuration.
+        #[arg(long)]
+        presets: Option<PathBuf>,
     },
     /// Run the simulated drives of a scenario alone on a SocketCAN interface, or the
     /// simulated PLC on Modbus TCP (--modbus HOST:PORT) or RTU (--modbus-rtu DEVICE).
@@ -227,6 +235,7 @@ fn main() -> ExitCode {
             yes,
             kinematics,
             history,
+            presets,
         } => commands::run::run(&commands::run::RunArgs {
             program,
             machine: machine.options(),
@@ -235,12 +244,14 @@ fn main() -> ExitCode {
             yes,
             kinematics,
             history,
+            presets,
         }),
         Cmd::Check {
             program,
             machine,
             kinematics,
-        } => commands::check::run(&program, &machine.options(), kinematics),
+            presets,
+        } => commands::check::run(&program, &machine.options(), kinematics, presets.as_deref()),
         Cmd::Demo { machine } => commands::demo::run(&machine.options()).map(|()| 0),
         Cmd::Sim {
             scenario,

@@ -84,10 +84,30 @@ pub fn cycles_config(
     cfg: &MachineConfig,
     scenario: Option<&Scenario>,
 ) -> Result<CyclesConfig, SessionError> {
+    cycles_config_with_presets(cfg, scenario, None)
+}
+
+/// As [`cycles_config`], with the preset table read from `presets` when given (else
+/// the one beside the machine configuration); the scenario's `preset` is its active
+/// row.
+pub fn cycles_config_with_presets(
+    cfg: &MachineConfig,
+    scenario: Option<&Scenario>,
+    presets: Option<&std::path::Path>,
+) -> Result<CyclesConfig, SessionError> {
     let mut c = CyclesConfig::of(cfg.clone()).map_err(|e| SessionError::Scenario(e.to_string()))?;
+    if let Some(path) = presets {
+        c.presets = cycles::preset_table::PresetTable::load(path, cfg)
+            .map_err(|e| SessionError::Scenario(e.to_string()))?;
+    }
     if let Some(sc) = scenario {
         for p in &mut c.probes {
             p.radius = sc.probe_table_radius();
+        }
+        if let Some(n) = sc.preset {
+            c.start_with_preset(n).map_err(|e| {
+                SessionError::Scenario(format!("{}: preset: {e}", sc.path.display()))
+            })?;
         }
     }
     Ok(c)

@@ -63,7 +63,7 @@ const PROGRAM: &str = "0 BEGIN PGM K MM
     Q421=+0 ~
     Q422=+5 ~
     Q423=+4 ;NO. OF PROBE POINTS ~
-    Q431=+0 ;PRESET ~
+    Q431=+1 ;PRESET ~
     Q432=+0 ;BACKLASH, ANG. RANGE
 6 END PGM K MM
 ";
@@ -164,7 +164,8 @@ fn run_451_check_program_changes_nothing() {
         c["qs"]["QS145"],
         "-1.0000000 -1.0000000 -1.0000000 -1.0000000"
     );
-    assert!((c["q"]["Q147"].as_f64().unwrap() - 50.0).abs() < 1e-3);
+    // Q431=1: the preset at the located sphere centre, the reference centre.
+    assert!(c["q"]["Q147"].as_f64().unwrap().abs() < 1e-6, "{c}");
     check_results_against_spec(c, &machine("table-ac"));
     assert!(dir.join("TCHPRAUTO.html").exists());
 }

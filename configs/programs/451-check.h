@@ -2,8 +2,8 @@
 1 ; Cycle 451 MEASURE KINEMATICS, mode 0 (check), on configs/scenarios/demo-sphere.toml:
 2 ; the calibration sphere R12.5 at X+50 Y-30 Z+80 on the A/C tilting table.
 3 ; The probe goes over the sphere, 5 mm above Q320 + SET_UP over its pole; cycle 451
-4 ; finds the sphere from there. Q431=0 keeps the preset at the table origin, so
-5 ; Q147..Q149 give the sphere centre. Mode 0 reports the dispersion and what a
+4 ; finds the sphere from there (Q431=1: the preset at its centre, not written in
+5 ; mode 0, so Q147..Q149 are 0). Mode 0 reports the dispersion and what a
 6 ; position optimisation would give, and leaves the kinematics file alone.
 7 TOOL CALL "TOUCH_PROBE" Z
 8 L Z+150 R0 FMAX
@@ -29,7 +29,7 @@
     Q421=+0        ;INCID. ANGLE C AXIS ~
     Q422=+3        ;MEAS. POINTS C AXIS ~
     Q423=+4        ;NO. OF PROBE POINTS ~
-    Q431=+0        ;PRESET ~
+    Q431=+1        ;PRESET ~
     Q432=+0        ;BACKLASH, ANG. RANGE
 12 L Z+150 R0 FMAX
 13 END PGM 451-check MM

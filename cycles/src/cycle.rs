@@ -3,6 +3,7 @@
 
 use crate::cycle_block::CycleBlock;
 use crate::cycles_config::CyclesConfig;
+use crate::datum::Datum;
 use crate::error::CycleError;
 use crate::kinematics::Estimator;
 use crate::measuring_log::probing3d::Probing3dRecord;
@@ -27,6 +28,8 @@ pub struct CycleContext<'a> {
     pub program: Option<&'a Path>,
     /// Every cycle 444 point of this run so far: TCHPR444.html lists them all.
     pub probing3d: Vec<Probing3dRecord>,
+    /// The preset table as the program changed it, and the datum shift.
+    pub datum: Datum,
 }
 
 impl CycleContext<'_> {

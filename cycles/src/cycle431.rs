@@ -130,20 +130,19 @@ fn measure<M: Machine>(
     let mut up = [0.0; 3];
     up[t] = 1.0;
     let up = Vector3::from(up);
+    // Program coordinates: relative to the active preset plus shift.
+    let origin = Vector3::from(ctx.datum.origin());
+    let safe_height = p.safe_height + origin[t];
     let starts = p
         .points
-        .map(|pt| Vector3::from(axis.to_machine(pt)) + up * approach);
+        .map(|pt| Vector3::from(axis.to_machine(pt)) + origin + up * approach);
     // Planned before anything moves: every start point must lie below the safe height.
-    if let Some((i, s)) = starts
-        .iter()
-        .enumerate()
-        .find(|(_, s)| s[t] > p.safe_height)
-    {
+    if let Some((i, s)) = starts.iter().enumerate().find(|(_, s)| s[t] > safe_height) {
         return Err(CycleError::Plan(format!(
             "Q260={} is below the start of point {} ({:.4} = nominal + R + SET_UP + Q320); nothing moved",
             p.safe_height,
             i + 1,
-            s[t]
+            s[t] - origin[t]
         )));
     }
     ctx.note(call.block, "basic rotation reset");
@@ -155,7 +154,7 @@ fn measure<M: Machine>(
         progress: &mut *ctx.progress,
     };
     let mut measured = p.points;
-    pos.safe_height(p.safe_height)?;
+    pos.safe_height(safe_height)?;
     for (i, start) in starts.iter().enumerate() {
         pos.over((*start).into())?;
         pos.to(&format!("approaching point {}", i + 1), (*start).into())?;
@@ -168,8 +167,8 @@ fn measure<M: Machine>(
         // Ball centre shifted by R along the probing direction (no 3D radius
         // compensation: on a tilted plane this is a constant offset of all three
         // points, which leaves the angles exact).
-        measured[i][2] = contact.positions.xyz()[t] - probe.radius;
-        pos.safe_height(p.safe_height)?;
+        measured[i][2] = contact.positions.xyz()[t] - probe.radius - origin[t];
+        pos.safe_height(safe_height)?;
     }
     let angles = plane_angles(measured[0].into(), measured[1].into(), measured[2].into())
         .map_err(|e| CycleError::Geometry(e.to_string()))?;

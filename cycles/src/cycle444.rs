@@ -101,7 +101,8 @@ impl MeasuringCycle for Probing3dParams {
         machine: &mut M,
         ctx: &mut CycleContext<'_>,
     ) -> Result<CycleOutput, CycleError> {
-        let (q, record) = measure(call, self, machine, &mut *ctx.progress)?;
+        let origin = Vector3::from(ctx.datum.origin());
+        let (q, record) = measure(call, self, origin, machine, &mut *ctx.progress)?;
         let stop = stop_message(self.reaction, record.status, record.deviation_3d);
         ctx.probing3d.push(record);
         let log = write_probing3d_log(ctx.out_dir, &ctx.probing3d, ctx.program).map_err(|e| {
@@ -120,6 +121,7 @@ impl MeasuringCycle for Probing3dParams {
 fn measure<M: Machine>(
     call: &CycleBlock,
     p: &Probing3dParams,
+    origin: Vector3<f64>,
     machine: &mut M,
     progress: &mut ProgressSink<'_>,
 ) -> Result<(BTreeMap<String, f64>, Probing3dRecord), CycleError> {
@@ -127,7 +129,8 @@ fn measure<M: Machine>(
     let axis = call.tool.axis;
     let n_cycle = Vector3::from(p.normal);
     let n = Vector3::from(axis.to_machine(p.normal));
-    let nominal = Vector3::from(axis.to_machine(p.nominal));
+    // Program coordinates: relative to the active preset plus shift (`origin`).
+    let nominal = Vector3::from(axis.to_machine(p.nominal)) + origin;
     let approach = probe.radius + probe.set_up + p.clearance;
     let start = nominal + n * approach;
     let max_distance = approach + probe.dist;
@@ -140,16 +143,17 @@ fn measure<M: Machine>(
         block: call.block,
         progress,
     };
-    pos.safe_height(p.safe_height)?;
+    let safe_height = p.safe_height + origin[axis.tool_index()];
+    pos.safe_height(safe_height)?;
     pos.over(start.into())?;
     pos.to("moving to the pre-position", start.into())?;
     let contact = pos.probe("probing the point", direction.into(), probe.f, max_distance)?;
     let centre = Vector3::from(contact.positions.xyz());
     // Retract from the contact by MB against the probing direction, then clear.
     pos.to("retracting", (centre + n * probe.mb).into())?;
-    pos.safe_height(p.safe_height)?;
+    pos.safe_height(safe_height)?;
 
-    let actual_m = centre - n * probe.radius;
+    let actual_m = centre - n * probe.radius - origin;
     let actual = Vector3::from(axis.to_cycle(actual_m.into()));
     let nominal_c = Vector3::from(p.nominal);
     let deviation = actual - nominal_c;

@@ -1,10 +1,12 @@
 //! A machine as the measuring cycles see it: hal's [`MachineConfig`] and, from the same
 //! TOML file, the probe table ([`crate::probe_table`]) and the cycles' machine
-//! parameters ([`crate::machine_parameters`]). hal accepts `[[probe]]` and `[cycles]`
+//! parameters ([`crate::machine_parameters`]); and the preset table beside it
+//! ([`crate::preset_table`]). hal accepts `[[probe]]` and `[cycles]`
 //! unread; they are validated here, just as strictly (unknown keys refused, errors
 //! name the file, the key and why).
 
 use crate::machine_parameters::MachineParameters;
+use crate::preset_table::PresetTable;
 use crate::probe_table::ProbeEntry;
 use hal::config::{ConfigError, MachineConfig};
 use serde::Deserialize;
@@ -17,6 +19,9 @@ pub struct CyclesConfig {
     pub probes: Vec<ProbeEntry>,
     /// `[cycles]`.
     pub parameters: MachineParameters,
+    /// `<machine>.presets.toml` beside the machine file (row 0 at the origin when
+    /// there is none); a program starts with its active row.
+    pub presets: PresetTable,
 }
 
 /// The sections of the machine TOML the cycles own; hal checks every other key.
@@ -69,11 +74,19 @@ impl CyclesConfig {
         if let Some((key, why)) = s.cycles.invalid_field() {
             return Err(invalid(key.to_string(), why));
         }
+        let presets = PresetTable::load(&PresetTable::default_path(&machine), &machine)?;
         Ok(Self {
             machine,
             probes: s.probes,
             parameters: s.cycles,
+            presets,
         })
+    }
+
+    /// Makes row `number` the active preset the program starts with (a scenario's
+    /// `preset`); `Err` names the rows there are.
+    pub fn start_with_preset(&mut self, number: u32) -> Result<(), String> {
+        self.presets.activate(number)
     }
 
     pub fn probe(&self, name: &str) -> Option<&ProbeEntry> {

@@ -8,6 +8,7 @@ use crate::cycle444::Probing3dParams;
 use crate::cycle450::SaveParams;
 use crate::cycle451::KinematicsParams;
 pub use crate::cycle_block::{CycleBlock, Origin, Param, ToolCall, Value};
+use crate::datum::DatumBlock;
 pub use crate::diagnostic::{Diagnostic, ProgramErrors};
 pub use crate::length_unit::LengthUnit;
 pub use crate::probe_axis::ProbeAxis;
@@ -41,6 +42,8 @@ pub enum Statement {
     },
     ToolCall(ToolCall),
     Cycle(Box<CycleCall>),
+    /// Cycle 247, cycle 7, TRANS DATUM, G247, G54: the datum changes.
+    Datum(DatumBlock),
     /// Any other NC block (moves, comments, FN, M functions, ...): not a measuring
     /// cycle, accepted and not run.
     Other(String),

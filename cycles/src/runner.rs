@@ -6,6 +6,7 @@ use crate::cycle::{CycleContext, MeasuringCycle};
 use crate::cycle451;
 use crate::cycle451::PlanErrorKind;
 use crate::cycles_config::CyclesConfig;
+use crate::datum::Datum;
 use crate::error::CycleError;
 use crate::kinematics::{Estimator, LocalEstimator};
 use crate::kinematics_file::ActiveKinematics;
@@ -208,12 +209,22 @@ pub fn run_program<M: Machine>(
         out_dir: &opts.out_dir,
         program: program.path.as_deref(),
         probing3d: Vec::new(),
+        datum: Datum::new(cfg.presets.clone()),
     };
     for block in &program.blocks {
         let call = match &block.statement {
             Statement::Cycle(call) => &**call,
+            Statement::Datum(d) => {
+                if let Err(e) = ctx.datum.apply(d) {
+                    report.stopped = Some(format!("line {}: {e}", block.line));
+                    break;
+                }
+                continue;
+            }
             Statement::Other(code) => {
-                if let Some(Ok(mv)) = parse_linear(code, program.unit) {
+                if let Some(Ok(mut mv)) = parse_linear(code, program.unit) {
+                    // Program coordinates: relative to the active preset plus shift.
+                    mv.target = ctx.datum.to_machine(&mv.target);
                     let feed = match mv.feed {
                         MoveFeed::Rapid => rapid,
                         MoveFeed::Feed(f) => f,

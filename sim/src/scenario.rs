@@ -255,6 +255,9 @@ pub struct Fault {
 pub struct Scenario {
     pub machine: MachineConfig,
     pub seed: u64,
+    /// `preset`: the number of the preset table row the control starts with (the
+    /// cycles check it against the machine's preset table); `None`: the table's own.
+    pub preset: Option<u32>,
     pub probe: ProbeTruth,
     pub truth: Truth,
     pub spheres: Vec<Sphere>,
@@ -271,6 +274,8 @@ struct RawScenario {
     machine: String,
     #[serde(default)]
     seed: u64,
+    #[serde(default)]
+    preset: Option<u32>,
     probe: RawProbe,
     #[serde(default)]
     truth: BTreeMap<String, f64>,
@@ -416,6 +421,7 @@ impl Scenario {
         Ok(Self {
             machine,
             seed: raw.seed,
+            preset: raw.preset,
             probe,
             truth,
             spheres,

@@ -35,7 +35,26 @@ pub fn cycles_config(sc: &Scenario) -> cycles::CyclesConfig {
     for p in &mut cfg.probes {
         p.radius = sc.probe_table_radius();
     }
+    if let Some(n) = sc.preset {
+        cfg.start_with_preset(n)
+            .unwrap_or_else(|e| panic!("scenario preset: {e}"));
+    }
+    // Cycles that set a preset write a temporary copy, never the shipped table.
+    cfg.presets.path = temp_presets_path(&cfg.presets.path);
     cfg
+}
+
+/// A fresh folder per call for a preset table the test may write.
+fn temp_presets_path(shipped: &Path) -> PathBuf {
+    use std::sync::atomic::{AtomicU32, Ordering};
+    static N: AtomicU32 = AtomicU32::new(0);
+    let dir = std::env::temp_dir().join(format!(
+        "pbtest-presets-{}-{}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    ));
+    std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+    dir.join(shipped.file_name().unwrap_or_default())
 }
 
 /// A unique name per test (and process) for iceoryx2 services.

@@ -87,7 +87,8 @@ impl Default for P451 {
             b: NONE,
             c: NONE,
             points: 4,
-            preset: 0,
+            // The probe is put over the sphere: the cycle locates it from there.
+            preset: 1,
             backlash: 0.0,
         }
     }
@@ -614,4 +615,188 @@ fn parameter_ranges_are_checked_before_anything_moves() {
         let e = Program::parse(&changed, &cfg).unwrap_err().to_string();
         assert!(e.contains(param), "{bad}: {e}");
     }
+}
+
+// ---------------------------------------------------------------------------------
+// Presets (Q431) and cycle 247.
+
+/// The 451 block of `p` alone, without the pre-positioning `L` block.
+fn cycle_block(p: &P451) -> String {
+    let text = program(p, [0.0, 0.0, 0.0]);
+    let start = text.find("3 TCH PROBE 451").unwrap();
+    let end = text.find("4 END PGM").unwrap();
+    text[start..end].to_string()
+}
+
+/// "N sphere(s) measured" from the report's notes.
+fn spheres_measured(v: &serde_json::Value) -> usize {
+    let notes = v["kinematics"]["notes"].as_array().unwrap();
+    notes
+        .iter()
+        .find_map(|n| {
+            n.as_str()?
+                .strip_suffix(" sphere(s) measured")?
+                .parse()
+                .ok()
+        })
+        .unwrap_or_else(|| panic!("no sphere count in {notes:?}"))
+}
+
+#[test]
+fn q431_0_finds_the_sphere_at_the_preset_of_cycle_247_from_100_mm_away() {
+    let sc = demo_sphere();
+    let mut cfg = cycles_config(&sc);
+    let mut row = cycles::preset_table::Preset::origin(1);
+    [row.x, row.y, row.z] = [50.0, -30.0, 80.0];
+    cfg.presets.rows.push(row);
+    let p = P451 {
+        preset: 0,
+        a: Ax(-90.0, 90.0, 0.0, 4),
+        c: Ax(90.0, 270.0, 0.0, 3),
+        ..P451::default()
+    };
+    // No L block over the sphere: the start is 100 mm from it, in the preset's
+    // coordinates after cycle 247.
+    let text = format!(
+        "0 BEGIN PGM K451 MM\n1 TOOL CALL \"TOUCH_PROBE\" Z\n\
+2 CYCL DEF 247 DATUM SETTING ~\n  Q339=+1 ;DATUM NUMBER\n\
+3 L X+0 Y+100 Z+30 R0 FMAX\n{}4 END PGM K451 MM\n",
+        cycle_block(&p)
+    );
+    let dir = temp_dir("q431-0");
+    let r = run_with(&text, &sc, &cfg, &dir, true);
+    ok_cycle(&r);
+    let v = json(&r);
+    let after = errors_of(&v["kinematics"]["errors_after"]);
+    // The pre-positioned program (Q431 = 1) on the same scenario.
+    let pre = P451 { preset: 1, ..p };
+    let dir_pre = temp_dir("q431-0-pre");
+    let r_pre = run(&program(&pre, [50.0, -30.0, 80.0]), &sc, &dir_pre);
+    ok_cycle(&r_pre);
+    let v_pre = json(&r_pre);
+    let after_pre = errors_of(&v_pre["kinematics"]["errors_after"]);
+    for name in all_location_errors(&['A', 'C']) {
+        let truth = sc.truth.get(&name).unwrap();
+        assert!(
+            (after[&name] - truth).abs() < 1e-4,
+            "{name}: identified {} vs injected {truth}",
+            after[&name]
+        );
+        assert!((after[&name] - after_pre[&name]).abs() < 1e-4, "{name}");
+    }
+    check_results_against_spec(&v, &machine_config(&sc));
+    // Relative to preset 1, the sphere centre: Q147..Q149 about 0.
+    for q in ["Q147", "Q148", "Q149"] {
+        assert!(
+            v["q"][q].as_f64().unwrap().abs() < 1e-6,
+            "{q}: {}",
+            v["q"][q]
+        );
+    }
+    // A: reference + 4 positions, C: reference + 3; no locating sphere with Q431 = 0,
+    // and with Q431 = 1 the locating sphere is A's reference (9, not 10 as before).
+    assert_eq!(spheres_measured(&v), 9);
+    assert_eq!(spheres_measured(&v_pre), 9);
+    // Q431 = 0 writes no preset.
+    assert!(!cfg.presets.path.exists());
+}
+
+#[test]
+fn q431_3_writes_the_preset_row_at_the_sphere_centre() {
+    let sc = demo_sphere();
+    let cfg = cycles_config(&sc);
+    let p = P451 {
+        preset: 3,
+        c: Ax(90.0, 270.0, 0.0, 3),
+        ..P451::default()
+    };
+    // Mode 0: neither the preset nor the kinematics.
+    let dir = temp_dir("q431-3-check");
+    let check = P451 { mode: 0, ..p };
+    let r = run_with(&program(&check, [50.0, -30.0, 80.0]), &sc, &cfg, &dir, true);
+    ok_cycle(&r);
+    assert!(!cfg.presets.path.exists());
+    assert!(!dir.join("kinematics.toml").exists());
+
+    let dir = temp_dir("q431-3");
+    let r = run_with(&program(&p, [50.0, -30.0, 80.0]), &sc, &cfg, &dir, true);
+    ok_cycle(&r);
+    let v = json(&r);
+    let table = cycles::preset_table::PresetTable::load(&cfg.presets.path, &cfg.machine).unwrap();
+    let row = table.active_row().xyz();
+    for (i, want) in [50.0, -30.0, 80.0].into_iter().enumerate() {
+        assert!((row[i] - want).abs() < 1e-6, "preset row {i}: {}", row[i]);
+        let shift = v["kinematics"]["preset_shift"][i].as_f64().unwrap();
+        assert!((shift - want).abs() < 1e-6, "shift {i}: {shift}");
+        // Q147..Q149: the reference centre relative to the preset active then.
+        let q = v["q"][format!("Q{}", 147 + i)].as_f64().unwrap();
+        let reference = v["kinematics"]["preset_after"][i].as_f64().unwrap();
+        assert!(
+            (q - (reference - row[i])).abs() < 1e-9 && q.abs() < 1e-6,
+            "Q{}: {q}",
+            147 + i
+        );
+    }
+    assert_eq!(spheres_measured(&v), 4);
+}
+
+/// The shipped examples of presets and cycle 450 run on demo-sphere.toml.
+#[test]
+fn the_preset_and_save_restore_examples_run() {
+    let sc = demo_sphere();
+    let read =
+        |name: &str| std::fs::read_to_string(configs_dir().join("programs").join(name)).unwrap();
+    // The shipped preset table (row 1: the sphere centre), in a temporary copy.
+    let mut cfg = cycles_config(&sc);
+    let shipped = configs_dir().join("machines/table-ac.presets.toml");
+    let path = cfg.presets.path.clone();
+    cfg.presets = cycles::preset_table::PresetTable::load(&shipped, &cfg.machine).unwrap();
+    cfg.presets.path = path;
+
+    // Q431 = 0 after cycle 247: from 100 mm away, Q147..Q149 relative to preset 1.
+    let dir = temp_dir("example-247");
+    let r = run_with(&read("451-preset-247.h"), &sc, &cfg, &dir, true);
+    ok_cycle(&r);
+    let v = json(&r);
+    for q in ["Q147", "Q148", "Q149"] {
+        assert!(
+            v["q"][q].as_f64().unwrap().abs() < 1e-6,
+            "{q}: {}",
+            v["q"][q]
+        );
+    }
+    assert!(!cfg.presets.path.exists(), "mode 0 writes no preset");
+
+    // Q431 = 3, mode 1: the active row (0) is written with the sphere centre.
+    let dir = temp_dir("example-q431-3");
+    let r = run_with(&read("451-preset-set.h"), &sc, &cfg, &dir, true);
+    ok_cycle(&r);
+    let table = cycles::preset_table::PresetTable::load(&cfg.presets.path, &cfg.machine).unwrap();
+    assert_eq!(table.active, 0);
+    for (got, want) in table.active_row().xyz().iter().zip([50.0, -30.0, 80.0]) {
+        assert!((got - want).abs() < 1e-6, "{:?}", table.active_row());
+    }
+    assert_eq!(
+        table.row(1),
+        cfg.presets.row(1),
+        "only the active row changes"
+    );
+
+    // 450 saves, 451 mode 1 changes, 450 restores: the file as it was, byte for byte.
+    let dir = temp_dir("example-450");
+    let kin = dir.join("kinematics.toml");
+    // As probebridge writes it (a restore writes that form).
+    let before = cycles::kinematics_file::ActiveKinematics {
+        machine: "table-ac".into(),
+        errors: [("EB0A".to_string(), 0.001), ("EX0C".to_string(), 0.002)].into(),
+        path: kin.clone(),
+    };
+    before.write().unwrap();
+    let text = std::fs::read_to_string(&kin).unwrap();
+    let r = run_with(&read("450-save-restore.h"), &sc, &cfg, &dir, true);
+    assert!(r.report.completed(), "{:?}", r.report.stopped);
+    assert_eq!(r.report.cycles.len(), 3);
+    let k451 = r.report.cycles[1].kinematics.as_ref().unwrap();
+    assert!(k451.written, "451 changed the kinematics in between");
+    assert_eq!(std::fs::read_to_string(&kin).unwrap(), text);
 }

@@ -3,7 +3,7 @@
 //! the first move (cycle 451's plan against the machine and its active kinematics);
 //! nothing moves and no bus is opened.
 
-use crate::session::{cycles_config, resolve_machine, MachineOptions};
+use crate::session::{cycles_config_with_presets, resolve_machine, MachineOptions};
 use cycles::kinematics_file::ActiveKinematics;
 use cycles::parser::parse_program;
 use cycles::runner::preflight_program;
@@ -14,9 +14,11 @@ pub fn run(
     program: &Path,
     machine: &MachineOptions,
     kinematics: Option<PathBuf>,
+    presets: Option<&Path>,
 ) -> Result<u8, String> {
     let (cfg, scenario) = resolve_machine(machine).map_err(|e| e.to_string())?;
-    let cycles_cfg = cycles_config(&cfg, scenario.as_ref()).map_err(|e| e.to_string())?;
+    let cycles_cfg =
+        cycles_config_with_presets(&cfg, scenario.as_ref(), presets).map_err(|e| e.to_string())?;
     let text = std::fs::read_to_string(program)
         .map_err(|e| format!("cannot read {}: {e}", program.display()))?;
     let errors: Vec<String> = match parse_program(&text, &cycles_cfg) {

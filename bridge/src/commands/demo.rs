@@ -193,7 +193,7 @@ fn demo451_program(
     let text = format!(
         "0 BEGIN PGM DEMO451 MM\n1 TOOL CALL \"{}\" Z\n2 L Z{:+} R0 FMAX\n3 L X{:+} Y{:+} R0 FMAX\n4 L Z{above:+} R0 FMAX\n\
 5 TCH PROBE 451 MEASURE KINEMATICS ~\n  Q406=+1 ;MODE ~\n  Q407={:+} ;SPHERE RADIUS ~\n  Q320=+0 ~\n  Q408=+0 ~\n\
-  Q253=+750 ~\n  Q380=+0 ~\n{q}  Q423=+4 ~\n  Q431=+0 ~\n  Q432=+0\n6 L Z{:+} R0 FMAX\n7 END PGM DEMO451 MM\n",
+  Q253=+750 ~\n  Q380=+0 ~\n{q}  Q423=+4 ~\n  Q431=+1 ~\n  Q432=+0\n6 L Z{:+} R0 FMAX\n7 END PGM DEMO451 MM\n",
         tool,
         above + 50.0,
         c[0],
@@ -227,10 +227,17 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
         .clone()
         .ok_or("the demo runs on the simulator only")?;
     let sphere = scenario.spheres[0];
-    let cfg = cycles_config(&s.config, Some(&scenario)).map_err(|e| e.to_string())?;
+    let mut cfg = cycles_config(&s.config, Some(&scenario)).map_err(|e| e.to_string())?;
     let probe = cfg.probes[0].clone();
     let dir = std::env::temp_dir().join(format!("probebridge-demo-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    // Q431 = 1 sets the preset: in a temporary copy of the preset table.
+    cfg.presets.path = dir.join(
+        cfg.presets
+            .path
+            .file_name()
+            .unwrap_or(std::ffi::OsStr::new("presets.toml")),
+    );
     // A temporary copy of the machine's kinematics file.
     let shipped = ActiveKinematics::default_path(&cfg.machine);
     let kin = dir.join(shipped.file_name().unwrap_or_default());

@@ -4,7 +4,7 @@
 
 use crate::ipc::{EstimatorChild, EstimatorClient, IpcEstimator};
 use crate::output::write_atomic;
-use crate::session::{cycles_config, resolve_machine, MachineOptions, Session};
+use crate::session::{cycles_config_with_presets, resolve_machine, MachineOptions, Session};
 use cycles::program::{Program, ProgramError};
 use cycles::progress::ProgressEvent;
 use cycles::runner::{run_program, RunOptions};
@@ -27,13 +27,16 @@ pub struct RunArgs {
     pub kinematics: Option<PathBuf>,
     /// Record the run in this history file.
     pub history: Option<PathBuf>,
+    /// The preset table (cycles 247, 451); default: beside the machine configuration.
+    pub presets: Option<PathBuf>,
 }
 
 /// Exit status: 0 every cycle succeeded, 1 a cycle failed or stopped the program,
 /// 2 the program is invalid (nothing moved).
 pub fn run(args: &RunArgs) -> Result<u8, String> {
     let (cfg, scenario) = resolve_machine(&args.machine).map_err(|e| e.to_string())?;
-    let cfg = cycles_config(&cfg, scenario.as_ref()).map_err(|e| e.to_string())?;
+    let cfg = cycles_config_with_presets(&cfg, scenario.as_ref(), args.presets.as_deref())
+        .map_err(|e| e.to_string())?;
     let program = match Program::load(&args.program, &cfg) {
         Ok(p) => p,
         Err(ProgramError::Invalid { path, errors }) => {

@@ -31,7 +31,8 @@ pub fn run(cmd: &mut Command) -> Output {
 }
 
 /// `probebridge run PROGRAM --scenario SCENARIO --out DIR --json DIR/r.json` on an
-/// iceoryx2 service of its own, plus `extra`: the output and the JSON written
+/// iceoryx2 service of its own, with the preset table in DIR (cycle 451 with Q431 != 0
+/// writes it; never the shipped one), plus `extra`: the output and the JSON written
 /// (`None`: none was).
 pub fn run_program(
     program: &Path,
@@ -51,6 +52,7 @@ pub fn run_program(
         .args(["--out", dir.to_str().unwrap()])
         .args(["--json", json.to_str().unwrap()])
         .args(["--service", &service])
+        .args(["--presets", dir.join("presets.toml").to_str().unwrap()])
         .args(extra));
     let v = std::fs::read_to_string(&json)
         .ok()

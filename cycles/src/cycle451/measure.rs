@@ -68,10 +68,15 @@ pub(super) struct Measure<'a, 'c, M: Machine> {
     pub start: Angles,
     /// The sphere centre in table coordinates (from the locate measurement).
     table_point: Vector3<f64>,
-    /// Active preset, machine X/Y/Z.
+    /// Active datum (preset plus shift), machine X/Y/Z.
     pub preset: Vector3<f64>,
     /// Notes for the report.
     pub notes: Vec<String>,
+    /// The locating measurement (Q431 = 1/3), taken as the first reference when the
+    /// axes have not moved since.
+    located: Option<Sphere>,
+    /// Spheres measured so far (a sphere probed twice counts once).
+    pub spheres: usize,
 }
 
 impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
@@ -87,6 +92,7 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
             .positions()
             .map_err(|e| CycleError::machine("reading the axis positions", &e))?;
         let start = angles_of(&start);
+        let preset = Vector3::from(ctx.datum.origin());
         Ok(Measure {
             machine,
             ctx,
@@ -100,8 +106,10 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
             now: start,
             start,
             table_point: Vector3::zeros(),
-            preset: Vector3::zeros(),
+            preset,
             notes: Vec::new(),
+            located: None,
+            spheres: 0,
         })
     }
 
@@ -145,6 +153,7 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
         let located = self.sphere(&start, c0, "locating the sphere")?;
         self.table_point = self.model.table_point(&located.angles, &located.centre);
         let ball = self.model.ball_in_machine(&located.angles, &located.centre);
+        self.located = Some(located);
         if p.preset == 1 || p.preset == 3 {
             self.preset = ball;
             self.note(format!(
@@ -153,6 +162,57 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
             ));
         }
         Ok(ball)
+    }
+
+    /// Q431 = 0/2: the sphere centre is the active datum (with the rotary axes where
+    /// they stand). From wherever the probe is: up along the tool axis to the safe
+    /// height (the pole start, or Q408 above the datum when higher, or where the probe
+    /// already is), over the sphere, down to the pole start; every point inside the
+    /// software limits, else nothing moves.
+    pub fn approach_datum(&mut self) -> Result<(), CycleError> {
+        let start = self.start;
+        let c = self.preset - self.model.ball_in_machine(&start, &Vector3::zeros());
+        self.table_point = self.model.table_point(&start, &c);
+        let pole = self.pole(&start, &c);
+        let here = self
+            .machine
+            .positions()
+            .map_err(|e| CycleError::machine("reading the axis positions", &e))?
+            .xyz();
+        let t = self.tool.tool_index();
+        let q408 = self.plan.params.retract_height;
+        let mut height = pole[t].max(here[t]);
+        if q408 > 0.0 {
+            height = height.max(self.preset[t] + q408);
+        }
+        let mut above = pole;
+        above[t] = height;
+        for axis in Axis::LINEAR {
+            let i = axis.index();
+            let Some(c) = self.ctx.cfg.machine.axis(axis) else {
+                continue;
+            };
+            for v in [above[i], pole[i]] {
+                if v < c.min || v > c.max {
+                    return Err(CycleError::Plan(format!(
+                        "Q431={}: the sphere at the active datum X{:+.4} Y{:+.4} Z{:+.4} is reached over {axis}{v:+.4}, outside the software limits {:+.4} .. {:+.4}; set the preset at the sphere centre (cycle 247) or pre-position with Q431=1; nothing moved",
+                        self.plan.params.preset, self.preset.x, self.preset.y, self.preset.z, c.min, c.max
+                    )));
+                }
+            }
+        }
+        self.note(format!(
+            "Q431={}: the sphere is at the active datum X{:+.4} Y{:+.4} Z{:+.4}; moving over it",
+            self.plan.params.preset, self.preset.x, self.preset.y, self.preset.z
+        ));
+        let up = AxisPositions::new().with(Axis::LINEAR[t], height);
+        self.mv(
+            "moving up to the safe height",
+            up,
+            self.plan.positioning_feed,
+        )?;
+        self.move_xyz("moving over the sphere at the safe height", above)?;
+        self.move_xyz("approaching the sphere", pole)
     }
 
     /// Measures every planned axis: the 0 deg reference, then its positions (from both
@@ -206,6 +266,18 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
         } else {
             vec![None]
         };
+        let unmoved = (0..3).all(|s| (target[s] - self.now[s]).abs() <= 1e-9);
+        if b == 0.0 && unmoved {
+            if let Some(s) = self.located.take() {
+                // Nothing moved since the sphere was located there: that is this
+                // position's measurement.
+                self.note(format!(
+                    "{what}: the locating measurement at the same angles is the reference"
+                ));
+                return Ok(vec![s]);
+            }
+        }
+        self.located = None;
         let mut spheres = Vec::new();
         for (si, side) in sides.iter().enumerate() {
             let via = side.map(|off| plan.angles(axis, angle + off));
@@ -381,6 +453,7 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
                     angles[rotary_slot(x).expect("rotary")] = 0.0;
                 }
             }
+            self.spheres += 1;
             return Ok(Sphere {
                 angles,
                 centre: fit.centre,

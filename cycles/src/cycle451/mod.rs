@@ -7,10 +7,15 @@
 //! Each step has its file: [`parameters`] (typed at parse time), [`plan`](mod@plan), [`measure`],
 //! [`identify`], [`evaluate`], [`report`], [`write_back`] and the [`measuring_log`].
 //!
-//! 1. Locate: the probe stands roughly over the sphere, about Q320 + SET_UP above it
-//!    (an `L` block or the operator put it there). It probes down along the tool axis,
-//!    then measures the sphere around that estimate. This machine has no preset table:
-//!    the active preset is the table origin until Q431 = 1/3 sets it to this centre.
+//! 1. Q431 = 1/3, locate: the probe stands roughly over the sphere, about Q320 + SET_UP
+//!    above it (an `L` block or the operator put it there). It probes down along the
+//!    tool axis, then measures the sphere around that estimate, which becomes the
+//!    preset; with the axes not moved since, that measurement is the first axis's
+//!    reference. Q431 = 0/2: the sphere centre is the active datum (preset table row
+//!    plus shift, [`crate::datum`]); the probe goes there from wherever it stands, up
+//!    to the safe height, over, down, without a locating measurement. Q431 = 2/3 set
+//!    the preset to the centre at the reference after measuring; the active row of
+//!    the preset table is written in modes 1..3 once everything else succeeded.
 //! 2. Per measured axis, in the order A, B, C: the 0 deg reference first, then the
 //!    measuring positions ([`crate::kinematics::positions`]); the other rotary axes stand
 //!    at their incidence angles (Q413/Q417/Q421). Between positions the probe retracts to
@@ -55,7 +60,6 @@ use crate::results::CycleOutput;
 use evaluate::Evaluation;
 use hal::Machine;
 use measure::{arr, axis_map, Measure};
-use nalgebra::Vector3;
 use write_back::WriteBack;
 
 impl MeasuringCycle for KinematicsParams {
@@ -73,9 +77,18 @@ impl MeasuringCycle for KinematicsParams {
         let active_set = ErrorSet::from_map(&active.errors);
         let model = KinematicModel::new(&plan.chain, &active_set);
         let mut m = Measure::new(machine, ctx, &plan, call, model)?;
-        let located_ball = m.locate()?;
+        let preset_before = m.preset;
+        let p = &plan.params;
+        // Q431 = 1/3: the probe stands over the sphere, which is located from there;
+        // 0/2: the sphere is at the active datum.
+        if p.preset == 1 || p.preset == 3 {
+            m.locate()?;
+        } else {
+            m.approach_datum()?;
+        }
         let preset_measuring = m.preset;
         let measured = m.measure_axes()?;
+        let spheres = m.spheres;
 
         let input = identify::input(&plan, active_set, &measured);
         let result = identify::identify(m.ctx.estimator, &input)?;
@@ -94,17 +107,16 @@ impl MeasuringCycle for KinematicsParams {
             .collect::<Result<Vec<_>, _>>()?;
         let offset = ev.reference_ball() - preset_measuring;
         let (q, qs) = ev.results(&axes, &offset);
-        // Q431 = 2/3: the preset goes to the sphere centre where the cycle ends (it
-        // returns to the rotary angles it started at, where the sphere was located).
-        let p = &plan.params;
+        // Q431 = 2/3: the preset goes to the sphere centre measured at the reference.
         let mut preset_after = m.preset;
         if p.preset == 2 || p.preset == 3 {
-            preset_after = located_ball;
+            preset_after = ev.reference_ball();
             m.note(format!(
                 "Q431={}: preset set to the sphere centre X{:+.4} Y{:+.4} Z{:+.4}",
-                p.preset, located_ball.x, located_ball.y, located_ball.z
+                p.preset, preset_after.x, preset_after.y, preset_after.z
             ));
         }
+        notes.push(format!("{spheres} sphere(s) measured"));
         for t in &result.transfers {
             notes.push(format!(
                 "machine datum: {} = {:+.6} deg moved into {}",
@@ -125,7 +137,6 @@ impl MeasuringCycle for KinematicsParams {
         if !p.mode.writes() {
             notes.push("mode 0 (check): the kinematics were not changed".into());
         }
-        let preset_before = Vector3::zeros();
         let mut report = KinematicsReport {
             mode: p.mode.q406(),
             machine: cfg.machine.name.clone(),
@@ -144,6 +155,26 @@ impl MeasuringCycle for KinematicsParams {
             notes,
         };
         let log = write_back.write(call.block, &mut report, &active, ctx)?;
+        // Q431 != 0: the active preset row takes the sphere centre, written only in
+        // modes 1..3 and after the kinematics were accepted (mode 0, a refusal or any
+        // failure before this point write neither).
+        if p.preset != 0 && p.mode.writes() && write_back.stop.is_none() {
+            let shift = ctx.datum.shift;
+            let row = [0, 1, 2].map(|i| preset_after[i] - shift[i]);
+            ctx.datum.presets.set_active_xyz(row);
+            ctx.datum
+                .presets
+                .write()
+                .map_err(|e| CycleError::Plan(format!("writing the preset table: {e}")))?;
+            let file = ctx.datum.presets.path.display().to_string();
+            ctx.note(
+                call.block,
+                format!(
+                    "preset {} set to X{:+.4} Y{:+.4} Z{:+.4} in {file} (previous version kept as .prev)",
+                    ctx.datum.presets.active, row[0], row[1], row[2]
+                ),
+            );
+        }
         Ok(CycleOutput {
             q,
             qs,

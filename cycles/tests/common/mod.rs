@@ -252,7 +252,17 @@ pub fn run(
     out_dir: &Path,
     confirm: bool,
 ) -> (probebridge_cycles::ProgramReport, Vec<String>) {
-    let cfg = config();
+    run_on(&config(), program, m, out_dir, confirm)
+}
+
+/// As [`run`], on the machine `cfg`.
+pub fn run_on(
+    cfg: &CyclesConfig,
+    program: &probebridge_cycles::Program,
+    m: &mut MockMachine,
+    out_dir: &Path,
+    confirm: bool,
+) -> (probebridge_cycles::ProgramReport, Vec<String>) {
     let mut shown = Vec::new();
     let mut confirm_fn = |text: &str| {
         shown.push(text.to_string());
@@ -266,7 +276,7 @@ pub fn run(
         kinematics: None,
         estimator: None,
     };
-    let report = probebridge_cycles::run_program(program, m, &cfg, &mut opts);
+    let report = probebridge_cycles::run_program(program, m, cfg, &mut opts);
     (report, shown)
 }
 
