@@ -10,3 +10,4 @@ pub mod ipc;
 pub mod modbus_session;
 pub mod output;
 pub mod session;
+pub mod stop_signal;

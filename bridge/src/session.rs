@@ -36,6 +36,8 @@ pub struct MachineOptions {
     pub service: String,
     /// Record the master's CAN traffic in candump's log format.
     pub candump: Option<PathBuf>,
+    /// The operator's stop (the signal handler's flag): brakes a move under way.
+    pub abort: Option<hal::AbortFlag>,
 }
 
 /// Any backend, as the commands drive it.
@@ -172,6 +174,7 @@ impl Session {
         let options = MasterOptions {
             pacing,
             run_id,
+            abort: opts.abort,
             ..MasterOptions::default()
         };
         let (machine, startup) = CanMachine::start(&config, transport, sink, options)?;

@@ -6,7 +6,7 @@ use crate::cycle::{CycleContext, MeasuringCycle};
 use crate::cycle451;
 use crate::cycle451::PlanErrorKind;
 use crate::cycles_config::CyclesConfig;
-use crate::error::CycleError;
+use crate::error::{CycleError, CycleErrorKind};
 use crate::kinematics::{Estimator, LocalEstimator};
 use crate::kinematics_file::ActiveKinematics;
 use crate::linear::{parse_linear, LinearBlockError, LinearBlockErrorKind, MoveFeed};
@@ -14,6 +14,7 @@ use crate::program::{CycleCall, CycleKind, Program, Statement};
 use crate::progress::{ProgressEvent, ProgressSink};
 use crate::results::{CycleOutput, CycleResult, ProgramReport, Status};
 use hal::config::MachineConfig;
+use hal::machine::Error as _;
 use hal::{Axis, Machine};
 use std::path::PathBuf;
 
@@ -225,6 +226,7 @@ pub fn run_program<M: Machine>(
                         feed,
                     });
                     if let Err(e) = machine.move_to(&mv.target, feed) {
+                        report.aborted = e.kind() == hal::ErrorKind::Aborted;
                         report.stopped = Some(format!("block {number} (line {}): {e}", block.line));
                         break;
                     }
@@ -285,6 +287,15 @@ fn run_cycle<M: Machine>(
                 message: out.stop,
                 kinematics: out.kinematics,
             }
+        }
+        Err(e) if e.kind() == CycleErrorKind::Machine(hal::ErrorKind::Aborted) => {
+            let message = e.to_string();
+            report.aborted = true;
+            report.stopped = Some(format!(
+                "block {}: cycle {} aborted: {message}",
+                head.block, head.cycle
+            ));
+            CycleResult::aborted(head.block, head.cycle, message)
         }
         Err(e) => {
             let message = e.to_string();

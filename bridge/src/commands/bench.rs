@@ -341,6 +341,7 @@ fn start_rig(
         rt_priority: args.rt_priority,
         run_id: TRIGGER_RUN,
         command_timeout: Duration::from_secs(10),
+        abort: None,
     };
     eprintln!(
         "bench: bringing up the drives ({} bus, SYNC every {} us) ...",
