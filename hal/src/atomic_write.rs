@@ -32,6 +32,8 @@ pub enum WriteErrorKind {
 pub struct WriteError {
     pub path: PathBuf,
     kind: WriteErrorKind,
+    /// The operating system's reason, for [`WriteErrorKind::Io`].
+    io_kind: Option<std::io::ErrorKind>,
     message: String,
 }
 
@@ -40,16 +42,36 @@ impl WriteError {
         self.kind
     }
 
+    /// Why, without the path (for errors that name the path themselves).
+    pub fn reason(&self) -> &str {
+        &self.message
+    }
+
+    /// As an `std::io::Error` (the reason, without the path), for callers whose errors
+    /// carry one.
+    pub fn to_io(&self) -> std::io::Error {
+        let kind = match self.kind {
+            WriteErrorKind::NotRegularFile => std::io::ErrorKind::InvalidInput,
+            WriteErrorKind::NoFolder => std::io::ErrorKind::NotFound,
+            WriteErrorKind::Io => self.io_kind.unwrap_or(std::io::ErrorKind::Other),
+        };
+        std::io::Error::new(kind, self.message.clone())
+    }
+
     fn new(path: &Path, kind: WriteErrorKind, message: impl Into<String>) -> Self {
         Self {
             path: path.to_path_buf(),
             kind,
+            io_kind: None,
             message: message.into(),
         }
     }
 
     fn io(path: &Path, e: &std::io::Error) -> Self {
-        Self::new(path, WriteErrorKind::Io, e.to_string())
+        Self {
+            io_kind: Some(e.kind()),
+            ..Self::new(path, WriteErrorKind::Io, e.to_string())
+        }
     }
 }
 

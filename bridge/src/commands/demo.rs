@@ -115,7 +115,7 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
             .map_err(|e| e.to_string())?;
     }
     report_sphere(&estimator, run_id, sphere, probe.radius)?;
-    drop(s);
+    s.close()?;
     kinematics(&opts, &estimator)
 }
 
@@ -280,7 +280,7 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
         estimator: Some(&mut ipc),
     };
     let report = run_program(&program, &mut s.machine, &cfg, &mut run);
-    drop(s);
+    s.close()?;
     let result = report
         .cycles
         .iter()

@@ -49,6 +49,7 @@ pub fn run(args: &ProbeArgs) -> Result<(), String> {
     s.machine
         .move_to(&start, rapid)
         .map_err(|e| format!("retracting: {e}"))?;
+    s.close()?;
     println!("contact (stylus ball centre, machine coordinates, latched by the drives):");
     for (axis, v) in contact.positions.iter() {
         let unit = if axis.is_rotary() { "deg" } else { "mm" };

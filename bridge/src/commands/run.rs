@@ -120,6 +120,9 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
         opts.estimator = Some(e);
     }
     let report = run_program(&program, &mut session.machine, &cfg, &mut opts);
+    drop(opts);
+    // The drives are disabled before anything else is said or written.
+    let closed = session.close();
     print!("{}", report.to_text());
     if let Some(path) = &args.json {
         write_atomic(path, report.to_json().as_bytes())?;
@@ -127,6 +130,7 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     if let Some(why) = &report.stopped {
         eprintln!("program stopped: {why}");
     }
+    closed?;
     Ok(if report.completed() { 0 } else { 1 })
 }
 
