@@ -3,6 +3,7 @@
 use clap::{Args, Parser, Subcommand};
 use probebridge::commands::{self, parse_vec3};
 use probebridge::session::MachineOptions;
+use probebridge::tell;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -260,11 +261,11 @@ fn main() -> ExitCode {
     match result {
         Ok(code) => ExitCode::from(stopped_by.unwrap_or(code)),
         Err(e) if stopped_by.is_some() => {
-            eprintln!("probebridge: {e}");
+            tell!("probebridge: {e}");
             ExitCode::from(stopped_by.unwrap_or(1))
         }
         Err(e) => {
-            eprintln!("probebridge: {e}");
+            tell!("probebridge: {e}");
             ExitCode::FAILURE
         }
     }

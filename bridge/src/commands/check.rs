@@ -31,13 +31,13 @@ pub fn run(
         }
     };
     if errors.is_empty() {
-        println!("{}: ok (machine {})", program.display(), cfg.name);
+        say!("{}: ok (machine {})", program.display(), cfg.name);
         return Ok(0);
     }
     for e in &errors {
-        eprintln!("{}: {e}", program.display());
+        tell!("{}: {e}", program.display());
     }
-    eprintln!(
+    tell!(
         "{}: {} error(s); nothing was run",
         program.display(),
         errors.len()

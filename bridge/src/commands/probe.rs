@@ -28,7 +28,7 @@ pub fn run(args: &ProbeArgs) -> Result<(), String> {
     crate::output::check_output(args.json.as_deref())?;
     let mut s = Session::open(&args.machine).map_err(|e| e.to_string())?;
     for note in &s.notes {
-        eprintln!("note: {note}");
+        tell!("note: {note}");
     }
     let probes = cycles_config(&s.config, s.scenario.as_ref()).map_err(|e| e.to_string())?;
     let rapid = probes.probes.first().map_or(3000.0, |p| p.fmax);
@@ -50,12 +50,12 @@ pub fn run(args: &ProbeArgs) -> Result<(), String> {
         .move_to(&start, rapid)
         .map_err(|e| format!("retracting: {e}"))?;
     s.close()?;
-    println!("contact (stylus ball centre, machine coordinates, latched by the drives):");
+    say!("contact (stylus ball centre, machine coordinates, latched by the drives):");
     for (axis, v) in contact.positions.iter() {
         let unit = if axis.is_rotary() { "deg" } else { "mm" };
-        println!("  {axis} {v:+14.6} {unit}");
+        say!("  {axis} {v:+14.6} {unit}");
     }
-    println!("  trigger at {} ns", contact.trigger_ns);
+    say!("  trigger at {} ns", contact.trigger_ns);
     if let Some(path) = &args.json {
         let mut c = serde_json::Map::new();
         for (axis, v) in contact.positions.iter() {

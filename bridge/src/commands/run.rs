@@ -36,9 +36,9 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
         Ok(p) => p,
         Err(ProgramError::Invalid { path, errors }) => {
             for d in &errors.0 {
-                eprintln!("{}: {d}", path.display());
+                tell!("{}: {d}", path.display());
             }
-            eprintln!(
+            tell!(
                 "{}: {} error(s); nothing moved",
                 path.display(),
                 errors.0.len()
@@ -66,38 +66,40 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     };
     let mut session = Session::open(&args.machine).map_err(|e| e.to_string())?;
     for note in &session.notes {
-        eprintln!("note: {note}");
+        tell!("note: {note}");
     }
     let total = program.cycles().count();
     let mut done = 0usize;
     let mut progress = |ev: ProgressEvent| match ev {
         ProgressEvent::CycleStarted { block, cycle, line } => {
             done += 1;
-            eprintln!("[{done}/{total}] block {block} (line {line}): cycle {cycle}");
+            tell!("[{done}/{total}] block {block} (line {line}): cycle {cycle}");
         }
         ProgressEvent::Contact { centre, .. } => {
-            eprintln!(
+            tell!(
                 "    contact at X{:+.4} Y{:+.4} Z{:+.4}",
-                centre[0], centre[1], centre[2]
+                centre[0],
+                centre[1],
+                centre[2]
             );
         }
-        ProgressEvent::Note { text, .. } => eprintln!("    {text}"),
-        ProgressEvent::MeasuringLog { path, .. } => eprintln!("    protocol {}", path.display()),
-        ProgressEvent::CycleFinished { status, .. } => eprintln!("    {status:?}"),
+        ProgressEvent::Note { text, .. } => tell!("    {text}"),
+        ProgressEvent::MeasuringLog { path, .. } => tell!("    protocol {}", path.display()),
+        ProgressEvent::CycleFinished { status, .. } => tell!("    {status:?}"),
         _ => {}
     };
     let yes = args.yes;
     let mut confirm = |text: &str| -> bool {
-        println!("{text}");
+        say!("{text}");
         if yes {
             return true;
         }
-        print!("Press Enter to go on, or type n and Enter to stop: ");
+        say_raw!("Press Enter to go on, or type n and Enter to stop: ");
         let _ = std::io::stdout().flush();
         let stdin = std::io::stdin();
         if !stdin.is_terminal() {
             // Without an operator there is nobody to confirm: stop (use --yes).
-            println!();
+            say!();
         }
         let mut line = String::new();
         match stdin.lock().read_line(&mut line) {
@@ -123,12 +125,12 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     drop(opts);
     // The drives are disabled before anything else is said or written.
     let closed = session.close();
-    print!("{}", report.to_text());
+    say_raw!("{}", report.to_text());
     if let Some(path) = &args.json {
         write_atomic(path, report.to_json().as_bytes())?;
     }
     if let Some(why) = &report.stopped {
-        eprintln!("program stopped: {why}");
+        tell!("program stopped: {why}");
     }
     closed?;
     Ok(if report.completed() { 0 } else { 1 })
@@ -155,19 +157,19 @@ impl EstimatorLink {
 /// either the cycle computes in this process (said on stderr).
 fn estimator_link(prefix: &str) -> Option<EstimatorLink> {
     if let Ok(c) = EstimatorClient::connect(prefix, Duration::from_millis(300)) {
-        eprintln!("estimator: using the estimator process serving {prefix}");
+        tell!("estimator: using the estimator process serving {prefix}");
         return Some(EstimatorLink::Running(c));
     }
     match EstimatorChild::spawn(prefix, ESTIMATOR_TIMEOUT) {
         Ok(child) => {
-            eprintln!(
+            tell!(
                 "estimator: started the estimator process (pid {}) on {prefix}",
                 child.id()
             );
             Some(EstimatorLink::Child(child))
         }
         Err(e) => {
-            eprintln!(
+            tell!(
                 "estimator: cannot start the estimator process ({e}); cycle 451 computes in this process"
             );
             None

@@ -18,6 +18,7 @@ use command::{Command, Detail, Reply, RtError};
 pub use pacing::{PacedLoop, Pacing};
 pub use process_data::BusLoad;
 pub use rt_loop::{LoopConfig, LoopStats, RtLoop};
+use std::io::Write as _;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender};
 use std::sync::{Arc, Mutex};
@@ -319,7 +320,11 @@ fn run_thread<T: CanTransport, S: SampleSink>(
                 ErrorKind::Bus,
                 Detail::Transport,
             )));
-            eprintln!("probebridge: real-time loop stopped: {e}");
+            // A closed or full stderr must not panic the loop thread.
+            let _ = writeln!(
+                std::io::stderr(),
+                "probebridge: real-time loop stopped: {e}"
+            );
             return;
         }
         if let Some(r) = rt.take_reply() {
