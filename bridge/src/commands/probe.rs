@@ -1,7 +1,7 @@
 //! `probebridge probe`: one probing move, reported with the latched positions of all
 //! axes.
 
-use crate::session::{cycles_config, MachineOptions, Session};
+use crate::session::{cycles_config, resolve_machine, MachineOptions, Session};
 use hal::{AxisPositions, Machine, ProbeMove};
 use std::path::PathBuf;
 
@@ -26,6 +26,16 @@ pub fn run(args: &ProbeArgs) -> Result<(), String> {
         return Err(format!("--feed {}: must be > 0", args.feed));
     }
     crate::output::check_output(args.json.as_deref())?;
+    // The probing move is checked against the machine before anything moves (also
+    // the move to the start).
+    let (cfg, _) = resolve_machine(&args.machine).map_err(|e| e.to_string())?;
+    hal::motion_guard::MotionGuard::new(&cfg)
+        .check_probe_request(&ProbeMove {
+            direction: args.dir,
+            feed: args.feed,
+            max_distance: args.dist,
+        })
+        .map_err(|e| format!("probing: {e}"))?;
     let mut s = Session::open(&args.machine).map_err(|e| e.to_string())?;
     for note in &s.notes {
         tell!("note: {note}");

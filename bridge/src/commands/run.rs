@@ -5,9 +5,10 @@
 use crate::ipc::{EstimatorChild, EstimatorClient, IpcEstimator};
 use crate::output::write_atomic;
 use crate::session::{cycles_config, resolve_machine, MachineOptions, Session};
+use cycles::kinematics_file::ActiveKinematics;
 use cycles::program::{Program, ProgramError};
 use cycles::progress::ProgressEvent;
-use cycles::runner::{run_program, RunOptions};
+use cycles::runner::{check_complete, preflight_program, run_program, RunOptions};
 use std::io::{BufRead, IsTerminal, Write};
 use std::path::PathBuf;
 use std::time::Duration;
@@ -35,9 +36,7 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     let program = match Program::load(&args.program, &cfg) {
         Ok(p) => p,
         Err(ProgramError::Invalid { path, errors }) => {
-            for d in &errors.0 {
-                tell!("{}: {d}", path.display());
-            }
+            super::tell_errors(&path, &errors.0);
             tell!(
                 "{}: {} error(s); nothing moved",
                 path.display(),
@@ -47,6 +46,20 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
         }
         Err(e) => return Err(e.to_string()),
     };
+    // What `check` refuses, `run` refuses the same way (exit 2) before the machine
+    // is opened.
+    let kinematics = args
+        .kinematics
+        .clone()
+        .unwrap_or_else(|| ActiveKinematics::default_path(&cfg.machine));
+    if let Err(e) = check_complete(&program).and_then(|()| {
+        preflight_program(&program, cfg.machine.axis_mask(), &cfg, &kinematics)
+            .map_err(|e| e.to_string())
+    }) {
+        tell!("{}: {e}", args.program.display());
+        tell!("{}: 1 error(s); nothing moved", args.program.display());
+        return Ok(2);
+    }
     let out_dir = args
         .out
         .clone()

@@ -365,7 +365,7 @@ impl Machine for CanMachine {
     }
 
     fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), MachineError> {
-        self.guard.check_move(target, feed)?;
+        self.guard.check_move_from(&self.position, target, feed)?;
         match self.command(Command::MoveTo {
             target: target.raw(),
             mask: target.mask(),
@@ -394,7 +394,12 @@ impl Machine for CanMachine {
             run_id: self.run_id,
         })? {
             Reply::Contact(s) => Ok(Contact {
-                positions: s.axis_positions(),
+                // Where the axes are is close to the latch (the stop runs on by the
+                // braking distance): good enough for the next move's duration check.
+                positions: {
+                    self.position = s.axis_positions();
+                    self.position
+                },
                 trigger_ns: s.trigger_ns,
                 sequence: s.sequence,
                 direction: dir,
