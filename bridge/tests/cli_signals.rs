@@ -13,9 +13,12 @@ use std::io::{BufRead, BufReader, Read};
 use std::process::Stdio;
 
 /// Starts `probebridge run 451-check.h` in real time with a candump log, waits on its
-/// stderr for the first contact of cycle 451, sends `signal`, and returns the exit
+/// stderr for the first contact of cycle 451, sends `signals`, and returns the exit
 /// status, everything it wrote on stderr, the JSON and the candump log.
-fn run_451_and_signal(name: &str, signal: libc::c_int) -> (Option<i32>, String, String, String) {
+fn run_451_and_signal(
+    name: &str,
+    signals: &[libc::c_int],
+) -> (Option<i32>, String, String, String) {
     let dir = tmpdir(name);
     let json = dir.join("r.json");
     let log = dir.join("bus.log");
@@ -59,8 +62,10 @@ fn run_451_and_signal(name: &str, signal: libc::c_int) -> (Option<i32>, String, 
         }
     }
     let pid = libc::pid_t::try_from(child.id()).unwrap();
-    // SAFETY: signalling our own child.
-    assert_eq!(unsafe { libc::kill(pid, signal) }, 0);
+    for &signal in signals {
+        // SAFETY: signalling our own child.
+        assert_eq!(unsafe { libc::kill(pid, signal) }, 0);
+    }
     stderr.read_to_string(&mut said).unwrap();
     let status = child.wait().unwrap();
     let json = std::fs::read_to_string(&json).unwrap_or_default();
@@ -91,7 +96,7 @@ fn last_controlwords(log: &str) -> std::collections::BTreeMap<u16, u16> {
 
 #[test]
 fn sigterm_mid_451_brakes_disables_the_drives_and_reports_aborted() {
-    let (code, said, json, log) = run_451_and_signal("term", libc::SIGTERM);
+    let (code, said, json, log) = run_451_and_signal("term", &[libc::SIGTERM]);
     assert_eq!(code, Some(143), "exit status 128 + SIGTERM:\n{said}");
     let v: serde_json::Value = serde_json::from_str(&json)
         .unwrap_or_else(|e| panic!("the JSON ({e}):\n{json}\nstderr:\n{said}"));
@@ -114,7 +119,15 @@ fn sigterm_mid_451_brakes_disables_the_drives_and_reports_aborted() {
 
 #[test]
 fn sigint_exits_130_with_the_result_written() {
-    let (code, said, json, _) = run_451_and_signal("int", libc::SIGINT);
+    let (code, said, json, _) = run_451_and_signal("int", &[libc::SIGINT]);
     assert_eq!(code, Some(130), "{said}");
     assert!(json.contains("\"aborted\""), "{json}");
+}
+
+/// A second signal while the first is being handled (the axes braking, the results
+/// being written) exits at once, with the second signal's status.
+#[test]
+fn a_second_signal_exits_at_once() {
+    let (code, said, _, _) = run_451_and_signal("twice", &[libc::SIGTERM, libc::SIGINT]);
+    assert_eq!(code, Some(130), "{said}");
 }
