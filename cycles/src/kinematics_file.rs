@@ -22,6 +22,12 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+/// The largest position error (EX0C, EY0A, ...) a kinematics file may hold, mm: a
+/// location error is a deviation from the nominal chain, never a structure size.
+pub const PLAUSIBLE_MM: f64 = 10.0;
+/// The largest orientation error (EA0C, EB0A, ...) a kinematics file may hold, deg.
+pub const PLAUSIBLE_DEG: f64 = 10.0;
+
 /// What went wrong with a kinematics file.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[non_exhaustive]
@@ -35,6 +41,9 @@ pub enum KinematicsFileErrorKind {
     UnknownError,
     /// A value that is not a finite number.
     NotANumber,
+    /// A value beyond what a machine's location error can be
+    /// ([`PLAUSIBLE_MM`], [`PLAUSIBLE_DEG`]): a typo or a unit mix-up.
+    Implausible,
     /// Cycle 450: nothing saved under the designation.
     NothingSaved,
     Write,
@@ -151,6 +160,20 @@ impl ActiveKinematics {
                 return Err(invalid(
                     K::NotANumber,
                     format!("errors.{name}: {v} is not a number"),
+                ));
+            }
+            // EX/EY/EZ are positions (mm), EA/EB/EC orientations (deg).
+            let (bound, unit) = if matches!(name.get(..2), Some("EA" | "EB" | "EC")) {
+                (PLAUSIBLE_DEG, "deg")
+            } else {
+                (PLAUSIBLE_MM, "mm")
+            };
+            if v.abs() > bound {
+                return Err(invalid(
+                    K::Implausible,
+                    format!(
+                        "errors.{name}: {v} is beyond the plausible range -{bound} .. +{bound} {unit} of a location error"
+                    ),
                 ));
             }
         }
@@ -290,6 +313,16 @@ pub(crate) mod tests {
         std::fs::write(&path, "machine = \"table-ac\"\nerror = 1\n").unwrap();
         let e = ActiveKinematics::load(&path, &c).unwrap_err();
         assert_eq!(e.kind(), KinematicsFileErrorKind::Syntax, "{e}");
+        for (name, v) in [("EX0C", "1e300"), ("EA0C", "-45.0")] {
+            std::fs::write(
+                &path,
+                format!("machine = \"table-ac\"\n[errors]\n{name} = {v}\n"),
+            )
+            .unwrap();
+            let e = ActiveKinematics::load(&path, &c).unwrap_err();
+            assert_eq!(e.kind(), KinematicsFileErrorKind::Implausible, "{e}");
+            assert!(e.to_string().contains(&format!("errors.{name}")), "{e}");
+        }
     }
 
     /// A process that ran and is gone: its pid names a stale temporary.
