@@ -75,8 +75,9 @@ pub struct ReceiveTime {
 pub struct ReceiveTimes;
 
 impl ReceiveTimes {
+    /// Written whole through [`hal::atomic_write`], or not at all.
     pub fn write(path: &std::path::Path, times: &[ReceiveTime]) -> std::io::Result<()> {
-        let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+        let mut out = Vec::with_capacity(times.len() * 64);
         for t in times {
             writeln!(
                 out,
@@ -84,7 +85,7 @@ impl ReceiveTimes {
                 t.run_id, t.sequence, t.trigger_ns, t.receive_ns, t.t1_ns
             )?;
         }
-        out.flush()
+        hal::atomic_write::write_atomic(path, &out).map_err(|e| e.to_io())
     }
 
     pub fn read(path: &std::path::Path) -> Result<Vec<ReceiveTime>, String> {

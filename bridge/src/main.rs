@@ -3,6 +3,7 @@
 use clap::{Args, Parser, Subcommand};
 use probebridge::commands::{self, parse_vec3};
 use probebridge::session::MachineOptions;
+use probebridge::tell;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -55,7 +56,17 @@ impl MachineArgs {
             realtime: self.realtime,
             service: self.service.clone(),
             candump: self.candump.clone(),
+            abort: None,
         }
+    }
+
+    /// The options of a command that moves the axes: a stop signal brakes them.
+    fn moving_options(&self) -> Result<MachineOptions, String> {
+        probebridge::stop_signal::install()?;
+        Ok(MachineOptions {
+            abort: Some(probebridge::stop_signal::flag()),
+            ..self.options()
+        })
     }
 }
 
@@ -218,7 +229,7 @@ fn main() -> ExitCode {
             .and_then(|start| {
                 let dir = parse_vec3("--dir", &dir)?;
                 commands::probe::run(&commands::probe::ProbeArgs {
-                    machine: machine.options(),
+                    machine: machine.moving_options()?,
                     start,
                     dir,
                     dist,
@@ -236,15 +247,17 @@ fn main() -> ExitCode {
             kinematics,
             history,
             presets,
-        } => commands::run::run(&commands::run::RunArgs {
-            program,
-            machine: machine.options(),
-            out,
-            json,
-            yes,
-            kinematics,
-            history,
-            presets,
+        } => machine.moving_options().and_then(|machine| {
+            commands::run::run(&commands::run::RunArgs {
+                program,
+                machine,
+                out,
+                json,
+                yes,
+                kinematics,
+                history,
+                presets,
+            })
         }),
         Cmd::Check {
             program,
@@ -252,7 +265,10 @@ fn main() -> ExitCode {
             kinematics,
             presets,
         } => commands::check::run(&program, &machine.options(), kinematics, presets.as_deref()),
-        Cmd::Demo { machine } => commands::demo::run(&machine.options()).map(|()| 0),
+        Cmd::Demo { machine } => machine
+            .moving_options()
+            .and_then(|m| commands::demo::run(&m))
+            .map(|()| 0),
         Cmd::Sim {
             scenario,
             can,
@@ -301,10 +317,17 @@ fn main() -> ExitCode {
         Cmd::Serve { config } => probebridge::serve::run(&config),
         Cmd::Bench(BenchCmd::Trigger(args)) => commands::bench::run(&args).map(|()| 0),
     };
+    // After a stop signal the session is closed (axes braked, drives disabled) and
+    // the results written: exit as the signal says.
+    let stopped_by = probebridge::stop_signal::exit_status();
     match result {
-        Ok(code) => ExitCode::from(code),
+        Ok(code) => ExitCode::from(stopped_by.unwrap_or(code)),
+        Err(e) if stopped_by.is_some() => {
+            tell!("probebridge: {e}");
+            ExitCode::from(stopped_by.unwrap_or(1))
+        }
         Err(e) => {
-            eprintln!("probebridge: {e}");
+            tell!("probebridge: {e}");
             ExitCode::FAILURE
         }
     }

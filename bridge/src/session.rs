@@ -5,6 +5,7 @@ use crate::configs;
 use crate::ipc::ForwardingSink;
 use cycles::CyclesConfig;
 use hal::can::inproc::InprocBus;
+use hal::can::record::RecordHealth;
 use hal::can::socketcan::SocketCanTransport;
 use hal::can::CanTransport;
 use hal::config::MachineConfig;
@@ -36,6 +37,8 @@ pub struct MachineOptions {
     pub service: String,
     /// Record the master's CAN traffic in candump's log format.
     pub candump: Option<PathBuf>,
+    /// The operator's stop (the signal handler's flag): brakes a move under way.
+    pub abort: Option<hal::AbortFlag>,
 }
 
 /// Any backend, as the commands drive it.
@@ -54,6 +57,8 @@ pub struct Session {
     pub notes: Vec<String>,
     pub sim: Option<SimRunner>,
     pub plc: Option<SimPlc>,
+    /// The candump log and whether its recording is whole.
+    pub candump: Option<(PathBuf, RecordHealth)>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -135,6 +140,12 @@ pub fn resolve_machine(
 
 impl Session {
     pub fn open(opts: &MachineOptions) -> Result<Self, SessionError> {
+        if let Some(path) = &opts.candump {
+            // A device, FIFO or symlink, or a missing folder, is refused before the
+            // machine opens.
+            hal::atomic_write::check_writable(path)
+                .map_err(|e| SessionError::Scenario(format!("--candump: {e}")))?;
+        }
         let (mut config, scenario) = resolve_machine(opts)?;
         let sink =
             ForwardingSink::spawn(&opts.service).map_err(|e| SessionError::Ipc(e.to_string()))?;
@@ -142,14 +153,23 @@ impl Session {
         if crate::modbus_session::wanted(opts, &config) {
             let (machine, plc, notes) =
                 crate::modbus_session::open(opts, &mut config, scenario.as_ref(), sink, run_id)?;
+            // The PLC finishes the move under way; after the stop nothing more moves.
+            let machine: DynMachine = match opts.abort {
+                Some(flag) => Box::new(hal::abort::AbortGate {
+                    inner: machine,
+                    flag,
+                }),
+                None => Box::new(machine),
+            };
             return Ok(Self {
-                machine: Box::new(machine),
+                machine,
                 config,
                 scenario,
                 startup: None,
                 notes,
                 sim: None,
                 plc,
+                candump: None,
             });
         }
         let (transport, sim, pacing): (Box<dyn CanTransport>, Option<SimRunner>, Pacing) =
@@ -191,19 +211,23 @@ impl Session {
                     (Box::new(bus.endpoint()), Some(sim), pacing)
                 }
             };
+        let mut candump = None;
         let transport: Box<dyn CanTransport> = match &opts.candump {
             Some(path) => {
                 let file = std::fs::File::create(path).map_err(|e| {
                     SessionError::Scenario(format!("cannot create {}: {e}", path.display()))
                 })?;
                 let iface = opts.can.as_deref().unwrap_or("inproc");
-                Box::new(hal::can::record::Recorder::new(transport, file, iface))
+                let recorder = hal::can::record::Recorder::new(transport, file, iface);
+                candump = Some((path.clone(), recorder.health()));
+                Box::new(recorder)
             }
             None => transport,
         };
         let options = MasterOptions {
             pacing,
             run_id,
+            abort: opts.abort,
             ..MasterOptions::default()
         };
         let (machine, startup) = CanMachine::start(&config, transport, sink, options)?;
@@ -215,6 +239,24 @@ impl Session {
             startup: Some(startup),
             plc: None,
             sim,
+            candump,
         })
+    }
+
+    /// Closes the machine (the drives disabled, the loop stopped, the candump log
+    /// flushed) and says whether every file the session wrote is whole.
+    pub fn close(self) -> Result<(), String> {
+        let candump = self.candump.clone();
+        drop(self);
+        match candump {
+            Some((path, health)) => match health.error() {
+                Some(e) => Err(format!(
+                    "candump log {}: write failed ({e}); the recording is incomplete",
+                    path.display()
+                )),
+                None => Ok(()),
+            },
+            None => Ok(()),
+        }
     }
 }

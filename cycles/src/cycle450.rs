@@ -137,10 +137,25 @@ pub fn save_kinematics(
             }
             let mut saved = ActiveKinematics::load(&path, cfg)?;
             saved.path = active.to_path_buf();
+            // Say what really happened: an identical file is not rewritten, and a
+            // previous version is kept only when there was one.
+            let current = ActiveKinematics::load(active, cfg).ok();
+            if current.as_ref().is_some_and(|c| c.errors == saved.errors) && active.is_file() {
+                return Ok(format!(
+                    "kinematics {designation} is already active in {}; nothing written",
+                    active.display()
+                ));
+            }
+            let existed = active.is_file();
             saved.write()?;
             Ok(format!(
-                "kinematics {designation} restored into {} (previous version kept as .prev)",
-                active.display()
+                "kinematics {designation} restored into {}{}",
+                active.display(),
+                if existed {
+                    " (previous version kept as .prev)"
+                } else {
+                    ""
+                }
             ))
         }
         SaveMode::Show => {
@@ -205,10 +220,17 @@ mod tests {
         k.write().unwrap();
         let shown = save_kinematics(SaveMode::Show, 7, &path, &c).unwrap();
         assert!(shown.contains("7: EY0C=+0.020000 <-"), "{shown}");
-        save_kinematics(SaveMode::Restore, 7, &path, &c).unwrap();
+        let said = save_kinematics(SaveMode::Restore, 7, &path, &c).unwrap();
+        assert!(said.contains("kept as .prev"), "{said}");
         assert_eq!(
             ActiveKinematics::load(&path, &c).unwrap().error("EY0C"),
             0.02
+        );
+        // Restoring what is already active writes nothing and says so.
+        let said = save_kinematics(SaveMode::Restore, 7, &path, &c).unwrap();
+        assert!(
+            said.contains("nothing written") && !said.contains(".prev"),
+            "{said}"
         );
         // The version the restore replaced is kept.
         assert_eq!(

@@ -20,8 +20,13 @@ use crate::iso230_7::error_names;
 use hal::config::MachineConfig;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use std::io::Write;
 use std::path::{Path, PathBuf};
+
+/// The largest position error (EX0C, EY0A, ...) a kinematics file may hold, mm: a
+/// location error is a deviation from the nominal chain, never a structure size.
+pub const PLAUSIBLE_MM: f64 = 10.0;
+/// The largest orientation error (EA0C, EB0A, ...) a kinematics file may hold, deg.
+pub const PLAUSIBLE_DEG: f64 = 10.0;
 
 /// What went wrong with a kinematics file.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -36,6 +41,9 @@ pub enum KinematicsFileErrorKind {
     UnknownError,
     /// A value that is not a finite number.
     NotANumber,
+    /// A value beyond what a machine's location error can be
+    /// ([`PLAUSIBLE_MM`], [`PLAUSIBLE_DEG`]): a typo or a unit mix-up.
+    Implausible,
     /// Cycle 450: nothing saved under the designation.
     NothingSaved,
     Write,
@@ -154,6 +162,20 @@ impl ActiveKinematics {
                     format!("errors.{name}: {v} is not a number"),
                 ));
             }
+            // EX/EY/EZ are positions (mm), EA/EB/EC orientations (deg).
+            let (bound, unit) = if matches!(name.get(..2), Some("EA" | "EB" | "EC")) {
+                (PLAUSIBLE_DEG, "deg")
+            } else {
+                (PLAUSIBLE_MM, "mm")
+            };
+            if v.abs() > bound {
+                return Err(invalid(
+                    K::Implausible,
+                    format!(
+                        "errors.{name}: {v} is beyond the plausible range -{bound} .. +{bound} {unit} of a location error"
+                    ),
+                ));
+            }
         }
         Ok(Self {
             machine: f.machine,
@@ -189,16 +211,20 @@ impl ActiveKinematics {
                     return Ok(());
                 }
             }
-            copy_atomic(&self.path, &prev_path(&self.path))?;
         }
-        write_atomic(&self.path, self.render().as_bytes())
+        // The target is checked before `.prev` is taken: a symlink or device at the
+        // path is refused without reading through it.
+        hal::atomic_write::write_atomic_keeping_previous(&self.path, self.render().as_bytes())
+            .map_err(|e| KinematicsFileError::Write {
+                path: e.path.clone(),
+                source: e.to_io(),
+            })
     }
 }
 
+#[cfg(test)]
 pub(crate) fn prev_path(path: &Path) -> PathBuf {
-    let mut s = path.as_os_str().to_owned();
-    s.push(".prev");
-    PathBuf::from(s)
+    hal::atomic_write::previous_path(path)
 }
 
 pub(crate) fn write_error(path: &Path) -> impl Fn(std::io::Error) -> KinematicsFileError + '_ {
@@ -208,38 +234,19 @@ pub(crate) fn write_error(path: &Path) -> impl Fn(std::io::Error) -> KinematicsF
     }
 }
 
-/// Temporary file in the same folder, fsync, rename over `path`, fsync the folder.
+/// Through [`hal::atomic_write`]: temporary file in the same folder, fsync, rename over
+/// `path`, fsync the folder; a symlink, device or FIFO at `path` is refused, and
+/// temporaries a killed write left are removed.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), KinematicsFileError> {
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).map_err(write_error(dir))?;
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)?;
-        // The rename is durable only once the folder is.
-        std::fs::File::open(dir)?.sync_all()
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result.map_err(write_error(path))
-}
-
-fn copy_atomic(from: &Path, to: &Path) -> Result<(), KinematicsFileError> {
-    let bytes = std::fs::read(from).map_err(|source| KinematicsFileError::Read {
-        path: from.to_path_buf(),
-        source,
-    })?;
-    write_atomic(to, &bytes)
+    hal::atomic_write::write_atomic(path, bytes).map_err(|e| KinematicsFileError::Write {
+        path: path.to_path_buf(),
+        source: e.to_io(),
+    })
 }
 
 #[cfg(test)]
@@ -306,5 +313,51 @@ pub(crate) mod tests {
         std::fs::write(&path, "machine = \"table-ac\"\nerror = 1\n").unwrap();
         let e = ActiveKinematics::load(&path, &c).unwrap_err();
         assert_eq!(e.kind(), KinematicsFileErrorKind::Syntax, "{e}");
+        for (name, v) in [("EX0C", "1e300"), ("EA0C", "-45.0")] {
+            std::fs::write(
+                &path,
+                format!("machine = \"table-ac\"\n[errors]\n{name} = {v}\n"),
+            )
+            .unwrap();
+            let e = ActiveKinematics::load(&path, &c).unwrap_err();
+            assert_eq!(e.kind(), KinematicsFileErrorKind::Implausible, "{e}");
+            assert!(e.to_string().contains(&format!("errors.{name}")), "{e}");
+        }
+    }
+
+    /// A process that ran and is gone: its pid names a stale temporary.
+    fn dead_pid() -> u32 {
+        let mut c = std::process::Command::new("true").spawn().unwrap();
+        c.wait().unwrap();
+        c.id()
+    }
+
+    #[test]
+    fn a_write_removes_temporaries_of_killed_writes_and_refuses_a_symlink() {
+        let d = tmp("safe");
+        let c = cfg(&d);
+        let path = ActiveKinematics::default_path(&c);
+        let stale = d.join(format!(".table-ac.kinematics.toml.tmp{}", dead_pid()));
+        std::fs::write(&stale, "half a file").unwrap();
+        let mut k = ActiveKinematics::load(&path, &c).unwrap();
+        k.errors.insert("EX0C".into(), 0.012);
+        k.write().unwrap();
+        assert!(!stale.exists(), "the killed write's temporary is cleaned");
+
+        let target = d.join("elsewhere.toml");
+        std::fs::write(&target, "keep").unwrap();
+        let link = d.join("link.kinematics.toml");
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        k.path = link.clone();
+        k.errors.insert("EB0A".into(), -0.003);
+        let e = k.write().unwrap_err();
+        assert_eq!(e.kind(), KinematicsFileErrorKind::Write, "{e}");
+        assert!(e.to_string().contains("symbolic link"), "{e}");
+        assert!(std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        assert_eq!(std::fs::read_to_string(&target).unwrap(), "keep");
+        assert!(!prev_path(&link).exists(), "nothing read through the link");
     }
 }

@@ -36,6 +36,8 @@ pub enum LinearBlockErrorKind {
     AxisTwice,
     /// No axis at all.
     NoCoordinate,
+    /// A target outside the axis's software limits.
+    SoftwareLimit,
 }
 
 /// An `L` block that cannot run; the message names the word.
@@ -47,7 +49,7 @@ pub struct LinearBlockError {
 }
 
 impl LinearBlockError {
-    fn new(kind: LinearBlockErrorKind, message: impl Into<String>) -> Self {
+    pub(crate) fn new(kind: LinearBlockErrorKind, message: impl Into<String>) -> Self {
         Self {
             kind,
             message: message.into(),

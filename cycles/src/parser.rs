@@ -27,7 +27,7 @@ impl Program {
 
     /// Reads, parses and validates a `.h` file.
     pub fn load(path: &Path, cfg: &CyclesConfig) -> Result<Program, ProgramError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ProgramError::Read {
+        let text = read_program_text(path).map_err(|source| ProgramError::Read {
             path: path.to_path_buf(),
             source,
         })?;
@@ -38,6 +38,36 @@ impl Program {
         program.path = Some(path.to_path_buf());
         Ok(program)
     }
+}
+
+/// The largest program file read (bytes): a measuring program is a few kB; more is
+/// the wrong file (`/dev/zero`, a log), refused at once instead of read forever.
+pub const MAX_PROGRAM_BYTES: u64 = 1 << 20;
+
+/// Reads a program file: at most [`MAX_PROGRAM_BYTES`], UTF-8, a leading byte-order
+/// mark (as Windows editors write) dropped.
+pub fn read_program_text(path: &Path) -> std::io::Result<String> {
+    use std::io::Read;
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)?
+        .take(MAX_PROGRAM_BYTES + 1)
+        .read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > MAX_PROGRAM_BYTES {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("larger than {MAX_PROGRAM_BYTES} bytes: not a measuring program"),
+        ));
+    }
+    let text = String::from_utf8(bytes).map_err(|e| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("not UTF-8 text (byte {})", e.utf8_error().valid_up_to()),
+        )
+    })?;
+    Ok(match text.strip_prefix('\u{feff}') {
+        Some(rest) => rest.to_string(),
+        None => text,
+    })
 }
 
 /// Parses and validates `text`; `Err` holds every problem found.

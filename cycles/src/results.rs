@@ -12,6 +12,9 @@ use std::path::PathBuf;
 pub enum Status {
     Ok,
     Error,
+    /// The operator stopped the machine while the cycle ran (a signal): the axes were
+    /// braked, nothing was written back.
+    Aborted,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -31,6 +34,14 @@ pub struct CycleResult {
 }
 
 impl CycleResult {
+    /// The cycle was cut short by the operator's stop.
+    pub fn aborted(block: u32, cycle: u16, message: impl Into<String>) -> Self {
+        CycleResult {
+            status: Status::Aborted,
+            ..Self::error(block, cycle, message)
+        }
+    }
+
     pub fn error(block: u32, cycle: u16, message: impl Into<String>) -> Self {
         CycleResult {
             block,
@@ -73,6 +84,9 @@ pub struct ProgramReport {
     pub cycles: Vec<CycleResult>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stopped: Option<String>,
+    /// The operator stopped the program (a signal): the axes were braked.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub aborted: bool,
     /// Measuring logs written.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub protocols: Vec<PathBuf>,
@@ -81,7 +95,9 @@ pub struct ProgramReport {
 impl ProgramReport {
     /// The program ran to its end and every cycle is ok.
     pub fn completed(&self) -> bool {
-        self.stopped.is_none() && self.cycles.iter().all(|c| c.status == Status::Ok)
+        self.stopped.is_none()
+            && !self.aborted
+            && self.cycles.iter().all(|c| c.status == Status::Ok)
     }
 
     pub fn to_json(&self) -> String {
@@ -96,6 +112,7 @@ impl ProgramReport {
             let status = match c.status {
                 Status::Ok => "ok",
                 Status::Error => "error",
+                Status::Aborted => "aborted",
             };
             out.push_str(&format!("block {} cycle {}: {status}", c.block, c.cycle));
             if let Some(m) = &c.message {

@@ -7,14 +7,15 @@ use crate::cycle451;
 use crate::cycle451::PlanErrorKind;
 use crate::cycles_config::CyclesConfig;
 use crate::datum::Datum;
-use crate::error::CycleError;
+use crate::error::{CycleError, CycleErrorKind};
 use crate::kinematics::{Estimator, LocalEstimator};
 use crate::kinematics_file::ActiveKinematics;
-use crate::linear::{parse_linear, LinearBlockError, LinearBlockErrorKind, MoveFeed};
+use crate::linear::{parse_linear, LinearBlockError, LinearBlockErrorKind, LinearMove, MoveFeed};
 use crate::program::{CycleCall, CycleKind, Program, Statement};
 use crate::progress::{ProgressEvent, ProgressSink};
 use crate::results::{CycleOutput, CycleResult, ProgramReport, Status};
 use hal::config::MachineConfig;
+use hal::machine::Error as _;
 use hal::{Axis, Machine};
 use std::path::PathBuf;
 
@@ -150,12 +151,59 @@ pub fn preflight_program(
     }
     for block in &program.blocks {
         if let Statement::Other(code) = &block.statement {
-            if let Some(Err(error)) = parse_linear(code, program.unit) {
+            let checked = parse_linear(code, program.unit)
+                .map(|r| r.and_then(|mv| check_linear_move(&mv, &cfg.machine)));
+            if let Some(Err(error)) = checked {
                 return Err(Preflight::Positioning {
                     line: block.line,
                     error,
                 });
             }
+        }
+    }
+    Ok(())
+}
+
+/// A program file as `check` and `run` take it: BEGIN PGM and END PGM present (an
+/// empty, whitespace-only or cut-off file does nothing and must not pass as ok).
+/// Program text built in code (tests, embedding) may leave them out.
+pub fn check_complete(program: &Program) -> Result<(), String> {
+    let has = |f: fn(&Statement) -> bool| program.blocks.iter().any(|b| f(&b.statement));
+    if !has(|s| matches!(s, Statement::BeginPgm { .. })) {
+        return Err("no BEGIN PGM: an empty or cut-off program; nothing moved".into());
+    }
+    if !has(|s| matches!(s, Statement::EndPgm { .. })) {
+        return Err("no END PGM: a cut-off program; nothing moved".into());
+    }
+    Ok(())
+}
+
+/// What the machine would refuse of an `L` block, found before anything moves: a
+/// target outside the software limits, a feed outside the motion guard's range.
+fn check_linear_move(mv: &LinearMove, machine: &MachineConfig) -> Result<(), LinearBlockError> {
+    for (axis, v) in mv.target.iter() {
+        if let Some(a) = machine.axes.iter().find(|a| a.name == axis) {
+            if !(a.min..=a.max).contains(&v) {
+                return Err(LinearBlockError::new(
+                    LinearBlockErrorKind::SoftwareLimit,
+                    format!(
+                        "L block: {axis}{v:+.4} is outside the software limits {:+.4} .. {:+.4}",
+                        a.min, a.max
+                    ),
+                ));
+            }
+        }
+    }
+    if let MoveFeed::Feed(f) = mv.feed {
+        let fastest = machine.axes.iter().map(|a| a.max_feed).fold(0.0, f64::max);
+        if !(hal::motion_guard::MIN_FEED..=fastest).contains(&f) {
+            return Err(LinearBlockError::new(
+                LinearBlockErrorKind::Feed,
+                format!(
+                    "L block: F{f}: the feed must be between {} and the machine's fastest max_feed {fastest} mm/min",
+                    hal::motion_guard::MIN_FEED
+                ),
+            ));
         }
     }
     Ok(())
@@ -236,6 +284,7 @@ pub fn run_program<M: Machine>(
                         feed,
                     });
                     if let Err(e) = machine.move_to(&mv.target, feed) {
+                        report.aborted = e.kind() == hal::ErrorKind::Aborted;
                         report.stopped = Some(format!("block {number} (line {}): {e}", block.line));
                         break;
                     }
@@ -296,6 +345,15 @@ fn run_cycle<M: Machine>(
                 message: out.stop,
                 kinematics: out.kinematics,
             }
+        }
+        Err(e) if e.kind() == CycleErrorKind::Machine(hal::ErrorKind::Aborted) => {
+            let message = e.to_string();
+            report.aborted = true;
+            report.stopped = Some(format!(
+                "block {}: cycle {} aborted: {message}",
+                head.block, head.cycle
+            ));
+            CycleResult::aborted(head.block, head.cycle, message)
         }
         Err(e) => {
             let message = e.to_string();

@@ -32,6 +32,8 @@ pub enum WriteErrorKind {
 pub struct WriteError {
     pub path: PathBuf,
     kind: WriteErrorKind,
+    /// The operating system's reason, for [`WriteErrorKind::Io`].
+    io_kind: Option<std::io::ErrorKind>,
     message: String,
 }
 
@@ -40,16 +42,36 @@ impl WriteError {
         self.kind
     }
 
+    /// Why, without the path (for errors that name the path themselves).
+    pub fn reason(&self) -> &str {
+        &self.message
+    }
+
+    /// As an `std::io::Error` (the reason, without the path), for callers whose errors
+    /// carry one.
+    pub fn to_io(&self) -> std::io::Error {
+        let kind = match self.kind {
+            WriteErrorKind::NotRegularFile => std::io::ErrorKind::InvalidInput,
+            WriteErrorKind::NoFolder => std::io::ErrorKind::NotFound,
+            WriteErrorKind::Io => self.io_kind.unwrap_or(std::io::ErrorKind::Other),
+        };
+        std::io::Error::new(kind, self.message.clone())
+    }
+
     fn new(path: &Path, kind: WriteErrorKind, message: impl Into<String>) -> Self {
         Self {
             path: path.to_path_buf(),
             kind,
+            io_kind: None,
             message: message.into(),
         }
     }
 
     fn io(path: &Path, e: &std::io::Error) -> Self {
-        Self::new(path, WriteErrorKind::Io, e.to_string())
+        Self {
+            io_kind: Some(e.kind()),
+            ..Self::new(path, WriteErrorKind::Io, e.to_string())
+        }
     }
 }
 
@@ -148,7 +170,15 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     let name = file_name(path)?;
     let dir = folder_of(path);
     remove_stale_temporaries(dir, &name);
-    let tmp = dir.join(format!("{}{}", temp_prefix(&name), std::process::id()));
+    // Unique per write, so two threads of one process writing the same path (a
+    // gateway serving several requests) never share a temporary.
+    static SERIAL: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let serial = SERIAL.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tmp = dir.join(format!(
+        "{}{}-{serial}",
+        temp_prefix(&name),
+        std::process::id()
+    ));
     let result = (|| -> std::io::Result<()> {
         let mut f = OpenOptions::new()
             .write(true)
@@ -191,7 +221,7 @@ pub fn previous_path(path: &Path) -> PathBuf {
     PathBuf::from(s)
 }
 
-/// Removes `.<name>.tmp<pid>` files in `dir` whose process no longer runs: what a
+/// Removes `.<name>.tmp<pid>[-<serial>]` files in `dir` whose process no longer runs: what a
 /// write killed between create and rename left behind.
 fn remove_stale_temporaries(dir: &Path, name: &str) {
     let prefix = temp_prefix(name);
@@ -203,7 +233,8 @@ fn remove_stale_temporaries(dir: &Path, name: &str) {
         let Some(rest) = file.to_str().and_then(|f| f.strip_prefix(&prefix)) else {
             continue;
         };
-        let pid = rest.strip_suffix("-check").unwrap_or(rest);
+        // `<pid>`, `<pid>-<serial>` or `<pid>-check`.
+        let pid = rest.split('-').next().unwrap_or(rest);
         let Ok(pid) = pid.parse::<i32>() else {
             continue;
         };
@@ -307,12 +338,34 @@ mod tests {
         // A pid that cannot be running: above the kernel's pid_max limit.
         let stale = d.join(".k.toml.tmp2147483600");
         fs::write(&stale, "half").unwrap();
+        let stale_serial = d.join(".k.toml.tmp2147483600-7");
+        fs::write(&stale_serial, "half").unwrap();
         let mine = d.join(format!(".k.toml.tmp{}-check", std::process::id()));
         fs::write(&mine, "").unwrap();
         write_atomic(&d.join("k.toml"), b"whole").unwrap();
         assert!(!stale.exists());
+        assert!(!stale_serial.exists());
         // A live process's temporary is not touched.
         assert!(mine.exists());
+    }
+
+    #[test]
+    fn threads_of_one_process_writing_one_path_never_share_a_temporary() {
+        let d = dir("threads");
+        let p = d.join("TCHPR444.html");
+        std::thread::scope(|s| {
+            for t in 0..4u8 {
+                let p = &p;
+                s.spawn(move || {
+                    for _ in 0..50 {
+                        write_atomic(p, &[t; 64]).unwrap();
+                    }
+                });
+            }
+        });
+        let bytes = fs::read(&p).unwrap();
+        assert!(bytes.len() == 64 && bytes.iter().all(|b| *b == bytes[0]));
+        assert_eq!(fs::read_dir(&d).unwrap().count(), 1, "no temporary left");
     }
 
     #[test]

@@ -12,6 +12,7 @@
 //! - [`modbus`]: the PLC backend over Modbus TCP/RTU (mailbox codec, latch ring).
 //! - [`config`]: the machine description (axes, bus mapping, kinematics, probe table).
 
+pub mod abort;
 pub mod atomic_write;
 pub mod axis;
 pub mod can;
@@ -27,6 +28,7 @@ pub mod motion;
 pub mod motion_guard;
 pub mod rt;
 
+pub use abort::AbortFlag;
 pub use axis::{Axis, AxisPositions};
 pub use contact_sample::{ContactSample, NullSink, SampleSink, SinkError};
 pub use machine::{Contact, ErrorKind, Machine, MachineError, ProbeMove};

@@ -27,6 +27,9 @@ pub enum ErrorKind {
     Bus,
     /// The request itself is invalid (unknown axis, zero direction, bad feed).
     InvalidRequest,
+    /// The operator stopped the machine (a signal, a stop request): motion was braked,
+    /// or refused before it started.
+    Aborted,
     /// Anything else.
     Other,
 }
@@ -43,6 +46,7 @@ impl ErrorKind {
             ErrorKind::SoftwareLimit => "software limit",
             ErrorKind::Bus => "bus error",
             ErrorKind::InvalidRequest => "invalid request",
+            ErrorKind::Aborted => "aborted",
             ErrorKind::Other => "error",
         }
     }

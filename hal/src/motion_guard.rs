@@ -17,7 +17,17 @@ struct AxisBounds {
     max: f64,
     /// Units/s^2.
     max_acceleration: f64,
+    /// Units/min.
+    max_feed: f64,
 }
+
+/// The slowest feed any move is given (mm/min, deg/min): below it a move would take
+/// so long that it looks like a hang.
+pub const MIN_FEED: f64 = 1.0;
+
+/// The longest a single move may take at its feed (s): longer is a mistyped feed or
+/// distance, refused before anything moves.
+pub const MAX_MOVE_SECONDS: f64 = 15.0 * 60.0;
 
 /// Software limits and braking of a machine's axes.
 #[derive(Clone, Debug, PartialEq)]
@@ -41,21 +51,69 @@ impl MotionGuard {
                 min: a.min,
                 max: a.max,
                 max_acceleration: a.max_acceleration,
+                max_feed: a.max_feed,
             });
         }
         Self { axes }
     }
 
-    /// A feed (mm/min, deg/min) must be finite and > 0.
+    /// The fastest feed of any axis (the rapid traverse).
+    fn fastest(&self) -> f64 {
+        self.axes
+            .iter()
+            .flatten()
+            .map(|a| a.max_feed)
+            .fold(0.0, f64::max)
+    }
+
+    /// A feed (mm/min, deg/min) must be finite, at least [`MIN_FEED`] and at most the
+    /// fastest axis's `max_feed` (each axis is held to its own by the interpolation).
     pub fn check_feed(&self, feed: f64) -> Result<(), MachineError> {
-        if feed.is_finite() && feed > 0.0 {
+        let fastest = self.fastest();
+        if feed.is_finite() && (MIN_FEED..=fastest).contains(&feed) {
             Ok(())
         } else {
             Err(MachineError::new(
                 ErrorKind::InvalidRequest,
-                format!("feed {feed} must be > 0"),
+                format!(
+                    "feed {feed} must be between {MIN_FEED} and the machine's fastest max_feed {fastest} (mm/min); nothing moved"
+                ),
             ))
         }
+    }
+
+    /// A move of `distance` (mm or deg) at `feed` must end within
+    /// [`MAX_MOVE_SECONDS`].
+    pub fn check_duration(&self, distance: f64, feed: f64) -> Result<(), MachineError> {
+        let seconds = distance / (feed / 60.0);
+        if seconds.is_finite() && seconds <= MAX_MOVE_SECONDS {
+            Ok(())
+        } else {
+            Err(MachineError::new(
+                ErrorKind::InvalidRequest,
+                format!(
+                    "a move of {distance:.3} at feed {feed} would take {seconds:.0} s, longer than {MAX_MOVE_SECONDS:.0} s; nothing moved"
+                ),
+            ))
+        }
+    }
+
+    /// A straight move from `here` to `target` at `feed`: [`MotionGuard::check_move`]
+    /// and its duration.
+    pub fn check_move_from(
+        &self,
+        here: &AxisPositions,
+        target: &AxisPositions,
+        feed: f64,
+    ) -> Result<(), MachineError> {
+        self.check_move(target, feed)?;
+        let mut sq = 0.0;
+        for (axis, v) in target.iter() {
+            if let Some(h) = here.get(axis) {
+                sq += (v - h) * (v - h);
+            }
+        }
+        self.check_duration(sq.sqrt(), feed)
     }
 
     /// Every axis of `target` exists and is inside its software limits. `what` names
@@ -121,7 +179,28 @@ impl MotionGuard {
                 ),
             ));
         }
-        Ok([d[0] / norm, d[1] / norm, d[2] / norm])
+        let unit = [d[0] / norm, d[1] / norm, d[2] / norm];
+        // Each linear axis moves at feed x its share of the direction: none beyond
+        // its max_feed (the latch must come at the feed asked for).
+        let mut limit = f64::INFINITY;
+        for (i, a) in Axis::LINEAR.iter().enumerate() {
+            if let Some(b) = self.axes[a.index()] {
+                if unit[i].abs() > 1e-9 {
+                    limit = limit.min(b.max_feed / unit[i].abs());
+                }
+            }
+        }
+        if mv.feed < MIN_FEED || mv.feed > limit {
+            return Err(MachineError::new(
+                ErrorKind::InvalidRequest,
+                format!(
+                    "probing feed {} must be between {MIN_FEED} and {limit:.0} mm/min (the axes' max_feed along this direction); nothing moved",
+                    mv.feed
+                ),
+            ));
+        }
+        self.check_duration(mv.max_distance, mv.feed)?;
+        Ok(unit)
     }
 
     /// A probing move from `here`: [`MotionGuard::check_probe_request`], and the path's
@@ -233,6 +312,40 @@ mod tests {
                 .kind,
             ErrorKind::InvalidRequest
         );
+    }
+
+    #[test]
+    fn feeds_below_the_minimum_above_max_feed_or_too_slow_for_the_distance_are_refused() {
+        let g = guard();
+        let at = |x: f64, y: f64, z: f64| AxisPositions::linear([x, y, z]);
+        let probe = |feed: f64, max_distance: f64| ProbeMove {
+            direction: [0.0, 0.0, -1.0],
+            feed,
+            max_distance,
+        };
+        for feed in [0.000001, 0.5, 1e308, f64::NAN] {
+            let e = g.check_probe_request(&probe(feed, 10.0)).unwrap_err();
+            assert_eq!(e.kind, ErrorKind::InvalidRequest, "{feed}: {e}");
+            let e = g.check_move(&at(0.0, 0.0, 10.0), feed).unwrap_err();
+            assert_eq!(e.kind, ErrorKind::InvalidRequest, "{feed}: {e}");
+        }
+        let fastest = g.fastest();
+        let e = g
+            .check_probe_request(&probe(fastest * 2.0, 10.0))
+            .unwrap_err();
+        assert!(e.message.contains("max_feed"), "{e}");
+        assert!(g.check_probe_request(&probe(100.0, 10.0)).is_ok());
+        // 1 mm/min over 100 mm is 100 min: refused; over 10 mm, 10 min: fine.
+        let e = g.check_probe_request(&probe(1.0, 100.0)).unwrap_err();
+        assert!(e.message.contains("would take"), "{e}");
+        assert!(g.check_probe_request(&probe(1.0, 10.0)).is_ok());
+        let e = g
+            .check_move_from(&at(0.0, 0.0, 0.0), &at(0.0, 0.0, 100.0), 1.0)
+            .unwrap_err();
+        assert!(e.message.contains("would take"), "{e}");
+        assert!(g
+            .check_move_from(&at(0.0, 0.0, 0.0), &at(0.0, 0.0, 100.0), 1000.0)
+            .is_ok());
     }
 
     #[test]

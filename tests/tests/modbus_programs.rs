@@ -22,8 +22,12 @@ fn run_on(
     let path = configs_dir().join("programs").join(program);
     let text = std::fs::read_to_string(&path).unwrap();
     let program = Program::parse(&text, &cfg).unwrap_or_else(|e| panic!("{e}"));
-    let out: PathBuf =
-        std::env::temp_dir().join(format!("pb-modbus-programs-{tag}-{}", std::process::id()));
+    // One folder per program and backend: the tests run in parallel threads.
+    let out: PathBuf = std::env::temp_dir().join(format!(
+        "pb-modbus-programs-{tag}-{}-{}",
+        path.file_stem().unwrap().to_string_lossy(),
+        std::process::id()
+    ));
     let _ = std::fs::remove_dir_all(&out);
     std::fs::create_dir_all(&out).unwrap();
     let mut confirm = |_: &str| true;

@@ -243,7 +243,7 @@ fn spawn_estimator(
 ) -> Result<(EstimatorChild, bool), String> {
     let (prefix, times_file, estimator_log) =
         (ws.prefix.as_str(), &ws.times_file, &ws.estimator_log);
-    eprintln!("bench: starting the estimator process ...");
+    tell!("bench: starting the estimator process ...");
     let mut command = Command::new(std::env::current_exe().map_err(|e| e.to_string())?);
     command.args([
         "estimator",
@@ -341,8 +341,9 @@ fn start_rig(
         rt_priority: args.rt_priority,
         run_id: TRIGGER_RUN,
         command_timeout: Duration::from_secs(10),
+        abort: None,
     };
-    eprintln!(
+    tell!(
         "bench: bringing up the drives ({} bus, SYNC every {} us) ...",
         args.can.as_deref().unwrap_or("in-process"),
         args.period_us
@@ -389,7 +390,7 @@ fn measure(args: &BenchArgs, rig: Rig, warmup: u64, total: u64) -> Result<(Measu
         max_distance: bench::DISTANCE,
     };
 
-    eprintln!(
+    tell!(
         "bench: {warmup} warm-up + {} measured triggers ...",
         args.triggers
     );
@@ -437,7 +438,7 @@ fn measure(args: &BenchArgs, rig: Rig, warmup: u64, total: u64) -> Result<(Measu
             .map_err(|e| format!("retract after trigger {}: {e}", k + 1))?;
         if last_report.elapsed() > Duration::from_secs(10) {
             last_report = Instant::now();
-            eprintln!(
+            tell!(
                 "bench: {} of {total} triggers, {:.0} s",
                 k + 1,
                 began.elapsed().as_secs_f64()
@@ -601,7 +602,7 @@ impl Report<'_> {
         } else {
             "ForwardingSink (forwarder thread publishes)"
         };
-        println!(
+        say!(
             "probebridge bench trigger: {} triggers ({} warm-up not counted) in {:.1} s; SYNC {} us; {} bus; sink: {}",
             args.triggers,
             self.warmup,
@@ -611,7 +612,7 @@ impl Report<'_> {
             sink_name
         );
         let granted = |b: bool| if b { "granted" } else { "NOT granted" };
-        println!(
+        say!(
             "SCHED_FIFO: real-time loop {} (priority {}), simulated drives {} ({}), {}, {}; memory {}; CPU wake-up latency {} (cpuidle driver: {}); {} CPUs",
             granted(startup.realtime_priority),
             args.rt_priority,
@@ -641,44 +642,44 @@ impl Report<'_> {
             std::thread::available_parallelism().map_or(0, |n| n.get())
         );
         for n in &self.notes {
-            println!("note: {n}");
+            say!("note: {n}");
         }
     }
 
     /// The latency table, the ratio to the floor, the targets, anything lost.
     fn print_figures(&self, f: &Figures) {
         let (trig, fl) = (&f.trig, &f.fl);
-        println!();
-        println!("{:<44}{}", "", Summary::HEADER);
-        println!(
+        say!();
+        say!("{:<44}{}", "", Summary::HEADER);
+        say!(
             "{:<44}{}",
             "trigger -> estimator (latch t0 to t1)",
             trig.row()
         );
         if let Some(s) = &f.bus_hop {
-            println!(
+            say!(
                 "{:<44}{}",
                 "  latch -> real-time loop has the frame",
                 s.row()
             );
         }
         if let Some(s) = &f.ipc_hop {
-            println!("{:<44}{}", "  real-time loop -> estimator", s.row());
+            say!("{:<44}{}", "  real-time loop -> estimator", s.row());
         }
-        println!(
+        say!(
             "{:<44}{}",
             "floor: bare iceoryx2 hop, same processes",
             fl.row()
         );
         if let Some(s) = &f.stop {
-            println!(
+            say!(
                 "{:<44}{}",
                 "stop: latch frame in -> stop setpoint sent",
                 s.row()
             );
         }
-        println!();
-        println!(
+        say!();
+        say!(
             "ratio to the floor: p50 {:.2}x, p99 {:.2}x; stop latency {} .. {} cycle(s) (p50 {})",
             f.ratio_p50,
             f.ratio_p99,
@@ -686,7 +687,7 @@ impl Report<'_> {
             f.cycles_sorted.last().copied().unwrap_or(0),
             bench::percentile(&f.cycles_sorted, 50.0)
         );
-        println!(
+        say!(
             "targets: p99 <= 20 us: {}; p99.9 <= 50 us: {}; p50 within 2x the floor: {}",
             yes_no(trig.p99_us <= 20.0),
             yes_no(trig.p999_us <= 50.0),
@@ -696,7 +697,7 @@ impl Report<'_> {
         let stats = &m.loop_stats;
         let anomalies = l.lost_triggers + l.lost_floor + m.missing_t0 + stats.publish_failures;
         if anomalies > 0 || stats.late_cycles > 0 || stats.skipped_cycles > 0 {
-            println!(
+            say!(
                 "lost: {} trigger and {} floor samples; {} triggers without t0; {} publish failures; {} late cycles, {} SYNC slots skipped after stalls",
                 l.lost_triggers, l.lost_floor, m.missing_t0, stats.publish_failures, stats.late_cycles, stats.skipped_cycles
             );

@@ -85,7 +85,7 @@ pub fn run(args: &ModbusBenchArgs) -> Result<(), String> {
     bus.validate()
         .map_err(|e| format!("{}: {}", e.key, e.reason))?;
 
-    eprintln!("bench: starting the estimator process ...");
+    tell!("bench: starting the estimator process ...");
     let mut estimator = start_estimator(&prefix, &times_file, &estimator_log, 2 * total + 64)?;
     let latches = LatchLog::new();
     let mut program = PlcProgram::new(&scenario, &bus);
@@ -106,7 +106,7 @@ pub fn run(args: &ModbusBenchArgs) -> Result<(), String> {
         ..ModbusOptions::default()
     };
     let mut machine = ModbusMachine::start(&cfg, sink, options).map_err(|e| e.to_string())?;
-    eprintln!(
+    tell!(
         "bench: {warmup} warm-up + {} measured triggers over Modbus TCP {} ...",
         args.triggers,
         bus.address.as_deref().unwrap_or("?")
@@ -241,7 +241,7 @@ fn report(
     let Some(trig) = Summary::of(trigger) else {
         return Err("no trigger sample reached the estimator".into());
     };
-    println!(
+    say!(
         "probebridge bench trigger --modbus: {} triggers ({warmup} warm-up not counted) in {:.1} s; \
          simulated PLC on Modbus TCP loopback, PLC cycle {} us, status poll {} ms; sink: ForwardingSink",
         args.triggers,
@@ -249,22 +249,22 @@ fn report(
         args.plc_cycle_us,
         args.poll_ms
     );
-    println!();
-    println!("{:<44}{}", "", Summary::HEADER);
-    println!(
+    say!();
+    say!("{:<44}{}", "", Summary::HEADER);
+    say!(
         "{:<44}{}",
         "trigger -> estimator (PLC latch t0 to t1)",
         trig.row()
     );
     let hop = Summary::of(to_bridge);
     if let Some(s) = hop {
-        println!("{:<44}{}", "  PLC latch -> bridge has the contact", s.row());
+        say!("{:<44}{}", "  PLC latch -> bridge has the contact", s.row());
     }
     let ipc = Summary::of(to_estimator);
     if let Some(s) = ipc {
-        println!("{:<44}{}", "  bridge -> estimator", s.row());
+        say!("{:<44}{}", "  bridge -> estimator", s.row());
     }
-    println!(
+    say!(
         "lost: {lost} samples, {missing_t0} triggers without t0; latch ring: {} contacts, {} discarded, {} lost; \
          Modbus: {} requests, {} timeouts, {} reconnects",
         latch_stats.contacts,
@@ -274,7 +274,7 @@ fn report(
         client.timeouts,
         client.reconnects
     );
-    println!("the axes stop in the PLC on its latch; this latency is when the estimator has the contact, not its accuracy");
+    say!("the axes stop in the PLC on its latch; this latency is when the estimator has the contact, not its accuracy");
     if let Some(path) = &args.json {
         let v = json!({
             "bus": "modbus-tcp-loopback",
@@ -290,8 +290,7 @@ fn report(
             "modbus_requests": client.requests,
             "modbus_timeouts": client.timeouts,
         });
-        std::fs::write(path, serde_json::to_string_pretty(&v).unwrap_or_default())
-            .map_err(|e| format!("{}: {e}", path.display()))?;
+        crate::output::write_json(path, &v)?;
     }
     Ok(())
 }

@@ -6,7 +6,7 @@
 use crate::session::{cycles_config_with_presets, resolve_machine, MachineOptions};
 use cycles::kinematics_file::ActiveKinematics;
 use cycles::parser::parse_program;
-use cycles::runner::preflight_program;
+use cycles::runner::{check_complete, preflight_program};
 use std::path::{Path, PathBuf};
 
 /// Exit status 0 when valid, 2 with every error listed.
@@ -19,27 +19,29 @@ pub fn run(
     let (cfg, scenario) = resolve_machine(machine).map_err(|e| e.to_string())?;
     let cycles_cfg =
         cycles_config_with_presets(&cfg, scenario.as_ref(), presets).map_err(|e| e.to_string())?;
-    let text = std::fs::read_to_string(program)
+    let text = cycles::parser::read_program_text(program)
         .map_err(|e| format!("cannot read {}: {e}", program.display()))?;
     let errors: Vec<String> = match parse_program(&text, &cycles_cfg) {
         Err(invalid) => invalid.0.iter().map(|d| d.to_string()).collect(),
         // Valid text: now what only the machine can tell, as `run` checks it.
         Ok(parsed) => {
             let kinematics = kinematics.unwrap_or_else(|| ActiveKinematics::default_path(&cfg));
-            match preflight_program(&parsed, cfg.axis_mask(), &cycles_cfg, &kinematics) {
-                Ok(()) => Vec::new(),
-                Err(e) => vec![e.to_string()],
-            }
+            check_complete(&parsed)
+                .and_then(|()| {
+                    preflight_program(&parsed, cfg.axis_mask(), &cycles_cfg, &kinematics)
+                        .map_err(|e| e.to_string())
+                })
+                .err()
+                .into_iter()
+                .collect()
         }
     };
     if errors.is_empty() {
-        println!("{}: ok (machine {})", program.display(), cfg.name);
+        say!("{}: ok (machine {})", program.display(), cfg.name);
         return Ok(0);
     }
-    for e in &errors {
-        eprintln!("{}: {e}", program.display());
-    }
-    eprintln!(
+    super::tell_errors(program, &errors);
+    tell!(
         "{}: {} error(s); nothing was run",
         program.display(),
         errors.len()

@@ -14,7 +14,9 @@ use cycles::kinematics_file::ActiveKinematics;
 use cycles::program::Program;
 use cycles::progress::ProgressEvent;
 use cycles::runner::{run_program, RunOptions};
+use cycles::CyclesConfig;
 use hal::{Axis, AxisPositions, Machine, ProbeMove};
+use std::path::PathBuf;
 use std::time::Duration;
 
 pub fn run(machine: &MachineOptions) -> Result<(), String> {
@@ -24,24 +26,24 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
         // A demo must not collide with a bridge already running on this gateway.
         opts.service = format!("probebridge-demo-{}", std::process::id());
     }
-    println!("probebridge demo: starting the estimator process ...");
+    say!("probebridge demo: starting the estimator process ...");
     let estimator = EstimatorChild::spawn(&opts.service, Duration::from_secs(10))
         .map_err(|e| format!("cannot start the estimator: {e}"))?;
     if opts.modbus.is_some() {
-        println!("starting the simulated machine behind a PLC and connecting over Modbus ...");
+        say!("starting the simulated machine behind a PLC and connecting over Modbus ...");
     } else {
-        println!("starting the simulated machine and bringing the drives up over CANopen ...");
+        say!("starting the simulated machine and bringing the drives up over CANopen ...");
     }
     let mut s = Session::open(&opts).map_err(|e| e.to_string())?;
-    println!("  machine {}: {}", s.config.name, s.config.description);
+    say!("  machine {}: {}", s.config.name, s.config.description);
     if let Some(startup) = &s.startup {
         for d in &startup.drives {
-            println!("  {d}");
+            say!("  {d}");
         }
-        println!("  {}", startup.bus_load);
+        say!("  {}", startup.bus_load);
     }
     for note in &s.notes {
-        println!("  note: {note}");
+        say!("  note: {note}");
     }
     let scenario = s
         .scenario
@@ -68,9 +70,12 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
     let big = r + probe.radius;
     let clearance = 5.0;
     let safe_z = c[2] + big + 10.0;
-    println!(
+    say!(
         "  sphere: nominal centre ({:.3}, {:.3}, {:.3}), radius {r:.3}; stylus R = {:.3}",
-        c[0], c[1], c[2], probe.radius
+        c[0],
+        c[1],
+        c[2],
+        probe.radius
     );
     let run_id = hal::clock::monotonic_ns();
     s.machine.set_run(run_id);
@@ -89,7 +94,7 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
             [-cs, -sn, 0.0],
         ));
     }
-    println!("probing 5 points (ball centre at the latch, all axes):");
+    say!("probing 5 points (ball centre at the latch, all axes):");
     for (i, (start, dir)) in starts.iter().enumerate() {
         let over = AxisPositions::linear([start[0], start[1], safe_z]);
         s.machine
@@ -106,7 +111,7 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
                 max_distance: clearance + probe.dist,
             })
             .map_err(|e| format!("point {}: {e}", i + 1))?;
-        println!("  {}: {}", i + 1, contact.positions);
+        say!("  {}: {}", i + 1, contact.positions);
         s.machine
             .move_to(&AxisPositions::linear(*start), probe.fmax)
             .map_err(|e| e.to_string())?;
@@ -115,7 +120,7 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
             .map_err(|e| e.to_string())?;
     }
     report_sphere(&estimator, run_id, sphere, probe.radius)?;
-    drop(s);
+    s.close()?;
     kinematics(&opts, &estimator)
 }
 
@@ -146,15 +151,18 @@ fn report_sphere(
         fit.centre[2] - c[2],
     ];
     let dev_len = (dev[0] * dev[0] + dev[1] * dev[1] + dev[2] * dev[2]).sqrt();
-    println!(
+    say!(
         "sphere fitted by the estimator process from {} contacts:",
         fit.n_points
     );
-    println!(
+    say!(
         "  centre ({:+.6}, {:+.6}, {:+.6}) mm, radius {radius:.6} mm (rms residual {:.2e} mm)",
-        fit.centre[0], fit.centre[1], fit.centre[2], fit.rms
+        fit.centre[0],
+        fit.centre[1],
+        fit.centre[2],
+        fit.rms
     );
-    println!(
+    say!(
         "  truth  ({:+.6}, {:+.6}, {:+.6}) mm, radius {r:.6} mm: centre off by {:.2e} mm, radius by {:.2e} mm",
         c[0],
         c[1],
@@ -217,6 +225,28 @@ fn demo_range(axis: Axis, cfg: &hal::config::MachineConfig) -> Option<(f64, f64,
     (end > start).then_some((start, end, n))
 }
 
+/// A temporary folder for the demo's 451 run, with copies of what it writes: the
+/// preset table (Q431 = 1 sets the preset; `cfg` is pointed at the copy) and the
+/// machine's kinematics file (returned). Nothing under `configs/` changes.
+fn scratch_files(cfg: &mut CyclesConfig) -> Result<(PathBuf, PathBuf), String> {
+    let dir = std::env::temp_dir().join(format!("probebridge-demo-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    cfg.presets.path = dir.join(
+        cfg.presets
+            .path
+            .file_name()
+            .unwrap_or(std::ffi::OsStr::new("presets.toml")),
+    );
+    let shipped = ActiveKinematics::default_path(&cfg.machine);
+    let kin = dir.join(shipped.file_name().unwrap_or_default());
+    let _ = std::fs::remove_file(&kin);
+    let _ = std::fs::remove_file(kin.with_extension("toml.prev"));
+    if shipped.exists() {
+        std::fs::copy(&shipped, &kin).map_err(|e| format!("{}: {e}", shipped.display()))?;
+    }
+    Ok((dir, kin))
+}
+
 /// Cycle 451 mode 1 on the scenario's rotary axes; see the module doc.
 fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), String> {
     let mut opts = opts.clone();
@@ -229,32 +259,16 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
     let sphere = scenario.spheres[0];
     let mut cfg = cycles_config(&s.config, Some(&scenario)).map_err(|e| e.to_string())?;
     let probe = cfg.probes[0].clone();
-    let dir = std::env::temp_dir().join(format!("probebridge-demo-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    // Q431 = 1 sets the preset: in a temporary copy of the preset table.
-    cfg.presets.path = dir.join(
-        cfg.presets
-            .path
-            .file_name()
-            .unwrap_or(std::ffi::OsStr::new("presets.toml")),
-    );
-    // A temporary copy of the machine's kinematics file.
-    let shipped = ActiveKinematics::default_path(&cfg.machine);
-    let kin = dir.join(shipped.file_name().unwrap_or_default());
-    let _ = std::fs::remove_file(&kin);
-    let _ = std::fs::remove_file(kin.with_extension("toml.prev"));
-    if shipped.exists() {
-        std::fs::copy(&shipped, &kin).map_err(|e| format!("{}: {e}", shipped.display()))?;
-    }
+    let (dir, kin) = scratch_files(&mut cfg)?;
     let before = ActiveKinematics::load(&kin, &cfg.machine).map_err(|e| e.to_string())?;
 
     let above = sphere.center[2] + sphere.radius + probe.radius + probe.set_up + 5.0;
     let (text, measured) = demo451_program(&cfg.machine, &sphere, &probe.name, above);
     let program_path = dir.join("demo451.h");
-    std::fs::write(&program_path, &text).map_err(|e| e.to_string())?;
+    crate::output::write_atomic(&program_path, text.as_bytes())?;
     let program = Program::load(&program_path, &cfg).map_err(|e| e.to_string())?;
-    println!();
-    println!(
+    say!();
+    say!(
         "cycle 451 MEASURE KINEMATICS, mode 1 (optimise position) on {} (virtual clock):",
         measured
             .iter()
@@ -262,14 +276,14 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
             .collect::<Vec<_>>()
             .join(" and ")
     );
-    println!("  program {}", program_path.display());
-    println!("  kinematics: a temporary copy, {}", kin.display());
+    say!("  program {}", program_path.display());
+    say!("  kinematics: a temporary copy, {}", kin.display());
     let mut spheres = 0usize;
     let mut progress = |ev: ProgressEvent| {
         if let ProgressEvent::Note { text, .. } = ev {
             if text.starts_with("measuring") {
                 spheres += 1;
-                println!("  {spheres:2}. {}", &text["measuring ".len()..]);
+                say!("  {spheres:2}. {}", &text["measuring ".len()..]);
             }
         }
     };
@@ -287,7 +301,7 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
         estimator: Some(&mut ipc),
     };
     let report = run_program(&program, &mut s.machine, &cfg, &mut run);
-    drop(s);
+    s.close()?;
     let result = report
         .cycles
         .iter()
@@ -300,36 +314,40 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
         .kinematics
         .as_ref()
         .ok_or("cycle 451 gave no kinematics result")?;
-    println!(
+    say!(
         "  measured in {:.1} s; spheres fitted and errors identified by the {}",
         t0.elapsed().as_secs_f64(),
         k.estimator
     );
-    println!("  error       before       after    injected (scenario truth)");
+    say!("  error       before       after    injected (scenario truth)");
     for a in &measured {
         for name in cycles::iso230_7::error_names(*a) {
             let b = before.error(name);
             let after = k.errors_after.get(*name).copied().unwrap_or(b);
             let truth = scenario.truth.get(name).unwrap_or(0.0);
-            println!(
+            say!(
                 "  {name}  {b:+10.6}  {after:+10.6}  {truth:+10.6}{}",
                 if after != b { "  corrected" } else { "" }
             );
         }
     }
     for a in &k.axes {
-        println!(
+        say!(
             "  axis {}: dispersion {:.6} -> {:.6} mm (Q14x), max deviation {:.6} -> {:.6} mm",
-            a.axis, a.dispersion_before, a.dispersion_after, a.max_before, a.max_after
+            a.axis,
+            a.dispersion_before,
+            a.dispersion_after,
+            a.max_before,
+            a.max_after
         );
     }
     for (name, v) in &result.qs {
-        println!("  {name} = \"{v}\"");
+        say!("  {name} = \"{v}\"");
     }
-    println!(
+    say!(
         "  mode 1 corrects the positions of the axes; the orientation errors stay (mode 2 finds them too)"
     );
-    println!(
+    say!(
         "  kinematics {}: {}",
         kin.display(),
         if k.written {
@@ -339,7 +357,7 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
         }
     );
     for p in &report.protocols {
-        println!("  protocol: {}", p.display());
+        say!("  protocol: {}", p.display());
     }
     Ok(())
 }

@@ -2,6 +2,7 @@
 
 use crate::history::{time::parse_since, to_text, Filter, History};
 use crate::serve::config::GatewayConfig;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 pub struct HistoryArgs {
@@ -43,13 +44,16 @@ pub fn run(args: &HistoryArgs) -> Result<(), String> {
         crate::output::check_output(Some(path))?;
         crate::output::write_atomic(path, crate::history::trend::trend_html(&runs).as_bytes())?;
     }
-    if args.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&runs).map_err(|e| e.to_string())?
-        );
+    // The listing is this command's result: a failed write to stdout is an error.
+    let text = if args.json {
+        serde_json::to_string_pretty(&runs).map_err(|e| e.to_string())? + "\n"
     } else if args.html.is_none() {
-        print!("{}", to_text(&runs));
-    }
-    Ok(())
+        to_text(&runs)
+    } else {
+        return Ok(());
+    };
+    let mut out = std::io::stdout().lock();
+    out.write_all(text.as_bytes())
+        .and_then(|()| out.flush())
+        .map_err(|e| format!("cannot write the history to stdout: {e}"))
 }

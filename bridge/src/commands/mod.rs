@@ -10,6 +10,24 @@ pub mod probe;
 pub mod run;
 pub mod sim;
 
+/// The most errors listed for one program; the rest are counted ("... and N more"),
+/// so a 10 MB file of bad blocks does not flood the terminal.
+pub const MAX_LISTED_ERRORS: usize = 100;
+
+/// `program: error` per line on stderr, at most [`MAX_LISTED_ERRORS`] of them.
+pub fn tell_errors<E: std::fmt::Display>(program: &std::path::Path, errors: &[E]) {
+    for e in errors.iter().take(MAX_LISTED_ERRORS) {
+        tell!("{}: {e}", program.display());
+    }
+    if errors.len() > MAX_LISTED_ERRORS {
+        tell!(
+            "{}: ... and {} more",
+            program.display(),
+            errors.len() - MAX_LISTED_ERRORS
+        );
+    }
+}
+
 /// Parses "X,Y,Z" into three numbers, naming the option on error.
 pub fn parse_vec3(option: &str, s: &str) -> Result<[f64; 3], String> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();

@@ -1,7 +1,7 @@
 //! `probebridge probe`: one probing move, reported with the latched positions of all
 //! axes.
 
-use crate::session::{cycles_config, MachineOptions, Session};
+use crate::session::{cycles_config, resolve_machine, MachineOptions, Session};
 use hal::{AxisPositions, Machine, ProbeMove};
 use std::path::PathBuf;
 
@@ -26,9 +26,19 @@ pub fn run(args: &ProbeArgs) -> Result<(), String> {
         return Err(format!("--feed {}: must be > 0", args.feed));
     }
     crate::output::check_output(args.json.as_deref())?;
+    // The probing move is checked against the machine before anything moves (also
+    // the move to the start).
+    let (cfg, _) = resolve_machine(&args.machine).map_err(|e| e.to_string())?;
+    hal::motion_guard::MotionGuard::new(&cfg)
+        .check_probe_request(&ProbeMove {
+            direction: args.dir,
+            feed: args.feed,
+            max_distance: args.dist,
+        })
+        .map_err(|e| format!("probing: {e}"))?;
     let mut s = Session::open(&args.machine).map_err(|e| e.to_string())?;
     for note in &s.notes {
-        eprintln!("note: {note}");
+        tell!("note: {note}");
     }
     let probes = cycles_config(&s.config, s.scenario.as_ref()).map_err(|e| e.to_string())?;
     let rapid = probes.probes.first().map_or(3000.0, |p| p.fmax);
@@ -49,12 +59,13 @@ pub fn run(args: &ProbeArgs) -> Result<(), String> {
     s.machine
         .move_to(&start, rapid)
         .map_err(|e| format!("retracting: {e}"))?;
-    println!("contact (stylus ball centre, machine coordinates, latched by the drives):");
+    s.close()?;
+    say!("contact (stylus ball centre, machine coordinates, latched by the drives):");
     for (axis, v) in contact.positions.iter() {
         let unit = if axis.is_rotary() { "deg" } else { "mm" };
-        println!("  {axis} {v:+14.6} {unit}");
+        say!("  {axis} {v:+14.6} {unit}");
     }
-    println!("  trigger at {} ns", contact.trigger_ns);
+    say!("  trigger at {} ns", contact.trigger_ns);
     if let Some(path) = &args.json {
         let mut c = serde_json::Map::new();
         for (axis, v) in contact.positions.iter() {

@@ -5,9 +5,10 @@
 use crate::ipc::{EstimatorChild, EstimatorClient, IpcEstimator};
 use crate::output::write_atomic;
 use crate::session::{cycles_config_with_presets, resolve_machine, MachineOptions, Session};
+use cycles::kinematics_file::ActiveKinematics;
 use cycles::program::{Program, ProgramError};
 use cycles::progress::ProgressEvent;
-use cycles::runner::{run_program, RunOptions};
+use cycles::runner::{check_complete, preflight_program, run_program, RunOptions};
 use std::io::{BufRead, IsTerminal, Write};
 use std::path::PathBuf;
 use std::time::Duration;
@@ -40,10 +41,8 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     let program = match Program::load(&args.program, &cfg) {
         Ok(p) => p,
         Err(ProgramError::Invalid { path, errors }) => {
-            for d in &errors.0 {
-                eprintln!("{}: {d}", path.display());
-            }
-            eprintln!(
+            super::tell_errors(&path, &errors.0);
+            tell!(
                 "{}: {} error(s); nothing moved",
                 path.display(),
                 errors.0.len()
@@ -52,6 +51,20 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
         }
         Err(e) => return Err(e.to_string()),
     };
+    // What `check` refuses, `run` refuses the same way (exit 2) before the machine
+    // is opened.
+    let kinematics = args
+        .kinematics
+        .clone()
+        .unwrap_or_else(|| ActiveKinematics::default_path(&cfg.machine));
+    if let Err(e) = check_complete(&program).and_then(|()| {
+        preflight_program(&program, cfg.machine.axis_mask(), &cfg, &kinematics)
+            .map_err(|e| e.to_string())
+    }) {
+        tell!("{}: {e}", args.program.display());
+        tell!("{}: 1 error(s); nothing moved", args.program.display());
+        return Ok(2);
+    }
     let out_dir = args
         .out
         .clone()
@@ -71,38 +84,40 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     };
     let mut session = Session::open(&args.machine).map_err(|e| e.to_string())?;
     for note in &session.notes {
-        eprintln!("note: {note}");
+        tell!("note: {note}");
     }
     let total = program.cycles().count();
     let mut done = 0usize;
     let mut progress = |ev: ProgressEvent| match ev {
         ProgressEvent::CycleStarted { block, cycle, line } => {
             done += 1;
-            eprintln!("[{done}/{total}] block {block} (line {line}): cycle {cycle}");
+            tell!("[{done}/{total}] block {block} (line {line}): cycle {cycle}");
         }
         ProgressEvent::Contact { centre, .. } => {
-            eprintln!(
+            tell!(
                 "    contact at X{:+.4} Y{:+.4} Z{:+.4}",
-                centre[0], centre[1], centre[2]
+                centre[0],
+                centre[1],
+                centre[2]
             );
         }
-        ProgressEvent::Note { text, .. } => eprintln!("    {text}"),
-        ProgressEvent::MeasuringLog { path, .. } => eprintln!("    protocol {}", path.display()),
-        ProgressEvent::CycleFinished { status, .. } => eprintln!("    {status:?}"),
+        ProgressEvent::Note { text, .. } => tell!("    {text}"),
+        ProgressEvent::MeasuringLog { path, .. } => tell!("    protocol {}", path.display()),
+        ProgressEvent::CycleFinished { status, .. } => tell!("    {status:?}"),
         _ => {}
     };
     let yes = args.yes;
     let mut confirm = |text: &str| -> bool {
-        println!("{text}");
+        say!("{text}");
         if yes {
             return true;
         }
-        print!("Press Enter to go on, or type n and Enter to stop: ");
+        say_raw!("Press Enter to go on, or type n and Enter to stop: ");
         let _ = std::io::stdout().flush();
         let stdin = std::io::stdin();
         if !stdin.is_terminal() {
             // Without an operator there is nobody to confirm: stop (use --yes).
-            println!();
+            say!();
         }
         let mut line = String::new();
         match stdin.lock().read_line(&mut line) {
@@ -126,17 +141,27 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     }
     let mut history = crate::history::record_run_start(args.history.as_deref(), &cfg, &program)?;
     let report = run_program(&program, &mut session.machine, &cfg, &mut opts);
+    drop(opts);
+    // The drives are disabled before anything else is said or written.
+    let closed = session.close();
     if let Some((h, id)) = history.as_mut() {
-        let status = if report.completed() { "done" } else { "error" };
+        let status = if report.aborted {
+            "aborted"
+        } else if report.completed() {
+            "done"
+        } else {
+            "error"
+        };
         h.finish(*id, status, &report).map_err(|e| e.to_string())?;
     }
-    print!("{}", report.to_text());
+    say_raw!("{}", report.to_text());
     if let Some(path) = &args.json {
         write_atomic(path, report.to_json().as_bytes())?;
     }
     if let Some(why) = &report.stopped {
-        eprintln!("program stopped: {why}");
+        tell!("program stopped: {why}");
     }
+    closed?;
     Ok(if report.completed() { 0 } else { 1 })
 }
 
@@ -161,19 +186,19 @@ impl EstimatorLink {
 /// either the cycle computes in this process (said on stderr).
 fn estimator_link(prefix: &str) -> Option<EstimatorLink> {
     if let Ok(c) = EstimatorClient::connect(prefix, Duration::from_millis(300)) {
-        eprintln!("estimator: using the estimator process serving {prefix}");
+        tell!("estimator: using the estimator process serving {prefix}");
         return Some(EstimatorLink::Running(c));
     }
     match EstimatorChild::spawn(prefix, ESTIMATOR_TIMEOUT) {
         Ok(child) => {
-            eprintln!(
+            tell!(
                 "estimator: started the estimator process (pid {}) on {prefix}",
                 child.id()
             );
             Some(EstimatorLink::Child(child))
         }
         Err(e) => {
-            eprintln!(
+            tell!(
                 "estimator: cannot start the estimator process ({e}); cycle 451 computes in this process"
             );
             None

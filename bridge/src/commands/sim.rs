@@ -16,7 +16,7 @@ pub fn run(scenario: Option<PathBuf>, iface: &str) -> Result<(), String> {
         .iter()
         .map(|a| format!("{}={}", a.name, a.canopen_node()))
         .collect();
-    eprintln!(
+    tell!(
         "probebridge sim: machine {} ({}), drives {} on {iface}; stop with Ctrl-C",
         sc.machine.name,
         sc.path.display(),
@@ -71,8 +71,8 @@ pub fn run_plc_tcp(scenario: Option<PathBuf>, addr: &str, realtime: bool) -> Res
         .map_err(|e| format!("--modbus {addr}: {e}"))?;
     let at = plc.local_addr().map_or_else(String::new, |a| a.to_string());
     // The address on stdout, alone on its line, for a script that started us on port 0.
-    println!("modbus tcp {at}");
-    eprintln!(
+    say!("modbus tcp {at}");
+    tell!(
         "probebridge sim: machine {} ({}), simulated PLC unit {} on Modbus TCP {at}, word order {}, capture {}; stop with Ctrl-C",
         sc.machine.name,
         sc.path.display(),
@@ -89,7 +89,7 @@ pub fn run_plc_rtu(scenario: Option<PathBuf>, dev: &str, realtime: bool) -> Resu
     let (sc, program, bus) = plc_program(scenario)?;
     let plc = sim::plc::SimPlc::serve_rtu(program, bus.unit, dev, bus.baud, pacing(realtime))
         .map_err(|e| format!("--modbus-rtu {dev}: {e}"))?;
-    eprintln!(
+    tell!(
         "probebridge sim: machine {} ({}), simulated PLC unit {} on Modbus RTU {dev} at {} baud; stop with Ctrl-C",
         sc.machine.name,
         sc.path.display(),

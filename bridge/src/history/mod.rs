@@ -415,6 +415,7 @@ mod tests {
                 kinematics: None,
             }],
             stopped: None,
+            aborted: false,
             protocols: vec![PathBuf::from("/tmp/TCHPR431.TXT")],
         }
     }

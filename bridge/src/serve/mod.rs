@@ -104,7 +104,7 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     lock(&shared).set_machine_ok(true);
     tracing::info!(listen = %face.local_addr, machine = %machine_cfg.name, "gateway ready");
     // Tests and scripts read the bound address (port 0 takes any) from this line.
-    println!("probebridge serve: listening on {}", face.local_addr);
+    crate::say!("probebridge serve: listening on {}", face.local_addr);
     let _ = std::io::stdout().flush();
     notifier.notify(&format!(
         "READY=1\nSTATUS=idle, PLC face on {}",

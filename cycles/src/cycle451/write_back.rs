@@ -1,6 +1,6 @@
 //! Step 6: the write-back. Modes 1..3 write the corrected errors to the active
 //! kinematics file, only after everything else succeeded (the measuring log is written
-//! first), and a correction beyond `maxModification` only when the operator confirms.
+//! after it and states its real outcome), and a correction beyond `maxModification` only when the operator confirms.
 
 use super::measuring_log::{write_kinematics_log, KINEMATICS_LOG};
 use super::report::KinematicsReport;
@@ -71,8 +71,10 @@ impl WriteBack {
         }
     }
 
-    /// Writes the measuring log, then (when accepted) the corrected kinematics over
-    /// `active`; marks the report written. Returns the log's path.
+    /// Writes (when accepted) the corrected kinematics over `active`, then the
+    /// measuring log stating what really happened to the file; marks the report
+    /// written. Returns the log's path; a failed write-back fails the cycle after the
+    /// log has said so.
     pub fn write(
         &self,
         block: u32,
@@ -81,31 +83,47 @@ impl WriteBack {
         ctx: &mut CycleContext<'_>,
     ) -> Result<PathBuf, CycleError> {
         let file = ctx.kinematics.display().to_string();
-        let written_text = self.accept.then(|| format!("written to {file}"));
+        let mut failed = None;
+        let mut outcome = None;
+        if self.accept {
+            let kept_previous = ctx.kinematics.is_file();
+            let mut new = active.clone();
+            for (i, _, a) in &self.changes {
+                new.errors.insert(ErrorSet::name(*i).to_string(), *a);
+            }
+            match new.write() {
+                Ok(()) => {
+                    report.written = true;
+                    let text = if kept_previous {
+                        format!("written to {file} (previous version kept as .prev)")
+                    } else {
+                        format!("written to {file}")
+                    };
+                    ctx.note(block, format!("corrected kinematics {text}"));
+                    outcome = Some(text);
+                }
+                Err(e) => {
+                    outcome = Some(format!("NOT written: {e}; {file} is unchanged"));
+                    failed = Some(CycleError::Plan(format!(
+                        "writing the corrected kinematics: {e}"
+                    )));
+                }
+            }
+        }
         let log = write_kinematics_log(
             ctx.out_dir,
             report,
             ctx.program,
             &timestamp_utc(),
-            written_text.as_deref(),
+            outcome.as_deref(),
         )
         .map_err(|e| CycleError::MeasuringLog {
             path: ctx.out_dir.join(KINEMATICS_LOG).display().to_string(),
             message: e.source.to_string(),
         })?;
-        if self.accept {
-            let mut new = active.clone();
-            for (i, _, a) in &self.changes {
-                new.errors.insert(ErrorSet::name(*i).to_string(), *a);
-            }
-            new.write()
-                .map_err(|e| CycleError::Plan(format!("writing the corrected kinematics: {e}")))?;
-            report.written = true;
-            ctx.note(
-                block,
-                format!("corrected kinematics written to {file} (previous version kept as .prev)"),
-            );
+        match failed {
+            Some(e) => Err(e),
+            None => Ok(log),
         }
-        Ok(log)
     }
 }

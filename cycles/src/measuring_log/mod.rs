@@ -67,14 +67,18 @@ impl MeasuringLogError {
     }
 }
 
-/// Writes `text` to `dir/name` (creating `dir`); the path written.
+/// Writes `text` to `dir/name` (creating `dir`) through [`hal::atomic_write`]: the
+/// previous log stays whole until the new one is complete, and a symlink, device or
+/// FIFO at the path is refused, not written through. The path written.
 pub fn write(dir: &Path, name: &str, text: &str) -> Result<PathBuf, MeasuringLogError> {
     let path = dir.join(name);
-    std::fs::create_dir_all(dir)
-        .and_then(|()| std::fs::write(&path, text))
-        .map_err(|source| MeasuringLogError {
-            path: path.clone(),
-            source,
-        })?;
+    std::fs::create_dir_all(dir).map_err(|source| MeasuringLogError {
+        path: path.clone(),
+        source,
+    })?;
+    hal::atomic_write::write_atomic(&path, text.as_bytes()).map_err(|e| MeasuringLogError {
+        path: path.clone(),
+        source: e.to_io(),
+    })?;
     Ok(path)
 }

@@ -15,6 +15,7 @@ use crate::clock::monotonic_ns;
 use core::time::Duration;
 use std::collections::VecDeque;
 use std::io::Write;
+use std::sync::{Arc, OnceLock};
 
 /// Whether a CANopen master (not a device) sends frames with this identifier: NMT,
 /// SYNC, RPDOs and SDO requests.
@@ -25,13 +26,31 @@ pub fn sent_by_master(cob_id: u16) -> bool {
     )
 }
 
+/// Whether a recording is whole: the first write error, shared with whoever opened
+/// the log (the recorder itself runs in the real-time thread).
+#[derive(Clone, Debug, Default)]
+pub struct RecordHealth(Arc<OnceLock<String>>);
+
+impl RecordHealth {
+    /// Why the log is incomplete, once a write failed.
+    pub fn error(&self) -> Option<&str> {
+        self.0.get().map(String::as_str)
+    }
+
+    fn fail(&self, e: &std::io::Error) {
+        let _ = self.0.set(e.to_string());
+    }
+}
+
 /// Logs all traffic of the wrapped transport (the buffered writer flushes when the
-/// recorder is dropped).
+/// recorder is dropped). A failed write stops the logging, never the machine, and is
+/// kept in [`Recorder::health`] for the command to report.
 pub struct Recorder<T, W: Write + Send> {
     inner: T,
     out: std::io::BufWriter<W>,
     iface: heapless::String<16>,
     failed: bool,
+    health: RecordHealth,
 }
 
 impl<T: CanTransport, W: Write + Send> Recorder<T, W> {
@@ -46,21 +65,39 @@ impl<T: CanTransport, W: Write + Send> Recorder<T, W> {
             out: std::io::BufWriter::with_capacity(64 * 1024, out),
             iface: name,
             failed: false,
+            health: RecordHealth::default(),
         }
+    }
+
+    /// Shared view of whether the log is whole (also after the recorder is gone).
+    pub fn health(&self) -> RecordHealth {
+        self.health.clone()
     }
 
     fn log(&mut self, frame: &CanFrame) {
         let mut line: heapless::String<64> = heapless::String::new();
         if write_line(&mut line, monotonic_ns(), &self.iface, frame).is_ok() && !self.failed {
-            // A full disk must not stop the machine: stop logging, keep going.
-            self.failed =
-                self.out.write_all(line.as_bytes()).is_err() || self.out.write_all(b"\n").is_err();
+            // A full disk must not stop the machine: stop logging, keep going, and
+            // say so at the end.
+            if let Err(e) = self
+                .out
+                .write_all(line.as_bytes())
+                .and_then(|()| self.out.write_all(b"\n"))
+            {
+                self.failed = true;
+                self.health.fail(&e);
+            }
         }
     }
+}
 
-    pub fn into_inner(mut self) -> T {
-        let _ = self.out.flush();
-        self.inner
+impl<T, W: Write + Send> Drop for Recorder<T, W> {
+    fn drop(&mut self) {
+        if !self.failed {
+            if let Err(e) = self.out.flush() {
+                self.health.fail(&e);
+            }
+        }
     }
 }
 
@@ -184,5 +221,40 @@ mod tests {
             "{}",
             e.message
         );
+    }
+
+    /// A writer that takes `room` bytes and then reports a full disk.
+    struct Full {
+        room: usize,
+    }
+
+    impl Write for Full {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            if self.room == 0 {
+                return Err(std::io::Error::from_raw_os_error(libc::ENOSPC));
+            }
+            let n = buf.len().min(self.room);
+            self.room -= n;
+            Ok(n)
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_failed_write_is_kept_for_the_command_and_the_traffic_goes_on() {
+        let bus = InprocBus::new();
+        let health;
+        {
+            let mut master = Recorder::new(bus.endpoint(), Full { room: 100 }, "vcan0");
+            health = master.health();
+            for _ in 0..10 {
+                master.transmit(&crate::canopen::sync::encode()).unwrap();
+            }
+            assert!(health.error().is_none(), "buffered so far");
+        }
+        let e = health.error().expect("the flush at the end failed");
+        assert!(e.contains("No space left"), "{e}");
     }
 }

@@ -22,6 +22,9 @@ pub enum Command {
     },
     /// Current actual positions.
     Positions,
+    /// Brake the motion under way (if any) and fail its command as aborted; the drives
+    /// stay enabled and the loop takes commands. Accepted while busy.
+    Stop,
     /// Stop the loop (axes held, drives disabled).
     Shutdown,
 }
@@ -64,6 +67,7 @@ pub enum Detail {
     Transport,
     Busy,
     Stopped,
+    Aborted,
 }
 
 impl RtError {
@@ -108,6 +112,7 @@ impl From<RtError> for MachineError {
             Detail::Transport => "CAN transport failed; all axes stopped".into(),
             Detail::Busy => "a command is already running".into(),
             Detail::Stopped => "the real-time loop has stopped".into(),
+            Detail::Aborted => "stop requested; all axes braked".into(),
         };
         let mut m = MachineError::new(e.kind, message);
         m.node = e.node;

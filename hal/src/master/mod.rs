@@ -7,6 +7,7 @@ pub mod process_data;
 pub mod rt_loop;
 pub mod startup;
 
+use crate::abort::AbortFlag;
 use crate::axis::{AxisPositions, MAX_AXES};
 use crate::can::CanTransport;
 use crate::config::MachineConfig;
@@ -17,6 +18,7 @@ use command::{Command, Detail, Reply, RtError};
 pub use pacing::{PacedLoop, Pacing};
 pub use process_data::BusLoad;
 pub use rt_loop::{LoopConfig, LoopStats, RtLoop};
+use std::io::Write as _;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender};
 use std::sync::{Arc, Mutex};
@@ -48,6 +50,9 @@ pub struct MasterOptions {
     pub run_id: u64,
     /// Longest wall-clock wait for one command (beyond the loop's own timeouts).
     pub command_timeout: Duration,
+    /// The operator's stop request: once raised, a move under way is braked and
+    /// answered as [`ErrorKind::Aborted`], and no further command is sent.
+    pub abort: Option<AbortFlag>,
 }
 
 impl Default for MasterOptions {
@@ -57,6 +62,7 @@ impl Default for MasterOptions {
             rt_priority: 80,
             run_id: 1,
             command_timeout: Duration::from_secs(600),
+            abort: None,
         }
     }
 }
@@ -227,22 +233,41 @@ impl CanMachine {
     }
 
     fn wait_reply(&mut self, timeout: Duration) -> Result<Reply, MachineError> {
-        match self.replies.recv_timeout(timeout) {
-            Ok(r) => Ok(r),
-            Err(RecvTimeoutError::Timeout) => Err(MachineError::new(
-                ErrorKind::Timeout,
-                format!(
-                    "the real-time loop did not answer within {} s",
-                    timeout.as_secs()
-                ),
-            )),
-            Err(RecvTimeoutError::Disconnected) => {
-                Err(RtError::new(ErrorKind::Bus, Detail::Stopped).into())
+        // Polled in short slices so the operator's stop brakes a move under way
+        // instead of waiting it out.
+        const POLL: Duration = Duration::from_millis(5);
+        let deadline = std::time::Instant::now() + timeout;
+        let mut stop_sent = false;
+        loop {
+            let now = std::time::Instant::now();
+            if now >= deadline {
+                return Err(MachineError::new(
+                    ErrorKind::Timeout,
+                    format!(
+                        "the real-time loop did not answer within {} s",
+                        timeout.as_secs()
+                    ),
+                ));
+            }
+            match self.replies.recv_timeout(POLL.min(deadline - now)) {
+                Ok(r) => return Ok(r),
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => {
+                    return Err(RtError::new(ErrorKind::Bus, Detail::Stopped).into())
+                }
+            }
+            if !stop_sent && self.options.abort.is_some_and(|a| a.is_raised()) {
+                // The channel holds one command: if the loop has not taken the last
+                // one yet, try again on the next slice.
+                stop_sent = self.commands.try_send(Command::Stop).is_ok();
             }
         }
     }
 
     fn command(&mut self, cmd: Command) -> Result<Reply, MachineError> {
+        if self.options.abort.is_some_and(|a| a.is_raised()) {
+            return Err(RtError::new(ErrorKind::Aborted, Detail::Aborted).into());
+        }
         self.commands
             .send(cmd)
             .map_err(|_| MachineError::from(RtError::new(ErrorKind::Bus, Detail::Stopped)))?;
@@ -295,7 +320,11 @@ fn run_thread<T: CanTransport, S: SampleSink>(
                 ErrorKind::Bus,
                 Detail::Transport,
             )));
-            eprintln!("probebridge: real-time loop stopped: {e}");
+            // A closed or full stderr must not panic the loop thread.
+            let _ = writeln!(
+                std::io::stderr(),
+                "probebridge: real-time loop stopped: {e}"
+            );
             return;
         }
         if let Some(r) = rt.take_reply() {
@@ -336,7 +365,7 @@ impl Machine for CanMachine {
     }
 
     fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), MachineError> {
-        self.guard.check_move(target, feed)?;
+        self.guard.check_move_from(&self.position, target, feed)?;
         match self.command(Command::MoveTo {
             target: target.raw(),
             mask: target.mask(),
@@ -365,7 +394,12 @@ impl Machine for CanMachine {
             run_id: self.run_id,
         })? {
             Reply::Contact(s) => Ok(Contact {
-                positions: s.axis_positions(),
+                // Where the axes are is close to the latch (the stop runs on by the
+                // braking distance): good enough for the next move's duration check.
+                positions: {
+                    self.position = s.axis_positions();
+                    self.position
+                },
                 trigger_ns: s.trigger_ns,
                 sequence: s.sequence,
                 direction: dir,

@@ -314,6 +314,10 @@ impl<S: SampleSink> RtLoop<S> {
             self.activity = Activity::Shutdown;
             return;
         }
+        if let Command::Stop = cmd {
+            self.stop_requested();
+            return;
+        }
         if self.is_busy() {
             self.reply = Some(Reply::Error(RtError::new(ErrorKind::Other, Detail::Busy)));
             return;
@@ -360,7 +364,34 @@ impl<S: SampleSink> RtLoop<S> {
                     },
                 };
             }
-            Command::Positions | Command::Shutdown => {}
+            Command::Positions | Command::Stop | Command::Shutdown => {}
+        }
+    }
+
+    /// The operator's stop: brake any motion and answer its command as aborted; a
+    /// command that has not moved yet (arming, settling) is answered at once. Nothing
+    /// is faulted: the drives stay enabled until the shutdown that follows.
+    fn stop_requested(&mut self) {
+        let err = RtError::new(ErrorKind::Aborted, Detail::Aborted);
+        match self.activity {
+            Activity::Moving { profile, t } | Activity::Probing { profile, t, .. } => {
+                self.disarm_all();
+                self.begin_stop(profile, t, Reply::Error(err));
+            }
+            Activity::Stopping { profile, t, .. } => {
+                self.activity = Activity::Stopping {
+                    profile,
+                    t,
+                    then: Reply::Error(err),
+                };
+            }
+            Activity::Arming { .. } | Activity::Settling { .. } => {
+                self.disarm_all();
+                self.hold_all();
+                self.reply = Some(Reply::Error(err));
+                self.activity = Activity::Idle;
+            }
+            Activity::Enabling { .. } | Activity::Idle | Activity::Shutdown => {}
         }
     }
 
@@ -1072,6 +1103,33 @@ mod tests {
                 .expect("RPDO1 every SYNC");
             Rpdo1::decode(f).unwrap()
         }
+    }
+
+    /// The operator's stop mid-move: the move is braked short of its target and
+    /// answered as aborted, the machine is not faulted, and the loop takes commands.
+    #[test]
+    fn stop_brakes_a_move_under_way_and_answers_aborted() {
+        let mut b = Bench::enabled();
+        b.move_axis(0, 400.0);
+        for _ in 0..200 {
+            b.tick();
+        }
+        assert!(b.rt.take_reply().is_none(), "the move is still under way");
+        b.rt.submit(Command::Stop);
+        let reply = b.until_reply();
+        let Reply::Error(e) = reply else {
+            panic!("expected an aborted move, got {reply:?}");
+        };
+        assert_eq!(e.kind, ErrorKind::Aborted);
+        let x = b.rt.actual_positions()[0];
+        assert!(x > 0.0 && x < 400.0, "braked short of the target: X = {x}");
+        b.rt.submit(Command::Positions);
+        assert!(matches!(b.rt.take_reply(), Some(Reply::Done { .. })));
+        b.rt.submit(Command::Stop);
+        assert!(
+            b.rt.take_reply().is_none(),
+            "a stop while idle answers nothing"
+        );
     }
 
     #[test]
