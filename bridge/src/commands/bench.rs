@@ -102,11 +102,26 @@ fn is_fifo(pid: u32) -> bool {
 }
 
 /// Where the run keeps its files and names its services.
-struct Workspace {
-    prefix: String,
-    dir: PathBuf,
-    times_file: PathBuf,
-    estimator_log: PathBuf,
+pub(crate) struct Workspace {
+    pub(crate) prefix: String,
+    pub(crate) dir: PathBuf,
+    pub(crate) times_file: PathBuf,
+    pub(crate) estimator_log: PathBuf,
+}
+
+impl Workspace {
+    /// A scratch folder named `prefix` (also the iceoryx2 service prefix) for the
+    /// estimator's receive times and its log.
+    pub(crate) fn new(prefix: String) -> Result<Self, String> {
+        let dir = std::env::temp_dir().join(&prefix);
+        std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        Ok(Self {
+            prefix,
+            times_file: dir.join("receive-times.txt"),
+            estimator_log: dir.join("estimator.log"),
+            dir,
+        })
+    }
 }
 
 /// The processes and threads of one run, and which real-time settings they got.
@@ -163,14 +178,7 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
     let warmup = args.warmup.unwrap_or((args.triggers / 10).clamp(1, 100));
     let total = warmup + args.triggers;
     let pid = std::process::id();
-    let dir = std::env::temp_dir().join(format!("probebridge-bench-{pid}"));
-    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let ws = Workspace {
-        prefix: format!("probebridge-bench-{pid}"),
-        times_file: dir.join("receive-times.txt"),
-        estimator_log: dir.join("estimator.log"),
-        dir,
-    };
+    let ws = Workspace::new(format!("probebridge-bench-{pid}"))?;
     let (scenario, cfg, mut notes) = bench_machine(args)?;
     let rig = start_rig(args, &ws, &scenario, &cfg, total)?;
     notes.extend(rig.startup.notes.iter().cloned());
@@ -465,7 +473,7 @@ fn measure(args: &BenchArgs, rig: Rig, warmup: u64, total: u64) -> Result<(Measu
 }
 
 /// Stops the estimator and reads the receive times it recorded.
-fn collect_records(
+pub(crate) fn collect_records(
     mut estimator: EstimatorChild,
     ws: &Workspace,
 ) -> Result<Vec<ReceiveTime>, String> {

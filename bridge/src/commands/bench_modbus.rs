@@ -13,7 +13,7 @@
 
 use crate::bench::{self, Summary};
 use crate::configs;
-use crate::estimator::{ReceiveTime, ReceiveTimes};
+use crate::estimator::ReceiveTime;
 use crate::ipc::{EstimatorChild, ForwardingSink};
 use hal::config::BusConfig;
 use hal::modbus::{ModbusBusConfig, ModbusMachine, ModbusOptions};
@@ -61,12 +61,8 @@ pub fn run(args: &ModbusBenchArgs) -> Result<(), String> {
     }
     let warmup = args.warmup.unwrap_or((args.triggers / 10).clamp(1, 100));
     let total = warmup + args.triggers;
-    let pid = std::process::id();
-    let prefix = format!("probebridge-bench-modbus-{pid}");
-    let work = std::env::temp_dir().join(&prefix);
-    std::fs::create_dir_all(&work).map_err(|e| format!("{}: {e}", work.display()))?;
-    let times_file = work.join("receive-times.txt");
-    let estimator_log = work.join("estimator.log");
+    let ws =
+        super::bench::Workspace::new(format!("probebridge-bench-modbus-{}", std::process::id()))?;
 
     let mut scenario = Scenario::parse(
         bench::SCENARIO,
@@ -86,7 +82,12 @@ pub fn run(args: &ModbusBenchArgs) -> Result<(), String> {
         .map_err(|e| format!("{}: {}", e.key, e.reason))?;
 
     tell!("bench: starting the estimator process ...");
-    let mut estimator = start_estimator(&prefix, &times_file, &estimator_log, 2 * total + 64)?;
+    let estimator = start_estimator(
+        &ws.prefix,
+        &ws.times_file,
+        &ws.estimator_log,
+        2 * total + 64,
+    )?;
     let latches = LatchLog::new();
     let mut program = PlcProgram::new(&scenario, &bus);
     program.set_latch_log(latches.clone());
@@ -100,7 +101,7 @@ pub fn run(args: &ModbusBenchArgs) -> Result<(), String> {
     bus.address = plc.local_addr().map(|a| a.to_string());
     let mut cfg = crate::session::machine_config(&scenario);
     cfg.bus = BusConfig::Modbus(bus.clone());
-    let sink = ForwardingSink::spawn(&prefix).map_err(|e| e.to_string())?;
+    let sink = ForwardingSink::spawn(&ws.prefix).map_err(|e| e.to_string())?;
     let options = ModbusOptions {
         run_id: TRIGGER_RUN,
         ..ModbusOptions::default()
@@ -119,25 +120,12 @@ pub fn run(args: &ModbusBenchArgs) -> Result<(), String> {
     drop(machine);
     drop(plc);
 
-    let _ = estimator.client().shutdown(Duration::from_secs(5));
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while estimator.try_wait().map_err(|e| e.to_string())?.is_none() {
-        if Instant::now() > deadline {
-            return Err(format!(
-                "the estimator did not exit; its log: {}",
-                estimator_log.display()
-            ));
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    drop(estimator);
-    let records = ReceiveTimes::read(&times_file)
-        .map_err(|e| format!("{e} (estimator log: {})", estimator_log.display()))?;
+    let records = super::bench::collect_records(estimator, &ws)?;
     let by_key: HashMap<(u64, u64), ReceiveTime> = records
         .iter()
         .map(|r| ((r.run_id, r.sequence), *r))
         .collect();
-    let _ = std::fs::remove_dir_all(&work);
+    let _ = std::fs::remove_dir_all(&ws.dir);
     let (mut trigger, mut to_bridge, mut to_estimator) = (Vec::new(), Vec::new(), Vec::new());
     let mut lost = 0u64;
     let mut seqs: Vec<&u64> = t0_of.keys().collect();
