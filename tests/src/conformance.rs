@@ -310,6 +310,15 @@ pub fn software_limits_refuse_before_moving<B: Backend>() {
         .unwrap_err();
     assert_eq!(e.kind, ErrorKind::SoftwareLimit, "{e}");
     assert_eq!(m.positions().unwrap(), before);
+    // A feed below the minimum, and a move that would take longer than any move may
+    // (300 mm at 1 mm/min), are refused the same way on every backend.
+    let inside = AxisPositions::linear([0.0, 0.0, z]);
+    let e = m.move_to(&inside, 0.5).unwrap_err();
+    assert_eq!(e.kind, ErrorKind::InvalidRequest, "{e}");
+    let far = AxisPositions::linear([before.get(Axis::X).unwrap() + 300.0, 0.0, z]);
+    let e = m.move_to(&far, 1.0).unwrap_err();
+    assert_eq!(e.kind, ErrorKind::InvalidRequest, "{e}");
+    assert_eq!(m.positions().unwrap(), before);
 }
 
 /// A move with linear and rotary axes arrives exactly.

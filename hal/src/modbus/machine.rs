@@ -510,7 +510,13 @@ impl Machine for ModbusMachine {
     }
 
     fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), MachineError> {
-        self.guard.check_move(target, feed)?;
+        // From where the last status read saw the axes (every command ends with one):
+        // the same checks as every backend, the move's duration included.
+        let here = AxisPositions::from_raw(
+            self.scale.positions(&self.status.actual),
+            self.config.axis_mask(),
+        );
+        self.guard.check_move_from(&here, target, feed)?;
         let (s, _) = self.run(CommandCode::Move, target, feed)?;
         match ResultCode::from_u16(s.result) {
             Some(ResultCode::Ok) => Ok(()),
