@@ -4,7 +4,7 @@
 use crate::configs;
 use crate::ipc::ForwardingSink;
 use cycles::CyclesConfig;
-use hal::can::inproc::InprocBus;
+use hal::can::inproc::{InprocBus, WireClock};
 use hal::can::record::RecordHealth;
 use hal::can::socketcan::SocketCanTransport;
 use hal::can::CanTransport;
@@ -185,16 +185,20 @@ impl Session {
                             "--machine describes real drives: give --can IFACE, or a --scenario for the simulator".into(),
                         ));
                     };
-                    let bus = InprocBus::new();
                     let mut machine = SimMachine::new(scenario);
-                    let pacing = if opts.realtime {
+                    let (pacing, clock) = if opts.realtime {
                         machine.set_clock(SimClock::Monotonic);
-                        Pacing::RealTime
+                        (Pacing::RealTime, WireClock::Monotonic)
                     } else {
-                        Pacing::Lockstep {
-                            answer_timeout: Duration::from_millis(200),
-                        }
+                        let answer_timeout = Duration::from_millis(200);
+                        (Pacing::Lockstep { answer_timeout }, WireClock::Virtual)
                     };
+                    // The bus has the machine's bit rate: frames take their wire time.
+                    let bitrate = config
+                        .canopen_bus()
+                        .unwrap_or(&hal::config::CanOpenBusConfig::DEFAULT)
+                        .bitrate;
+                    let bus = InprocBus::with_wire_time(bitrate, clock);
                     // In real time the simulated drives stand in for hardware, which a
                     // loaded gateway never starves: just below the real-time loop (as
                     // `bench trigger` runs them), so their heartbeats keep time.
@@ -203,7 +207,8 @@ impl Session {
                     } else {
                         0
                     };
-                    let sim = SimRunner::spawn_with_init(machine, bus.endpoint(), move || {
+                    let drives = bus.endpoint_for_devices();
+                    let sim = SimRunner::spawn_with_init(machine, drives, move || {
                         if drives_priority > 0 {
                             hal::rt::set_fifo_priority(drives_priority);
                         }

@@ -353,9 +353,10 @@ impl SimRunner {
                 let mut out: Vec<CanFrame> = Vec::with_capacity(64);
                 machine.power_on(&mut |r| out.push(*r));
                 while !stop2.load(Ordering::Acquire) {
-                    for r in out.drain(..) {
-                        transport.transmit(&r)?;
-                    }
+                    // One batch: on a bus with wire time the drives' answers
+                    // arbitrate together, as separate devices' frames do.
+                    transport.transmit_all(&out)?;
+                    out.clear();
                     // Wake for the stop flag at least every 50 ms.
                     let wait = machine
                         .poll_timeout()
@@ -366,9 +367,10 @@ impl SimRunner {
                         machine.on_frame(&f, &mut |r| out.push(*r));
                     }
                     machine.poll(&mut |r| out.push(*r));
-                    for r in out.drain(..) {
-                        transport.transmit(&r)?;
-                    }
+                    // One batch: on a bus with wire time the drives' answers
+                    // arbitrate together, as separate devices' frames do.
+                    transport.transmit_all(&out)?;
+                    out.clear();
                 }
                 Ok(machine)
             })

@@ -115,6 +115,26 @@ impl<T: CanTransport, W: Write + Send> CanTransport for Recorder<T, W> {
         }
         Ok(f)
     }
+
+    fn transmit_all(&mut self, frames: &[CanFrame]) -> Result<(), TransportError> {
+        self.inner.transmit_all(frames)?;
+        for f in frames {
+            self.log(f);
+        }
+        Ok(())
+    }
+
+    fn arrival_ns(&self) -> Option<u64> {
+        self.inner.arrival_ns()
+    }
+
+    fn virtual_now_ns(&self) -> Option<u64> {
+        self.inner.virtual_now_ns()
+    }
+
+    fn advance_virtual_clock(&mut self, now_ns: u64) {
+        self.inner.advance_virtual_clock(now_ns)
+    }
 }
 
 /// Plays a recorded log back to a master.

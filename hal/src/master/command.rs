@@ -55,15 +55,27 @@ pub struct RtError {
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Detail {
-    NotTriggered { distance: f64 },
+    NotTriggered {
+        distance: f64,
+    },
     Deflected,
     Collision,
     Emcy,
     FaultBit,
-    HeartbeatLost { silent_ms: f64 },
-    NotInPosition { axis: u8, error: f64 },
-    NotEnabled { state: u16 },
+    HeartbeatLost {
+        silent_ms: f64,
+    },
+    NotInPosition {
+        axis: u8,
+        error: f64,
+    },
+    NotEnabled {
+        state: u16,
+    },
     ArmTimeout,
+    /// The probe signal stopped the axes, but a moving axis's drive never reported
+    /// its latch.
+    LatchMissing,
     Transport,
     Busy,
     Stopped,
@@ -109,6 +121,9 @@ impl From<RtError> for MachineError {
                 format!("drive did not reach Operation enabled (statusword 0x{state:04X})")
             }
             Detail::ArmTimeout => "touch probe did not report armed in time; nothing moved".into(),
+            Detail::LatchMissing => {
+                "the probe signal stopped the axes, but this drive never reported its latch; no contact measured".into()
+            }
             Detail::Transport => "CAN transport failed; all axes stopped".into(),
             Detail::Busy => "a command is already running".into(),
             Detail::Stopped => "the real-time loop has stopped".into(),

@@ -7,6 +7,10 @@
 //! - `Lockstep`: for the simulator on a virtual clock: after each SYNC the driver waits
 //!   until every drive's TPDO1 (the last frame of a drive's answer to SYNC) is in, then
 //!   advances virtual time by one period. Runs as fast as the simulation can.
+//!
+//! Frames are stamped with their arrival (their last bit) when the transport models
+//! wire time (the in-process bus, on CLOCK_MONOTONIC or its virtual clock), else with
+//! the time the driver takes them in.
 
 use super::command::{Command, Reply};
 use super::rt_loop::{LoopConfig, LoopStats, RtLoop, TickFrames};
@@ -55,9 +59,11 @@ impl<T: CanTransport, S: SampleSink> PacedLoop<T, S> {
     /// The loop for the drives of `machine` (configured and operational, see
     /// `startup`); time starts now (real time) or at 0 (lockstep).
     pub fn new(machine: &MachineConfig, cfg: LoopConfig, transport: T, sink: S) -> Self {
+        // Lockstep runs on the transport's virtual clock when it has one (a simulated
+        // bus with wire time, whose clock the start-up traffic has already advanced).
         let now = match cfg.pacing {
             Pacing::RealTime => monotonic_ns(),
-            Pacing::Lockstep { .. } => 0,
+            Pacing::Lockstep { .. } => transport.virtual_now_ns().unwrap_or(0),
         };
         Self {
             rt: RtLoop::new(machine, cfg, sink, now),
@@ -119,9 +125,10 @@ impl<T: CanTransport, S: SampleSink> PacedLoop<T, S> {
             Pacing::RealTime => self.gather_real_time()?,
         };
         self.rt.tick(now, &mut self.frames);
-        for f in &self.frames {
-            self.transport.transmit(f)?;
+        if let Pacing::Lockstep { .. } = self.rt.config().pacing {
+            self.transport.advance_virtual_clock(now);
         }
+        self.transport.transmit_all(&self.frames)?;
         let sent = match self.rt.config().pacing {
             Pacing::RealTime => monotonic_ns(),
             Pacing::Lockstep { .. } => now,
@@ -147,7 +154,10 @@ impl<T: CanTransport, S: SampleSink> PacedLoop<T, S> {
                     .transport
                     .receive(Duration::from_nanos(deadline - now))?
                 {
-                    Some(f) => self.rt.on_frame(&f, next),
+                    Some(f) => {
+                        let at = self.transport.arrival_ns().unwrap_or(next);
+                        self.rt.on_frame(&f, at);
+                    }
                     None => break,
                 }
             }
@@ -155,7 +165,8 @@ impl<T: CanTransport, S: SampleSink> PacedLoop<T, S> {
         }
         // Anything else already queued (EMCY, heartbeats) belongs to this period.
         while let Some(f) = self.transport.receive(Duration::ZERO)? {
-            self.rt.on_frame(&f, next);
+            let at = self.transport.arrival_ns().unwrap_or(next);
+            self.rt.on_frame(&f, at);
         }
         Ok(next)
     }
@@ -184,12 +195,14 @@ impl<T: CanTransport, S: SampleSink> PacedLoop<T, S> {
                 .transport
                 .receive(Duration::from_nanos(deadline - now))?
             {
-                self.rt.on_frame(&f, monotonic_ns());
+                let at = self.transport.arrival_ns().unwrap_or_else(monotonic_ns);
+                self.rt.on_frame(&f, at);
             }
         }
         // Frames that came in while this cycle was late belong to it too.
         while let Some(f) = self.transport.receive(Duration::ZERO)? {
-            self.rt.on_frame(&f, monotonic_ns());
+            let at = self.transport.arrival_ns().unwrap_or_else(monotonic_ns);
+            self.rt.on_frame(&f, at);
         }
         Ok(monotonic_ns())
     }

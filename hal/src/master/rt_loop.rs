@@ -7,9 +7,10 @@
 //!
 //! Each activity has its method: [`RtLoop::supervise`] (heartbeat, EMCY, fault bits),
 //! [`RtLoop::interpolate`] (enabling, moves, arming, probing, braking, settling), the
-//! latch handling of `on_latch` (publish the contact, start the stop in the same
-//! cycle), the stop (`begin_stop`, `set_fault`) and [`RtLoop::sync_frames`] (setpoints
-//! and SYNC).
+//! latch handling of `on_latch` (the first latch frame starts the stop of every axis,
+//! since the probe signal is wired to all drives; the contact is published once every
+//! moving axis's latch is in), the stop (`begin_stop`, `set_fault`) and
+//! [`RtLoop::sync_frames`] (setpoints and SYNC).
 
 use super::command::{Command, Detail, Reply, RtError};
 use super::process_data::{ProcessData, Rpdo1, Rpdo2, Tpdo1, Tpdo2};
@@ -78,9 +79,10 @@ pub struct LoopStats {
     /// Real-time pacing: SYNC slots not sent because the loop had stalled for longer
     /// than a whole period (sending them late would put SYNCs back to back).
     pub skipped_cycles: u64,
-    /// Latch frame received -> stop setpoint sent, of the last contact, ns.
+    /// First latch frame received -> stop setpoint sent, of the last contact, ns.
     pub last_stop_latency_ns: u64,
-    /// The same in whole cycles (the stop goes out with the next SYNC).
+    /// The cycle whose SYNC carried the stop, counted from the cycle in which the
+    /// first latch frame arrived (1: the very next SYNC).
     pub last_stop_latency_cycles: u64,
 }
 
@@ -157,6 +159,24 @@ struct ProbeRequest {
     run_id: u64,
 }
 
+impl ProbeRequest {
+    /// Does the probing move move `axis`? (Only linear axes probe.)
+    fn moves(&self, axis: Axis) -> bool {
+        self.direction.get(axis.index()).is_some_and(|&d| d != 0.0)
+    }
+}
+
+/// A contact whose stop is under way while latches of moving axes are still to come.
+#[derive(Clone, Copy, Debug)]
+struct PendingContact {
+    request: ProbeRequest,
+    /// The SYNC of the cycle in which the first latch frame arrived.
+    sync_ns: u64,
+    /// Each drive's (actual, setpoint) increments when it arrived: the step of the
+    /// period in which the drives latched (the stop changes both afterwards).
+    step_inc: [(i32, i32); MAX_AXES],
+}
+
 #[derive(Clone, Copy, Debug)]
 enum Activity {
     /// Start-up: waiting for every drive's TPDO1, then walking each to Operation enabled.
@@ -213,7 +233,10 @@ pub struct RtLoop<S: SampleSink> {
     reply: Option<Reply>,
     fault: Option<RtError>,
     sequence: u64,
-    stop_pending_since: Option<u64>,
+    /// The first latch frame's arrival and the SYNC of its cycle, until the stop
+    /// goes out.
+    stop_pending_since: Option<(u64, u64)>,
+    contact: Option<PendingContact>,
     stats: LoopStats,
 }
 
@@ -252,6 +275,7 @@ impl<S: SampleSink> RtLoop<S> {
             fault: None,
             sequence: 0,
             stop_pending_since: None,
+            contact: None,
             stats: LoopStats::default(),
         }
     }
@@ -373,6 +397,7 @@ impl<S: SampleSink> RtLoop<S> {
     /// is faulted: the drives stay enabled until the shutdown that follows.
     fn stop_requested(&mut self) {
         let err = RtError::new(ErrorKind::Aborted, Detail::Aborted);
+        self.contact = None;
         match self.activity {
             Activity::Moving { profile, t } | Activity::Probing { profile, t, .. } => {
                 self.disarm_all();
@@ -431,13 +456,13 @@ impl<S: SampleSink> RtLoop<S> {
     /// The driver sent the frames of the last tick at `sent_ns`: the stop latency of a
     /// contact is measured up to here.
     pub fn frames_sent(&mut self, sent_ns: u64) {
-        if let Some(rx) = self.stop_pending_since.take() {
+        if let Some((rx, rx_sync)) = self.stop_pending_since.take() {
             self.stats.last_stop_latency_ns = sent_ns.saturating_sub(rx);
-            self.stats.last_stop_latency_cycles = self
-                .stats
-                .last_stop_latency_ns
-                .div_ceil(self.cfg.period_ns)
-                .max(1);
+            // SYNC periods between the cycle of the latch and this one (rounded: in real
+            // time a SYNC goes out a little off its slot).
+            let periods = (self.sync_ns.saturating_sub(rx_sync) as f64 / self.cfg.period_ns as f64)
+                .round() as u64;
+            self.stats.last_stop_latency_cycles = periods.max(1);
         }
     }
 
@@ -488,7 +513,9 @@ impl<S: SampleSink> RtLoop<S> {
 
     /// Latch handling: a drive's touch probe status (TPDO2). A rising probe signal
     /// while positioning is a collision; an edge stored while probing is this drive's
-    /// latch, and the last drive's latch completes the contact.
+    /// latch. The first latch frame stops every axis (the probe signal is wired to all
+    /// drives: they have all latched); the contact is complete once every moving
+    /// axis's latch is in.
     fn on_latch(&mut self, i: usize, pd: Tpdo2, now_ns: u64) {
         let d = &mut self.drives[i];
         d.tp_status = pd.touch_probe_status;
@@ -506,12 +533,13 @@ impl<S: SampleSink> RtLoop<S> {
             && d.latch_inc.is_none()
         {
             d.latch_inc = Some(pd.probe1_positive_edge);
+            self.first_latch(now_ns);
             self.try_complete_contact(now_ns);
         }
     }
 
-    /// Every drive has reported its latch: publish the contact and brake, in this cycle.
-    fn try_complete_contact(&mut self, receive_ns: u64) {
+    /// The first latch frame of a probing move: brake every axis with the next SYNC.
+    fn first_latch(&mut self, receive_ns: u64) {
         let Activity::Probing {
             profile,
             t,
@@ -520,23 +548,56 @@ impl<S: SampleSink> RtLoop<S> {
         else {
             return;
         };
-        if self.drives.iter().any(|d| d.latch_inc.is_none()) {
+        let mut step_inc = [(0, 0); MAX_AXES];
+        for (s, d) in step_inc.iter_mut().zip(&self.drives) {
+            *s = (d.actual_inc, d.target_inc);
+        }
+        self.contact = Some(PendingContact {
+            request,
+            sync_ns: self.sync_ns,
+            step_inc,
+        });
+        self.stop_pending_since = Some((receive_ns, self.sync_ns));
+        // The answer is set when the contact is complete (see `try_complete_contact`);
+        // until then the stop does not answer (see `settle`).
+        let placeholder = Reply::Error(RtError::new(ErrorKind::Timeout, Detail::LatchMissing));
+        self.begin_stop(profile, t, placeholder);
+    }
+
+    /// Every moving axis has reported its latch: publish the contact, disarm, and let
+    /// the stop under way answer with it.
+    fn try_complete_contact(&mut self, receive_ns: u64) {
+        let Some(PendingContact {
+            request,
+            sync_ns,
+            step_inc,
+        }) = self.contact
+        else {
+            return;
+        };
+        if self
+            .drives
+            .iter()
+            .any(|d| request.moves(d.axis) && d.latch_inc.is_none())
+        {
             return;
         }
+        self.contact = None;
         let mut positions = [0.0; MAX_AXES];
         // The fraction of the last period at which the latch happened, from the axis
         // that moved most: the drives latch position, not time.
         let mut best = 0.0;
         let mut fraction = 1.0;
-        for d in &self.drives {
-            let latched = d.latch_inc.unwrap_or(d.actual_inc);
+        for (d, &(from, to)) in self.drives.iter().zip(&step_inc) {
+            // An axis that does not move has not moved since: its position is its
+            // latch (whose frame may still be on the way).
+            let latched = d.latch_inc.unwrap_or(from);
             positions[d.axis.index()] = latched as f64 / d.scale;
-            let span = (d.target_inc as f64 - d.actual_inc as f64).abs();
+            let span = (to as f64 - from as f64).abs();
             if span > best {
                 best = span;
-                fraction = ((latched as f64 - d.actual_inc as f64)
-                    / (d.target_inc as f64 - d.actual_inc as f64))
-                    .clamp(0.0, 1.0);
+                fraction =
+                    ((latched as f64 - from as f64) / (to as f64 - from as f64)).clamp(0.0, 1.0);
             }
         }
         self.sequence += 1;
@@ -544,7 +605,7 @@ impl<S: SampleSink> RtLoop<S> {
         let sample = ContactSample {
             sequence: self.sequence,
             run_id: request.run_id,
-            trigger_ns: self.sync_ns + (fraction * self.cfg.period_ns as f64) as u64,
+            trigger_ns: sync_ns + (fraction * self.cfg.period_ns as f64) as u64,
             receive_ns,
             positions,
             direction: [d[0], d[1], d[2]],
@@ -557,8 +618,12 @@ impl<S: SampleSink> RtLoop<S> {
             Err(_) => self.stats.publish_failures += 1,
         }
         self.disarm_all();
-        self.stop_pending_since = Some(receive_ns);
-        self.begin_stop(profile, t, Reply::Contact(sample));
+        match &mut self.activity {
+            Activity::Stopping { then, .. } | Activity::Settling { then, .. } => {
+                *then = Reply::Contact(sample);
+            }
+            _ => {}
+        }
     }
 
     /// Stop: brake along the path of `profile` from its state at `t`, then answer
@@ -586,6 +651,7 @@ impl<S: SampleSink> RtLoop<S> {
             return;
         }
         self.fault = Some(err);
+        self.contact = None;
         self.disarm_all();
         match self.activity {
             Activity::Moving { profile, t } | Activity::Probing { profile, t, .. } => {
@@ -837,8 +903,24 @@ impl<S: SampleSink> RtLoop<S> {
         };
     }
 
-    /// Waiting for the axes to reach their setpoints, then answering `then`.
+    /// Waiting for the axes to reach their setpoints, then answering `then` (a stop
+    /// for a contact answers once every moving axis's latch is in).
     fn settle(&mut self, since_ns: u64, then: Reply, now: u64) {
+        if let Some(c) = self.contact {
+            if now - since_ns > self.cfg.settle_timeout_ns {
+                let node = self
+                    .drives
+                    .iter()
+                    .find(|d| c.request.moves(d.axis) && d.latch_inc.is_none())
+                    .map_or(0, |d| d.node);
+                self.contact = None;
+                self.disarm_all();
+                let err = RtError::new(ErrorKind::Timeout, Detail::LatchMissing).node(node);
+                self.reply = Some(Reply::Error(err));
+                self.activity = Activity::Idle;
+            }
+            return;
+        }
         match self.settled() {
             None => {
                 self.reply = Some(match then {
@@ -1023,6 +1105,9 @@ mod tests {
         now: u64,
         sent: TickFrames,
         heartbeats: bool,
+        /// Latch frames (TPDO2) of these nodes are held back until `release_latches`.
+        hold_latches_of: Vec<u8>,
+        held: Vec<CanFrame>,
     }
 
     impl Bench {
@@ -1040,6 +1125,8 @@ mod tests {
                 now: 0,
                 sent: TickFrames::new(),
                 heartbeats: true,
+                hold_latches_of: Vec::new(),
+                held: Vec::new(),
             }
         }
 
@@ -1063,7 +1150,20 @@ mod tests {
                 }
             }
             for f in &answers {
-                self.rt.on_frame(f, self.now + PERIOD / 2);
+                let node = (f.cob_id() & 0x7F) as u8;
+                if f.cob_id() == Tpdo2::cob_id(node) && self.hold_latches_of.contains(&node) {
+                    self.held.push(*f);
+                } else {
+                    self.rt.on_frame(f, self.now + PERIOD / 2);
+                }
+            }
+        }
+
+        /// The held-back latch frames arrive now, in this cycle.
+        fn release_latches(&mut self) {
+            self.hold_latches_of.clear();
+            for f in std::mem::take(&mut self.held) {
+                self.rt.on_frame(&f, self.now + PERIOD / 2);
             }
         }
 
@@ -1266,6 +1366,71 @@ mod tests {
         assert!(path.windows(2).all(|w| w[1] <= w[0]), "{path:?}");
         assert!((at_contact - end - 50).abs() <= 2, "{at_contact} -> {end}");
         assert_eq!(b.rt.stats().last_stop_latency_cycles, 1);
+    }
+
+    /// The probe signal reaches every drive, so the first latch frame stops all axes
+    /// with the next SYNC; the contact waits for the moving axis's latch (Z, node 3),
+    /// held back here for two more cycles.
+    #[test]
+    fn the_first_latch_frame_stops_every_axis_and_the_sample_waits_for_the_moving_axis() {
+        let mut b = Bench::enabled();
+        let mut twin = Bench::enabled();
+        assert!(probe_and_touch(&mut b, 20).is_none());
+        assert!(probe_and_touch(&mut twin, 20).is_none());
+        // Armed and touched: from here on the latch frames of these nodes wait.
+        b.hold_latches_of = vec![2, 3];
+        twin.hold_latches_of = vec![1, 2, 3];
+        let z_latched = b.drives[2].actual;
+        // The touch cycle: only node 1's latch frame (X, not moving) arrives.
+        b.tick();
+        twin.tick();
+        assert!(b.rt.sink_mut().0.is_empty(), "Z's latch is not in yet");
+        let probing_step = twin.rpdo1(3).target_position;
+        // The very next tick carries the stop: Z's setpoint brakes, where the twin
+        // (no latch frame at all) goes on at the probing feed.
+        b.tick();
+        twin.tick();
+        let (braking, probing) = (b.rpdo1(3).target_position, twin.rpdo1(3).target_position);
+        // 600 mm/min = 0.02 mm = 20 increments per 2 ms down; braking at 1000 mm/s^2
+        // takes 2 ms * 2 ms * 1000 / 2 = 0.002 mm = 2 increments off the first step.
+        assert_eq!(probing - probing_step, -20);
+        assert!(
+            braking > probing && braking - probing <= 4,
+            "stop setpoint {braking}, probing {probing}"
+        );
+        assert_eq!(b.rt.stats().last_stop_latency_cycles, 1);
+        assert!(b.rt.sink_mut().0.is_empty(), "still no sample");
+        b.tick();
+        assert!(
+            b.rt.take_reply().is_none(),
+            "the stop waits for the contact"
+        );
+        // Z's latch arrives two cycles late: the sample is complete, at the latch.
+        b.release_latches();
+        assert_eq!(b.rt.sink_mut().0.len(), 1);
+        let s = b.rt.sink_mut().0[0];
+        assert_eq!(s.positions[2], z_latched as f64 / SCALE);
+        assert_eq!(s.receive_ns, b.now + PERIOD / 2);
+        match b.until_reply() {
+            Reply::Contact(c) => assert_eq!(c.sequence, 1),
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(b.rt.sink_mut().0.len(), 1, "exactly one sample");
+    }
+
+    #[test]
+    fn a_moving_axis_whose_latch_never_comes_fails_the_probe_after_the_stop() {
+        let mut b = Bench::enabled();
+        assert!(probe_and_touch(&mut b, 20).is_none());
+        b.hold_latches_of = vec![3];
+        match b.until_reply() {
+            Reply::Error(e) => {
+                assert_eq!((e.kind, e.node), (ErrorKind::Timeout, Some(3)));
+                assert!(matches!(e.detail, Detail::LatchMissing));
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(b.rt.sink_mut().0.is_empty());
     }
 
     #[test]
