@@ -292,7 +292,7 @@ fn main() -> ExitCode {
             commands::bench_modbus::run(&commands::bench_modbus::ModbusBenchArgs {
                 triggers: args.triggers,
                 warmup: args.warmup,
-                plc_cycle_us: args.period_us,
+                plc_cycle_us: args.period_us.unwrap_or(250),
                 poll_ms: args.poll_ms,
                 json: args.json,
             })

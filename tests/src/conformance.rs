@@ -2,7 +2,7 @@
 //! in-process bus, on SocketCAN, Modbus, ...) must pass the same checks. Instantiate
 //! it for a backend with [`crate::machine_conformance!`].
 
-use hal::can::inproc::InprocBus;
+use hal::can::inproc::{InprocBus, WireClock};
 use hal::master::{CanMachine, MasterOptions, Pacing};
 use hal::{Axis, AxisPositions, Contact, ErrorKind, Machine, MachineError, NullSink, ProbeMove};
 use sim::machine::{SimClock, SimMachine, SimRunner};
@@ -45,14 +45,18 @@ impl<T> Machine for Held<T> {
     }
 }
 
-/// CANopen master and simulated drives on the in-process bus, virtual clock.
+/// CANopen master and simulated drives on the in-process bus with the machine's bit
+/// rate (wire time on the virtual clock).
 pub struct CanInproc;
 
 impl Backend for CanInproc {
     type M = Held<SimRunner>;
     fn open(scenario: &Scenario) -> Self::M {
-        let bus = InprocBus::new();
-        let sim = SimRunner::spawn(SimMachine::new(scenario), bus.endpoint());
+        let bitrate = crate::machine_config(scenario)
+            .canopen_bus()
+            .map_or(1_000_000, |b| b.bitrate);
+        let bus = InprocBus::with_wire_time(bitrate, WireClock::Virtual);
+        let sim = SimRunner::spawn(SimMachine::new(scenario), bus.endpoint_for_devices());
         let options = MasterOptions {
             pacing: Pacing::Lockstep {
                 answer_timeout: Duration::from_millis(500),

@@ -1,5 +1,7 @@
 //! Helpers of `probebridge bench`: latency statistics and the benchmark's machine.
 
+pub mod wakeup;
+
 use serde_json::{json, Value};
 
 /// Order statistics of a set of latencies (ns in, µs out).

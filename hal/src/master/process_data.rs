@@ -268,6 +268,34 @@ impl BusLoad {
     }
 }
 
+impl BusLoad {
+    /// The shortest SYNC period, µs (50 .. 100 000), at which the cyclic traffic of
+    /// `cfg`'s drives loads the bus no more than `limit_percent`; `None` when none does.
+    pub fn shortest_period_us(cfg: &MachineConfig, limit_percent: f64) -> Option<u32> {
+        let mut c = cfg.clone();
+        let mut load_at = |period_us: u32| {
+            if let Some(b) = c.canopen_bus_mut() {
+                b.sync_period_us = period_us;
+            }
+            Self::of(&c).percent
+        };
+        let (mut lo, mut hi) = (50u32, 100_000u32);
+        if load_at(hi) > limit_percent {
+            return None;
+        }
+        // The load falls as the period grows: the first period within the limit.
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            if load_at(mid) <= limit_percent {
+                hi = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+        Some(lo)
+    }
+}
+
 impl core::fmt::Display for BusLoad {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         write!(
@@ -390,5 +418,20 @@ mod tests {
         // SYNC 55 + 5 * (2 * 115 + 65 * 2000/50000) = 1218 bits per 2000.
         assert!((load.cyclic_bits - 1218.0).abs() < 1e-9, "{load}");
         assert!((load.percent - 60.9).abs() < 1e-9, "{load}");
+    }
+
+    #[test]
+    fn the_shortest_period_within_70_percent_for_five_drives_is_1738_us() {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/machines/table-ac.toml");
+        let cfg = MachineConfig::load(&p).unwrap();
+        // 55 + 5 * (230 + 65 * P / 50000) = 1205 + 0.0065 P bits per P us <= 70 %:
+        // P >= 1205 / 0.6935 = 1737.6, so 1738 us (69.98 %; 1737 us gives 70.02 %).
+        assert_eq!(BusLoad::shortest_period_us(&cfg, 70.0), Some(1738));
+        // 250 us, what the trigger bench used to run: 55 + 5 * (230 + 0.325) = 1206.625
+        // bits per 250 = 482.65 % of 1 Mbit/s.
+        let mut fast = cfg.clone();
+        fast.canopen_bus_mut().unwrap().sync_period_us = 250;
+        assert!((BusLoad::of(&fast).percent - 482.65).abs() < 1e-9);
+        assert_eq!(BusLoad::shortest_period_us(&cfg, 0.001), None);
     }
 }
