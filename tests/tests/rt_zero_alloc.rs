@@ -57,3 +57,51 @@ fn ten_thousand_triggers_allocate_nothing() {
         rt.stats().cycles
     );
 }
+
+/// The in-process bus with wire time allocates nothing either: a SYNC period's
+/// traffic (five RPDO1 and SYNC out, five TPDO2 and TPDO1 back) scheduled by id on
+/// both clocks, sent and received in this thread.
+#[test]
+fn the_wire_time_bus_allocates_nothing() {
+    use hal::can::inproc::{InprocBus, WireClock};
+    use hal::can::{CanFrame, CanTransport};
+    use std::time::Duration;
+
+    let master_frames: Vec<CanFrame> = (1..=5u16)
+        .map(|n| CanFrame::new(0x200 + n, &[0x0F, 0, 1, 2, 3, 4]).unwrap())
+        .chain([CanFrame::new(0x080, &[]).unwrap()])
+        .collect();
+    let drive_frames: Vec<CanFrame> = (1..=5u16)
+        .flat_map(|n| {
+            [
+                CanFrame::new(0x280 + n, &[0x83, 0, 1, 2, 3, 4]).unwrap(),
+                CanFrame::new(0x180 + n, &[0x37, 0x12, 1, 2, 3, 4]).unwrap(),
+            ]
+        })
+        .collect();
+    for (clock, rounds) in [(WireClock::Virtual, 10_000u64), (WireClock::Monotonic, 200)] {
+        let bus = InprocBus::with_wire_time(1_000_000, clock);
+        let mut master = bus.endpoint();
+        let mut drives = bus.endpoint_for_devices();
+        let mut period = |k: u64| {
+            master.advance_virtual_clock(k * 2_000_000);
+            master.transmit_all(&master_frames).unwrap();
+            for _ in &master_frames {
+                drives.receive(Duration::from_secs(5)).unwrap().unwrap();
+            }
+            drives.transmit_all(&drive_frames).unwrap();
+            for _ in &drive_frames {
+                master.receive(Duration::from_secs(5)).unwrap().unwrap();
+            }
+            master.arrival_ns().unwrap()
+        };
+        period(0);
+        let (last, counts) = count(|| (1..=rounds).map(&mut period).last());
+        let allocations = counts.this_thread_allocs + counts.this_thread_frees;
+        assert!(last.is_some());
+        assert_eq!(
+            allocations, 0,
+            "{clock:?}: the bus allocated {allocations} times over {rounds} periods"
+        );
+    }
+}
