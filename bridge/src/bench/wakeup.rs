@@ -114,7 +114,7 @@ pub fn measure(count: usize, warmup: usize, priority: i32) -> Result<Wakeup, Str
     let total = count + warmup;
     let parent_cpu = two_cpus && pin(0);
     // SAFETY: plain syscalls reading the calling thread's scheduling, to restore.
-    let (policy, mut param) = unsafe {
+    let (policy, param) = unsafe {
         let mut param = libc::sched_param { sched_priority: 0 };
         libc::sched_getparam(0, &mut param);
         (libc::sched_getscheduler(0), param)
@@ -171,7 +171,7 @@ pub fn measure(count: usize, warmup: usize, priority: i32) -> Result<Wakeup, Str
     // Back to the thread's own scheduling.
     if parent_fifo && policy >= 0 {
         // SAFETY: plain syscall on the calling thread, with what it had.
-        unsafe { libc::sched_setscheduler(0, policy, &mut param) };
+        unsafe { libc::sched_setscheduler(0, policy, &param) };
     }
     if let Some(set) = saved {
         // SAFETY: restores the affinity read above.

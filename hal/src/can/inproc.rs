@@ -298,9 +298,7 @@ impl CanTransport for InprocEndpoint {
             return None;
         }
         let mut st = lock(&self.bus);
-        if st.wire.is_none() {
-            return None;
-        }
+        st.wire.as_ref()?;
         self.slot(&mut st).map(|s| s.clock_ns)
     }
 
