@@ -106,10 +106,12 @@ impl CanMachine {
         let bus = startup::canopen_bus(cfg)?;
         let bus_load = BusLoad::of(cfg);
         if bus_load.percent > bus.max_load_percent {
+            let fits = BusLoad::shortest_period_us(cfg, bus.max_load_percent)
+                .map_or(String::new(), |p| format!(" (at least {p} us)"));
             return Err(MachineError::new(
                 ErrorKind::InvalidRequest,
                 format!(
-                    "{}: {bus_load}; the limit is {:.0} %: lengthen bus.sync_period_us or raise the bit rate",
+                    "{}: {bus_load}; the limit is {:.0} %: lengthen bus.sync_period_us{fits} or raise the bit rate",
                     cfg.path.display(),
                     bus.max_load_percent
                 ),
