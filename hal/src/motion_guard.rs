@@ -246,6 +246,11 @@ impl ProbeInput {
         rising
     }
 
+    /// Is the probe deflected (the last level taken)?
+    pub fn is_high(&self) -> bool {
+        self.level
+    }
+
     /// Is a rising input at this point a collision? Yes while positioning.
     pub fn is_collision(rising: bool, positioning: bool) -> bool {
         rising && positioning

@@ -55,14 +55,32 @@ pub struct RtError {
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Detail {
-    NotTriggered { distance: f64 },
-    Deflected,
+    NotTriggered {
+        distance: f64,
+    },
+    /// The probing move was to start with the probe signal high, at `at` (machine
+    /// X, Y, Z).
+    Deflected {
+        at: [f64; 3],
+    },
+    /// A positioning move was to start from `at` with the stylus in contact, other
+    /// than straight out of it.
+    DeflectedBeforeMove {
+        at: [f64; 3],
+    },
     Collision,
     Emcy,
     FaultBit,
-    HeartbeatLost { silent_ms: f64 },
-    NotInPosition { axis: u8, error: f64 },
-    NotEnabled { state: u16 },
+    HeartbeatLost {
+        silent_ms: f64,
+    },
+    NotInPosition {
+        axis: u8,
+        error: f64,
+    },
+    NotEnabled {
+        state: u16,
+    },
     ArmTimeout,
     Transport,
     Busy,
@@ -92,7 +110,12 @@ impl From<RtError> for MachineError {
             Detail::NotTriggered { distance } => {
                 format!("no contact within {distance:.3} mm; axes stopped at the end of the path")
             }
-            Detail::Deflected => "the probe signal is high before the move; nothing moved".into(),
+            Detail::Deflected { at: [x, y, z] } => format!(
+                "the probe was already triggered at the start of the probing move at X{x:+.4} Y{y:+.4} Z{z:+.4} (the stylus touches something: a start inside material?); nothing moved"
+            ),
+            Detail::DeflectedBeforeMove { at: [x, y, z] } => format!(
+                "the probe was already triggered at the start of the positioning move at X{x:+.4} Y{y:+.4} Z{z:+.4} (the stylus touches something: a start inside material?); only a retraction straight out of the contact may start like this; nothing moved. Retract by hand"
+            ),
             Detail::Collision => {
                 "the stylus touched something while positioning; all axes braked. Retract away from the contact".into()
             }
