@@ -110,12 +110,8 @@ impl From<RtError> for MachineError {
             Detail::NotTriggered { distance } => {
                 format!("no contact within {distance:.3} mm; axes stopped at the end of the path")
             }
-            Detail::Deflected { at: [x, y, z] } => format!(
-                "the probe was already triggered at the start of the probing move at X{x:+.4} Y{y:+.4} Z{z:+.4} (the stylus touches something: a start inside material?); nothing moved"
-            ),
-            Detail::DeflectedBeforeMove { at: [x, y, z] } => format!(
-                "the probe was already triggered at the start of the positioning move at X{x:+.4} Y{y:+.4} Z{z:+.4} (the stylus touches something: a start inside material?); only a retraction straight out of the contact may start like this; nothing moved. Retract by hand"
-            ),
+            Detail::Deflected { at } => crate::motion_guard::deflected_before_probing(at),
+            Detail::DeflectedBeforeMove { at } => crate::motion_guard::deflected_before_move(at),
             Detail::Collision => {
                 "the stylus touched something while positioning; all axes braked. Retract away from the contact".into()
             }

@@ -27,7 +27,7 @@ use crate::config::{CanOpenBusConfig, MachineConfig};
 use crate::contact_sample::{ContactSample, SampleSink, FLAG_HW_LATCH};
 use crate::machine::ErrorKind;
 use crate::motion::{AxisLimits, Profile};
-use crate::motion_guard::ProbeInput;
+use crate::motion_guard::{may_start_deflected, ProbeInput};
 
 pub use super::pacing::Pacing;
 
@@ -390,13 +390,7 @@ impl<S: SampleSink> RtLoop<S> {
         }
         let linear = [0, 1, 2].map(|i| to[i] - from[i]);
         let rotary = (3..MAX_AXES).any(|i| to[i] != from[i]);
-        if !rotary && linear.iter().all(|v| *v == 0.0) {
-            return None;
-        }
-        let away = self
-            .deflected_along
-            .is_some_and(|along| linear.iter().zip(along).map(|(m, d)| m * d).sum::<f64>() < 0.0);
-        if away && !rotary {
+        if may_start_deflected(self.deflected_along, linear, rotary) {
             return None;
         }
         Some(RtError::new(
