@@ -2,7 +2,7 @@
 //! or real drives (or `probebridge sim` in another process) on a SocketCAN interface.
 
 use crate::configs;
-use crate::ipc::ForwardingSink;
+use crate::ipc::{ForwardingSink, ServiceLock, ServiceLockError};
 use cycles::CyclesConfig;
 use hal::can::inproc::{InprocBus, WireClock};
 use hal::can::record::RecordHealth;
@@ -59,6 +59,9 @@ pub struct Session {
     pub plc: Option<SimPlc>,
     /// The candump log and whether its recording is whole.
     pub candump: Option<(PathBuf, RecordHealth)>,
+    /// This session's claim on its iceoryx2 service prefix; declared last, so freed
+    /// after the machine is closed.
+    _service: ServiceLock,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -69,6 +72,9 @@ pub enum SessionError {
     Machine(#[from] MachineError),
     #[error("iceoryx2: {0}")]
     Ipc(String),
+    /// Another session holds the `--service` prefix.
+    #[error(transparent)]
+    ServiceInUse(#[from] ServiceLockError),
 }
 
 pub fn load_scenario(path: Option<&Path>) -> Result<Scenario, SessionError> {
@@ -146,6 +152,8 @@ impl Session {
             hal::atomic_write::check_writable(path)
                 .map_err(|e| SessionError::Scenario(format!("--candump: {e}")))?;
         }
+        // Before anything is opened: a second session on the same prefix is refused.
+        let service = ServiceLock::acquire(&opts.service)?;
         let (mut config, scenario) = resolve_machine(opts)?;
         let sink =
             ForwardingSink::spawn(&opts.service).map_err(|e| SessionError::Ipc(e.to_string()))?;
@@ -170,6 +178,7 @@ impl Session {
                 sim: None,
                 plc,
                 candump: None,
+                _service: service,
             });
         }
         let (transport, sim, pacing): (Box<dyn CanTransport>, Option<SimRunner>, Pacing) =
@@ -245,6 +254,7 @@ impl Session {
             plc: None,
             sim,
             candump,
+            _service: service,
         })
     }
 

@@ -9,9 +9,10 @@ use crate::length_unit::LengthUnit;
 use crate::measuring_log::plane::{plane_log_text, write_plane_log, PlaneRecord, PLANE_LOG};
 use crate::measuring_log::{timestamp_utc, MeasuringLogError};
 use crate::plane::{plane_angles, COLLINEAR_SIN};
+use crate::planned_move::PlannedMove;
 use crate::positioning::Positioner;
 use crate::results::CycleOutput;
-use hal::Machine;
+use hal::{Axis, AxisPositions, Machine, ProbeMove};
 use nalgebra::Vector3;
 use std::collections::BTreeMap;
 
@@ -115,6 +116,98 @@ fn results(r: &PlaneRecord) -> BTreeMap<String, f64> {
     q
 }
 
+/// Where and how the probe comes to each point, machine coordinates.
+struct Approach {
+    /// Unit vector along the tool axis, away from the material.
+    up: Vector3<f64>,
+    /// From a start point to its nominal point: R + SET_UP + Q320, mm.
+    distance: f64,
+    /// Q260 in machine coordinates (tool-axis coordinate).
+    safe_height: f64,
+    starts: [Vector3<f64>; 3],
+}
+
+impl PlaneParams {
+    /// The start points over the three nominal points, with the active datum at
+    /// `origin` (machine XYZ); every one must lie below the safe height.
+    fn approach(&self, call: &CycleBlock, origin: Vector3<f64>) -> Result<Approach, CycleError> {
+        let probe = &call.tool.probe;
+        let axis = call.tool.axis;
+        let t = axis.tool_index();
+        let distance = probe.radius + probe.set_up + self.clearance;
+        // The probe comes from the positive tool-axis side (from above for Z).
+        let mut up = [0.0; 3];
+        up[t] = 1.0;
+        let up = Vector3::from(up);
+        // Program coordinates: relative to the active preset plus shift.
+        let safe_height = self.safe_height + origin[t];
+        let starts = self
+            .points
+            .map(|pt| Vector3::from(axis.to_machine(pt)) + origin + up * distance);
+        if let Some((i, s)) = starts.iter().enumerate().find(|(_, s)| s[t] > safe_height) {
+            return Err(CycleError::Plan(format!(
+                "Q260={} is below the start of point {} ({:.4} = nominal + R + SET_UP + Q320); nothing moved",
+                self.safe_height,
+                i + 1,
+                s[t] - origin[t]
+            )));
+        }
+        Ok(Approach {
+            up,
+            distance,
+            safe_height,
+            starts,
+        })
+    }
+
+    /// Every move the cycle commands, in order, with the active datum at `origin`
+    /// (machine XYZ): what `check` and `run` hold against the machine before the
+    /// program's first move.
+    pub fn planned_moves(
+        &self,
+        call: &CycleBlock,
+        origin: [f64; 3],
+    ) -> Result<Vec<PlannedMove>, CycleError> {
+        let a = self.approach(call, Vector3::from(origin))?;
+        let probe = &call.tool.probe;
+        let axis = call.tool.axis;
+        let [main, minor, _] = axis.indices();
+        let position = |step: String, target: AxisPositions| PlannedMove::Position {
+            step,
+            target,
+            feed: probe.fmax,
+        };
+        let safe = || {
+            position(
+                "moving to the safe height".into(),
+                AxisPositions::new().with(axis.axis(), a.safe_height),
+            )
+        };
+        let mut moves = vec![safe()];
+        for (i, s) in a.starts.iter().enumerate() {
+            let over = AxisPositions::new()
+                .with(Axis::LINEAR[main], s[main])
+                .with(Axis::LINEAR[minor], s[minor]);
+            moves.push(position(format!("positioning over point {}", i + 1), over));
+            moves.push(position(
+                format!("approaching point {}", i + 1),
+                AxisPositions::linear((*s).into()),
+            ));
+            moves.push(PlannedMove::Probe {
+                step: format!("probing point {}", i + 1),
+                from: (*s).into(),
+                mv: ProbeMove {
+                    direction: (-a.up).into(),
+                    feed: probe.f,
+                    max_distance: a.distance + probe.dist,
+                },
+            });
+            moves.push(safe());
+        }
+        Ok(moves)
+    }
+}
+
 /// Probes the three points and computes the plane's angles.
 fn measure<M: Machine>(
     call: &CycleBlock,
@@ -125,26 +218,13 @@ fn measure<M: Machine>(
     let probe = &call.tool.probe;
     let axis = call.tool.axis;
     let t = axis.tool_index();
-    let approach = probe.radius + probe.set_up + p.clearance;
-    // The probe comes from the positive tool-axis side (from above for Z).
-    let mut up = [0.0; 3];
-    up[t] = 1.0;
-    let up = Vector3::from(up);
-    // Program coordinates: relative to the active preset plus shift.
     let origin = Vector3::from(ctx.datum.origin());
-    let safe_height = p.safe_height + origin[t];
-    let starts = p
-        .points
-        .map(|pt| Vector3::from(axis.to_machine(pt)) + origin + up * approach);
-    // Planned before anything moves: every start point must lie below the safe height.
-    if let Some((i, s)) = starts.iter().enumerate().find(|(_, s)| s[t] > safe_height) {
-        return Err(CycleError::Plan(format!(
-            "Q260={} is below the start of point {} ({:.4} = nominal + R + SET_UP + Q320); nothing moved",
-            p.safe_height,
-            i + 1,
-            s[t] - origin[t]
-        )));
-    }
+    let Approach {
+        up,
+        distance: approach,
+        safe_height,
+        starts,
+    } = p.approach(call, origin)?;
     ctx.note(call.block, "basic rotation reset");
     let mut pos = Positioner {
         machine,

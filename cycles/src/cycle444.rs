@@ -8,11 +8,12 @@ use crate::diagnostic::Diagnostic;
 use crate::error::CycleError;
 use crate::length_unit::LengthUnit;
 use crate::measuring_log::probing3d::{write_probing3d_log, Probing3dRecord, PROBING_3D_LOG};
+use crate::planned_move::PlannedMove;
 use crate::positioning::Positioner;
 use crate::progress::ProgressSink;
 use crate::results::CycleOutput;
 use crate::tolerance::{Tolerance, WorkpieceStatus};
-use hal::Machine;
+use hal::{Axis, AxisPositions, Machine, ProbeMove};
 use nalgebra::Vector3;
 use std::collections::BTreeMap;
 
@@ -117,6 +118,84 @@ impl MeasuringCycle for Probing3dParams {
     }
 }
 
+/// Where and how the probe comes to the point, machine coordinates.
+struct Approach {
+    /// The surface normal (unit, away from the material).
+    n: Vector3<f64>,
+    /// The pre-position: the nominal point plus R + SET_UP + Q320 along the normal.
+    start: Vector3<f64>,
+    /// The probing path: to the nominal point and DIST beyond it, mm.
+    max_distance: f64,
+    /// Q260 in machine coordinates (tool-axis coordinate).
+    safe_height: f64,
+}
+
+impl Probing3dParams {
+    /// The pre-position and probing path with the active datum at `origin` (machine
+    /// XYZ).
+    fn approach(&self, call: &CycleBlock, origin: Vector3<f64>) -> Approach {
+        let probe = &call.tool.probe;
+        let axis = call.tool.axis;
+        let n = Vector3::from(axis.to_machine(self.normal));
+        // Program coordinates: relative to the active preset plus shift (`origin`).
+        let nominal = Vector3::from(axis.to_machine(self.nominal)) + origin;
+        let approach = probe.radius + probe.set_up + self.clearance;
+        Approach {
+            n,
+            start: nominal + n * approach,
+            max_distance: approach + probe.dist,
+            safe_height: self.safe_height + origin[axis.tool_index()],
+        }
+    }
+
+    /// Every move the cycle commands, in order, with the active datum at `origin`
+    /// (machine XYZ): what `check` and `run` hold against the machine before the
+    /// program's first move. The retraction after the contact, MB back along the
+    /// normal, lies between its ends for a contact at the start and at the path's end.
+    pub fn planned_moves(&self, call: &CycleBlock, origin: [f64; 3]) -> Vec<PlannedMove> {
+        let a = self.approach(call, Vector3::from(origin));
+        let probe = &call.tool.probe;
+        let axis = call.tool.axis;
+        let [main, minor, _] = axis.indices();
+        let position = |step: &str, target: AxisPositions| PlannedMove::Position {
+            step: step.to_string(),
+            target,
+            feed: probe.fmax,
+        };
+        let safe = AxisPositions::new().with(axis.axis(), a.safe_height);
+        let over = AxisPositions::new()
+            .with(Axis::LINEAR[main], a.start[main])
+            .with(Axis::LINEAR[minor], a.start[minor]);
+        let path_end = a.start - a.n * a.max_distance;
+        vec![
+            position("moving to the safe height", safe),
+            position("positioning in the working plane", over),
+            position(
+                "moving to the pre-position",
+                AxisPositions::linear(a.start.into()),
+            ),
+            PlannedMove::Probe {
+                step: "probing the point".into(),
+                from: a.start.into(),
+                mv: ProbeMove {
+                    direction: (-a.n).into(),
+                    feed: probe.f,
+                    max_distance: a.max_distance,
+                },
+            },
+            position(
+                "retracting",
+                AxisPositions::linear((a.start + a.n * probe.mb).into()),
+            ),
+            position(
+                "retracting",
+                AxisPositions::linear((path_end + a.n * probe.mb).into()),
+            ),
+            position("moving to the safe height", safe),
+        ]
+    }
+}
+
 /// Probes the point; its result parameters and what the log shows of it.
 fn measure<M: Machine>(
     call: &CycleBlock,
@@ -128,12 +207,12 @@ fn measure<M: Machine>(
     let probe = &call.tool.probe;
     let axis = call.tool.axis;
     let n_cycle = Vector3::from(p.normal);
-    let n = Vector3::from(axis.to_machine(p.normal));
-    // Program coordinates: relative to the active preset plus shift (`origin`).
-    let nominal = Vector3::from(axis.to_machine(p.nominal)) + origin;
-    let approach = probe.radius + probe.set_up + p.clearance;
-    let start = nominal + n * approach;
-    let max_distance = approach + probe.dist;
+    let Approach {
+        n,
+        start,
+        max_distance,
+        safe_height,
+    } = p.approach(call, origin);
     let direction = -n;
 
     let mut pos = Positioner {
@@ -143,7 +222,6 @@ fn measure<M: Machine>(
         block: call.block,
         progress,
     };
-    let safe_height = p.safe_height + origin[axis.tool_index()];
     pos.safe_height(safe_height)?;
     pos.over(start.into())?;
     pos.to("moving to the pre-position", start.into())?;

@@ -61,18 +61,42 @@ impl CyclesConfig {
             path: path.clone(),
             message: e.to_string(),
         })?;
-        let invalid = |key: String, message: &str| ConfigError::Invalid {
+        let invalid = |key: String, message: String| ConfigError::Invalid {
             path: path.clone(),
             key,
-            message: message.to_string(),
+            message,
         };
+        // The motion guard's range: a feed outside it would be refused mid-program.
+        let fastest = machine.axes.iter().map(|a| a.max_feed).fold(0.0, f64::max);
+        let feeds = hal::motion_guard::MIN_FEED..=fastest;
         for (i, p) in s.probes.iter().enumerate() {
+            let key = |f: &str| format!("probe[{i}] ({}).{f}", p.name);
             if let Some((f, why)) = p.invalid_field() {
-                return Err(invalid(format!("probe[{i}] ({}).{f}", p.name), why));
+                return Err(invalid(key(f), why));
+            }
+            for (f, v) in [("fmax", p.fmax), ("f", p.f)] {
+                if !feeds.contains(&v) {
+                    return Err(invalid(
+                        key(f),
+                        format!(
+                            "{v} is outside {} .. {fastest} mm/min (the motion guard's minimum feed .. the fastest axis's max_feed)",
+                            feeds.start()
+                        ),
+                    ));
+                }
+            }
+            if let Some(j) = s.probes[..i].iter().position(|q| q.name == p.name) {
+                return Err(invalid(
+                    key("name"),
+                    format!(
+                        "\"{}\" is also the name of probe[{j}]; TOOL CALL could not tell them apart",
+                        p.name
+                    ),
+                ));
             }
         }
         if let Some((key, why)) = s.cycles.invalid_field() {
-            return Err(invalid(key.to_string(), why));
+            return Err(invalid(key, why));
         }
         let presets = PresetTable::load(&PresetTable::default_path(&machine), &machine)?;
         Ok(Self {

@@ -39,6 +39,7 @@ pub mod measuring_log;
 pub mod params;
 pub mod parser;
 pub mod plane;
+pub mod planned_move;
 mod positioning;
 pub mod preset_table;
 pub mod probe_axis;

@@ -37,14 +37,39 @@ impl Default for MachineParameters {
     }
 }
 
+/// The plausible range of `maxDevCalBall` (mm) and `maxModification` (mm, deg): a
+/// sphere or a correction off by more than 10 is a broken set-up, not a tolerance.
+pub const TOLERANCE_RANGE: (f64, f64) = (1e-6, 10.0);
+
 impl MachineParameters {
-    /// The first value out of range, as (key, reason).
-    pub fn invalid_field(&self) -> Option<(&'static str, &'static str)> {
-        if self.max_dev_cal_ball.is_nan() || self.max_dev_cal_ball <= 0.0 {
-            return Some(("cycles.maxDevCalBall", "must be > 0"));
+    /// The first value out of range, as (key, reason). PREDEF values are checked
+    /// against the parameter tables ([`crate::params`]).
+    pub fn invalid_field(&self) -> Option<(String, String)> {
+        let (lo, hi) = TOLERANCE_RANGE;
+        for (key, v) in [
+            ("cycles.maxDevCalBall", self.max_dev_cal_ball),
+            ("cycles.maxModification", self.max_modification),
+        ] {
+            if !(lo..=hi).contains(&v) {
+                return Some((key.to_string(), format!("{v} is outside {lo} .. {hi}")));
+            }
         }
-        if self.max_modification.is_nan() || self.max_modification <= 0.0 {
-            return Some(("cycles.maxModification", "must be > 0"));
+        for (name, &v) in &self.predef {
+            let key = format!("cycles.predef.{name}");
+            let Some(spec) = crate::params::predef_spec(name) else {
+                return Some((
+                    key,
+                    format!(
+                        "{name} is not a parameter any cycle takes as PREDEF (known: {})",
+                        crate::params::predef_names().join(", ")
+                    ),
+                ));
+            };
+            if let crate::params::Kind::Number { min, max, .. } = spec.kind {
+                if !(min..=max).contains(&v) {
+                    return Some((key, format!("{v} is outside {min} .. {max}")));
+                }
+            }
         }
         None
     }

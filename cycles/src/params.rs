@@ -369,6 +369,27 @@ pub fn table(cycle: u16) -> Option<&'static CycleTable> {
     TABLES.iter().copied().find(|t| t.number == cycle)
 }
 
+/// The parameter a cycle takes as `PREDEF` under `name` ("Q320"), from any table.
+pub fn predef_spec(name: &str) -> Option<&'static ParamSpec> {
+    TABLES
+        .iter()
+        .flat_map(|t| t.params.iter())
+        .find(|p| p.name == name && p.keywords.predef)
+}
+
+/// Every parameter some cycle takes as `PREDEF`, sorted, for messages.
+pub fn predef_names() -> Vec<&'static str> {
+    let mut names: Vec<&str> = TABLES
+        .iter()
+        .flat_map(|t| t.params.iter())
+        .filter(|p| p.keywords.predef)
+        .map(|p| p.name)
+        .collect();
+    names.sort_unstable();
+    names.dedup();
+    names
+}
+
 /// "431, 444, 450, 451" for messages.
 pub fn known_cycles() -> String {
     TABLES

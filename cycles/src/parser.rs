@@ -1299,14 +1299,23 @@ fn resolve(
                             ),
                         );
                     };
-                    if !(min..=max).contains(&v) || (integer && v.fract() != 0.0) {
-                        return fail(diags, format!("{title} out of range {}", spec.allowed()));
-                    }
-                    let v = match unit {
-                        LengthUnit::Mm => v,
-                        LengthUnit::Inch => v * quantity.inch_factor(),
+                    // The ranges are the TNC's in mm (mm/min): an inch value is held
+                    // to them after the conversion.
+                    let (mm, converted) = match unit {
+                        LengthUnit::Mm => (v, String::new()),
+                        LengthUnit::Inch if quantity.inch_factor() != 1.0 => {
+                            let mm = v * quantity.inch_factor();
+                            (mm, format!(" ({v} in an INCH program is {mm} in mm)"))
+                        }
+                        LengthUnit::Inch => (v, String::new()),
                     };
-                    Some(param(Value::Number(v), Origin::Written))
+                    if !(min..=max).contains(&mm) || (integer && v.fract() != 0.0) {
+                        return fail(
+                            diags,
+                            format!("{title} out of range {}{converted}", spec.allowed()),
+                        );
+                    }
+                    Some(param(Value::Number(mm), Origin::Written))
                 }
             }
         }

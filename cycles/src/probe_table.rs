@@ -26,22 +26,31 @@ pub struct ProbeEntry {
     pub mb: f64,
 }
 
+/// The plausible range of each length of an entry, mm: a stylus ball up to 50 mm
+/// radius; clearances and paths up to 1 m.
+pub const RADIUS_MM: (f64, f64) = (0.01, 50.0);
+pub const PATH_MM: f64 = 1000.0;
+
 impl ProbeEntry {
-    /// The first field out of range, as (key, reason).
-    pub fn invalid_field(&self) -> Option<(&'static str, &'static str)> {
-        for (f, v) in [
-            ("radius", self.radius),
-            ("fmax", self.fmax),
-            ("f", self.f),
-            ("dist", self.dist),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Some((f, "must be > 0"));
-            }
+    /// The first field out of range, as (key, reason). Feeds are checked against the
+    /// machine by [`crate::cycles_config::CyclesConfig`].
+    pub fn invalid_field(&self) -> Option<(&'static str, String)> {
+        let (lo, hi) = RADIUS_MM;
+        if !(lo..=hi).contains(&self.radius) {
+            return Some((
+                "radius",
+                format!("{} is outside {lo} .. {hi} mm", self.radius),
+            ));
+        }
+        if !(self.dist > 0.0 && self.dist <= PATH_MM) {
+            return Some((
+                "dist",
+                format!("{} is outside (0, {PATH_MM}] mm", self.dist),
+            ));
         }
         for (f, v) in [("set_up", self.set_up), ("mb", self.mb)] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Some((f, "must be >= 0"));
+            if !(0.0..=PATH_MM).contains(&v) {
+                return Some((f, format!("{v} is outside 0 .. {PATH_MM} mm")));
             }
         }
         None

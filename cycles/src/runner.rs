@@ -11,11 +11,13 @@ use crate::error::{CycleError, CycleErrorKind};
 use crate::kinematics::{Estimator, LocalEstimator};
 use crate::kinematics_file::ActiveKinematics;
 use crate::linear::{parse_linear, LinearBlockError, LinearBlockErrorKind, LinearMove, MoveFeed};
+use crate::planned_move::check_planned;
 use crate::program::{CycleCall, CycleKind, Program, Statement};
 use crate::progress::{ProgressEvent, ProgressSink};
 use crate::results::{CycleOutput, CycleResult, ProgramReport, Status};
 use hal::config::MachineConfig;
 use hal::machine::Error as _;
+use hal::motion_guard::MotionGuard;
 use hal::{Axis, Machine};
 use std::path::PathBuf;
 
@@ -55,6 +57,9 @@ pub enum PreflightKind {
     MissingAxis,
     /// A positioning block (L) cannot run.
     Positioning(LinearBlockErrorKind),
+    /// A move of a probing cycle (431, 444) the machine would refuse: a point outside
+    /// the software limits, a feed the axes cannot run, a safe height below a start.
+    Moves,
 }
 
 /// Checks, before anything moves, what only the machine and its configuration can
@@ -107,10 +112,12 @@ fn preflight(
 pub enum Preflight {
     /// A cycle's demands the machine, its configuration or its kinematics file cannot
     /// meet.
-    #[error("block {block} (cycle {cycle}): {message}")]
+    #[error("line {line}, block {block} (cycle {cycle}): {message}")]
     Cycle {
         block: u32,
         cycle: u16,
+        /// 1-based first line of the cycle block.
+        line: usize,
         kind: PreflightKind,
         message: String,
     },
@@ -144,21 +151,57 @@ pub fn preflight_program(
             Preflight::Cycle {
                 block: call.head.block,
                 cycle: call.head.cycle,
+                line: call.head.line,
                 kind,
                 message,
             }
         })?;
     }
+    // The moves themselves, in program order with the datum as the program changes
+    // it: `L` targets and the probing cycles' points in machine coordinates.
+    let guard = MotionGuard::new(&cfg.machine);
+    let mut datum = Datum::new(cfg.presets.clone());
     for block in &program.blocks {
-        if let Statement::Other(code) = &block.statement {
-            let checked = parse_linear(code, program.unit)
-                .map(|r| r.and_then(|mv| check_linear_move(&mv, &cfg.machine)));
-            if let Some(Err(error)) = checked {
-                return Err(Preflight::Positioning {
-                    line: block.line,
-                    error,
+        match &block.statement {
+            // `run` stops at a preset row that does not exist, with the same message;
+            // nothing after it moves.
+            Statement::Datum(d) if datum.apply(d).is_err() => return Ok(()),
+            Statement::Other(code) => {
+                let checked = parse_linear(code, program.unit).map(|r| {
+                    r.and_then(|mut mv| {
+                        mv.target = datum.to_machine(&mv.target);
+                        check_linear_move(&mv, &cfg.machine)
+                    })
                 });
+                if let Some(Err(error)) = checked {
+                    return Err(Preflight::Positioning {
+                        line: block.line,
+                        error,
+                    });
+                }
             }
+            Statement::Cycle(call) => {
+                let origin = datum.origin();
+                let moves = match &call.kind {
+                    CycleKind::MeasurePlane(p) => p
+                        .planned_moves(&call.head, origin)
+                        .map_err(|e| e.to_string()),
+                    CycleKind::Probing3d(p) => Ok(p.planned_moves(&call.head, origin)),
+                    CycleKind::MeasureKinematics(_) | CycleKind::SaveKinematics(_) => {
+                        Ok(Vec::new())
+                    }
+                };
+                moves
+                    .and_then(|m| check_planned(&m, &guard))
+                    .map_err(|message| Preflight::Cycle {
+                        block: call.head.block,
+                        cycle: call.head.cycle,
+                        line: call.head.line,
+                        kind: PreflightKind::Moves,
+                        message,
+                    })?;
+            }
+            _ => {}
         }
     }
     Ok(())

@@ -47,7 +47,7 @@ fn values_out_of_range_name_file_and_key() {
         ConfigError::Invalid { path, key, message } => {
             assert_eq!(path, Path::new("m.toml"));
             assert_eq!(key, "probe[1] (TS 460).radius");
-            assert_eq!(message, "must be > 0");
+            assert_eq!(message, "-1.5 is outside 0.01 .. 50 mm");
         }
         e => panic!("{e}"),
     }
@@ -66,4 +66,73 @@ fn hal_still_checks_its_own_keys() {
     let text = common::CONFIG.replace("[cycles.predef]", "[cycle]\nx = 1\n[cycles.predef]");
     let e = parse(&text).unwrap_err().to_string();
     assert!(e.contains("m.toml") && e.contains("cycle"), "{e}");
+}
+
+/// Non-finite or implausible values, a probe name used twice, an unknown PREDEF
+/// parameter: refused with the file, the key and why. On main before these checks all
+/// of them loaded (`inf > 0` passed, names and PREDEF keys were not looked at).
+#[test]
+fn implausible_values_duplicate_probes_and_unknown_predef_are_refused() {
+    let cases = [
+        (
+            common::CONFIG.replace(
+                "[cycles.predef]",
+                "[cycles]\nmaxModification = inf\n[cycles.predef]",
+            ),
+            "cycles.maxModification",
+            "inf is outside 0.000001 .. 10",
+        ),
+        (
+            common::CONFIG.replace(
+                "[cycles.predef]",
+                "[cycles]\nmaxDevCalBall = nan\n[cycles.predef]",
+            ),
+            "cycles.maxDevCalBall",
+            "NaN is outside",
+        ),
+        (
+            common::CONFIG.replace("name = \"TS 460\"", "name = \"TOUCH_PROBE\""),
+            "probe[1] (TOUCH_PROBE).name",
+            "also the name of probe[0]",
+        ),
+        (
+            common::CONFIG.replace("Q260 = 150.0", "Q260 = 150.0\nQ999 = 1.0"),
+            "cycles.predef.Q999",
+            "Q999 is not a parameter any cycle takes as PREDEF (known: Q253, Q260, Q320)",
+        ),
+        (
+            common::CONFIG.replace("Q320 = 0.5", "Q320 = -4.0"),
+            "cycles.predef.Q320",
+            "-4 is outside 0 .. 99999.9999",
+        ),
+        (
+            common::CONFIG.replace("fmax = 3000.0", "fmax = 0.0001"),
+            "probe[0] (TOUCH_PROBE).fmax",
+            "0.0001 is outside 1 .. 10000 mm/min",
+        ),
+        (
+            common::CONFIG.replace("f = 50.0", "f = 20000.0"),
+            "probe[1] (TS 460).f",
+            "20000 is outside 1 .. 10000 mm/min",
+        ),
+        (
+            common::CONFIG.replace("dist = 5.0", "dist = inf"),
+            "probe[1] (TS 460).dist",
+            "inf is outside",
+        ),
+    ];
+    for (text, key, why) in cases {
+        match parse(&text).unwrap_err() {
+            ConfigError::Invalid {
+                path,
+                key: k,
+                message,
+            } => {
+                assert_eq!(path, Path::new("m.toml"));
+                assert_eq!(k, key, "{message}");
+                assert!(message.contains(why), "{key}: {message}");
+            }
+            e => panic!("{key}: not Invalid: {e}"),
+        }
+    }
 }

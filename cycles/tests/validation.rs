@@ -422,6 +422,39 @@ fn inch_programs_are_converted_to_mm() {
     assert_eq!(k.head.number("Q380"), Some(0.0), "angles are not converted");
 }
 
+/// The ranges are mm: an INCH value is held to them after the conversion. Q407 =
+/// +99 is a valid radius in mm, but 99 inch is 2514.6 mm, beyond 99.9999. On main
+/// before this check the range was applied to the inch number and Q407=+99 passed.
+#[test]
+fn inch_values_are_range_checked_after_the_conversion_to_mm() {
+    let program = |unit: &str, q407: &str| {
+        format!(
+            "0 BEGIN PGM IN {unit}\n1 TOOL CALL \"TOUCH_PROBE\" Z\n\
+             2 G451 Q406=+0 Q407={q407} Q253=+100\n3 END PGM IN {unit}"
+        )
+    };
+    Program::parse(&program("MM", "+99"), &common::config()).unwrap();
+    Program::parse(&program("INCH", "+3"), &common::config()).unwrap();
+    let e = Program::parse(&program("INCH", "+99"), &common::config())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("line 3")
+            && e.contains("Q407")
+            && e.contains("out of range 0.0001..99.9999")
+            && e.contains("99 in an INCH program is 2514.6 in mm"),
+        "{e}"
+    );
+    // Feeds: Q253 in 1/10 inch/min; 50000 is 127000 mm/min, beyond 99999.9999.
+    let e = Program::parse(
+        &program("INCH", "+1").replace("Q253=+100", "Q253=+50000"),
+        &common::config(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("Q253") && e.contains("out of range"), "{e}");
+}
+
 #[test]
 fn comments_l_blocks_and_m_functions_are_accepted_and_not_cycles() {
     let text = "0 BEGIN PGM X MM\n* - structure\n1 ; a comment\n2 L Z+100 R0 FMAX M3\n\

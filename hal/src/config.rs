@@ -52,6 +52,23 @@ impl ConfigError {
     }
 }
 
+/// The plausible ranges of the machine values, as the README's configuration section
+/// names them: a value outside is a typing error (a unit slip, a stray exponent) and is
+/// refused with the file, the key and the range before anything moves.
+pub mod bounds {
+    /// `max_feed`, mm/min (deg/min): from the motion guard's slowest feed to 200 m/min.
+    pub const MAX_FEED: (f64, f64) = (crate::motion_guard::MIN_FEED, 200_000.0);
+    /// `max_acceleration`, mm/s^2 (deg/s^2): below 10 a move barely starts (hours for
+    /// a rapid traverse); 100 000 is about 10 g.
+    pub const MAX_ACCELERATION: (f64, f64) = (10.0, 100_000.0);
+    /// `hirth`, deg: 0 (none) up to an eighth of a turn.
+    pub const HIRTH: (f64, f64) = (0.0, 45.0);
+    /// Every coordinate of a `kinematics.pivot`, mm either side of the origin.
+    pub const PIVOT_MM: f64 = 10_000.0;
+    /// `bus.sdo_timeout_ms`.
+    pub const SDO_TIMEOUT_MS: (u16, u16) = (10, 10_000);
+}
+
 /// One axis and the CiA 402 drive that moves it.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -346,6 +363,16 @@ impl MachineConfig {
                 "must be longer than heartbeat_producer_ms, which must be > 0",
             ));
         }
+        let (lo, hi) = bounds::SDO_TIMEOUT_MS;
+        if !(lo..=hi).contains(&b.sdo_timeout_ms) {
+            return Err(self.invalid(
+                "bus.sdo_timeout_ms",
+                format!(
+                    "{} is outside {lo} .. {hi} ms (a drive answers an SDO within milliseconds; 0 would give up at once)",
+                    b.sdo_timeout_ms
+                ),
+            ));
+        }
         if !(b.max_load_percent > 0.0 && b.max_load_percent <= 100.0) {
             return Err(self.invalid("bus.max_load_percent", "must be in (0, 100]"));
         }
@@ -385,16 +412,29 @@ impl MachineConfig {
                     "limits overflow the drive's 32-bit position",
                 ));
             }
-            if !(a.max_feed.is_finite() && a.max_feed > 0.0) {
-                return Err(self.invalid(key("max_feed"), "must be > 0"));
+            for (field, v, (lo, hi), unit) in [
+                ("max_feed", a.max_feed, bounds::MAX_FEED, "mm/min (deg/min)"),
+                (
+                    "max_acceleration",
+                    a.max_acceleration,
+                    bounds::MAX_ACCELERATION,
+                    "mm/s^2 (deg/s^2)",
+                ),
+            ] {
+                if !(lo..=hi).contains(&v) {
+                    return Err(
+                        self.invalid(key(field), format!("{v} is outside {lo} .. {hi} {unit}"))
+                    );
+                }
             }
-            if !(a.max_acceleration.is_finite() && a.max_acceleration > 0.0) {
-                return Err(self.invalid(key("max_acceleration"), "must be > 0"));
-            }
-            if a.hirth < 0.0 || (a.hirth > 0.0 && !a.name.is_rotary()) {
+            let (lo, hi) = bounds::HIRTH;
+            if !(lo..=hi).contains(&a.hirth) || (a.hirth > 0.0 && !a.name.is_rotary()) {
                 return Err(self.invalid(
                     key("hirth"),
-                    "a Hirth grid is >= 0 and only for rotary axes",
+                    format!(
+                        "{}: a Hirth grid is {lo} .. {hi} deg (0 = none) and only for rotary axes",
+                        a.hirth
+                    ),
                 ));
             }
         }
@@ -406,9 +446,29 @@ impl MachineConfig {
                 self.validate_modbus_reach(m)?;
             }
         }
+        self.validate_kinematics()
+    }
+
+    /// The chains name each rotary axis once, on one side, each with a finite pivot
+    /// within reach.
+    fn validate_kinematics(&self) -> Result<(), ConfigError> {
         let k = &self.kinematics;
         for (side, list) in [("table", &k.table), ("head", &k.head)] {
-            for ax in list {
+            for (i, ax) in list.iter().enumerate() {
+                if list[..i].contains(ax) {
+                    return Err(self.invalid(
+                        format!("kinematics.{side}"),
+                        format!("{ax} is listed twice"),
+                    ));
+                }
+                if side == "head" && k.table.contains(ax) {
+                    return Err(self.invalid(
+                        "kinematics.head",
+                        format!(
+                            "{ax} is in both the table and the head chain; an axis moves either the workpiece or the tool"
+                        ),
+                    ));
+                }
                 if !ax.is_rotary() {
                     return Err(self.invalid(
                         format!("kinematics.{side}"),
@@ -424,6 +484,15 @@ impl MachineConfig {
                 if !k.pivot.contains_key(ax) {
                     return Err(self.invalid("kinematics.pivot", format!("no pivot for {ax}")));
                 }
+            }
+        }
+        let reach = bounds::PIVOT_MM;
+        for (ax, p) in &k.pivot {
+            if let Some(v) = p.iter().find(|v| !(-reach..=reach).contains(*v)) {
+                return Err(self.invalid(
+                    format!("kinematics.pivot.{ax}"),
+                    format!("{v} is outside -{reach} .. {reach} mm (finite, within the machine)"),
+                ));
             }
         }
         for a in &self.axes {
@@ -541,6 +610,107 @@ max_acceleration = 1000.0
         .unwrap_err()
         .to_string();
         assert!(e.contains("m.toml") && e.contains("probes"), "{e}");
+    }
+
+    fn refused(text: &str) -> (String, String) {
+        match MachineConfig::parse(text, Path::new("m.toml")).unwrap_err() {
+            ConfigError::Invalid { path, key, message } => {
+                assert_eq!(path, Path::new("m.toml"));
+                (key, message)
+            }
+            e => panic!("not Invalid: {e}"),
+        }
+    }
+
+    const ROTARY: &str = r#"
+[[axis]]
+name = "A"
+node = 4
+increments_per_unit = 1000.0
+min = -120.0
+max = 120.0
+max_feed = 7200.0
+max_acceleration = 720.0
+[[axis]]
+name = "C"
+node = 5
+increments_per_unit = 1000.0
+min = -360.0
+max = 360.0
+max_feed = 7200.0
+max_acceleration = 720.0
+[kinematics]
+table = ["A", "C"]
+[kinematics.pivot]
+A = [0.0, 0.0, 0.0]
+C = [0.0, 0.0, 0.0]
+"#;
+
+    /// Values outside the plausible ranges (README, Configuration) are refused with
+    /// the file, the key, the value and the range. On main before these bounds every
+    /// one of these parsed (`1e-300 > 0`, a NaN compares false, 0 ms was taken).
+    #[test]
+    fn implausible_values_are_refused_with_key_and_range() {
+        let with_rotary = format!("{MINI}{ROTARY}");
+        MachineConfig::parse(&with_rotary, Path::new("m.toml")).unwrap();
+        let cases: Vec<(String, &str, &str)> = vec![
+            (
+                MINI.replacen("max_acceleration = 1000.0", "max_acceleration = 1e-300", 1),
+                "axis[0] (X).max_acceleration",
+                "outside 10 .. 100000",
+            ),
+            (
+                MINI.replacen("max_acceleration = 1000.0", "max_acceleration = inf", 1),
+                "axis[0] (X).max_acceleration",
+                "inf is outside",
+            ),
+            (
+                MINI.replacen("max_feed = 5000.0", "max_feed = 0.001", 1),
+                "axis[0] (X).max_feed",
+                "outside 1 .. 200000",
+            ),
+            (
+                with_rotary.replace("A = [0.0, 0.0, 0.0]", "A = [nan, 0.0, 0.0]"),
+                "kinematics.pivot.A",
+                "NaN is outside -10000 .. 10000 mm",
+            ),
+            (
+                with_rotary.replace("C = [0.0, 0.0, 0.0]", "C = [0.0, 1e9, 0.0]"),
+                "kinematics.pivot.C",
+                "outside",
+            ),
+            (
+                with_rotary.replace(
+                    "table = [\"A\", \"C\"]",
+                    "table = [\"A\", \"C\"]\nhead = [\"C\"]",
+                ),
+                "kinematics.head",
+                "C is in both the table and the head chain",
+            ),
+            (
+                with_rotary.replace("table = [\"A\", \"C\"]", "table = [\"A\", \"C\", \"A\"]"),
+                "kinematics.table",
+                "A is listed twice",
+            ),
+            (
+                with_rotary.replace(
+                    "max_acceleration = 720.0\n[kinematics]",
+                    "max_acceleration = 720.0\nhirth = nan\n[kinematics]",
+                ),
+                "axis[4] (C).hirth",
+                "NaN: a Hirth grid is 0 .. 45 deg",
+            ),
+            (
+                format!("{MINI}[bus]\nkind = \"canopen\"\nsdo_timeout_ms = 0\n"),
+                "bus.sdo_timeout_ms",
+                "0 is outside 10 .. 10000 ms",
+            ),
+        ];
+        for (text, key, why) in cases {
+            let (k, m) = refused(&text);
+            assert_eq!(k, key, "{m}");
+            assert!(m.contains(why), "{key}: {m}");
+        }
     }
 
     #[test]

@@ -170,6 +170,11 @@ impl Profile {
         p
     }
 
+    /// The unit direction of the path (all axes).
+    pub fn direction(&self) -> [f64; MAX_AXES] {
+        self.dir
+    }
+
     /// The end point.
     pub fn end(&self) -> [f64; MAX_AXES] {
         self.position(self.duration())

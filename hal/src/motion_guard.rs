@@ -228,6 +228,37 @@ impl MotionGuard {
     }
 }
 
+/// May a positioning move start while the stylus is in contact (the probe signal
+/// already high, so no rising edge will tell a collision)? Only straight out of the
+/// contact: against `along`, the linear direction of the motion that made it (a
+/// probing contact or a collision; `None` when it was there before anything moved, a
+/// start inside material), with no rotary axis turning. `linear` is the move's X/Y/Z
+/// displacement; a move that goes nowhere may start.
+pub fn may_start_deflected(along: Option<[f64; 3]>, linear: [f64; 3], rotary: bool) -> bool {
+    if !rotary && linear.iter().all(|v| *v == 0.0) {
+        return true;
+    }
+    let away = along.is_some_and(|d| linear.iter().zip(d).map(|(m, d)| m * d).sum::<f64>() < 0.0);
+    away && !rotary
+}
+
+/// The refusal of a positioning move that would push a stylus in contact further in
+/// (see [`may_start_deflected`]), at `at` (machine X, Y, Z).
+pub fn deflected_before_move(at: [f64; 3]) -> String {
+    let [x, y, z] = at;
+    format!(
+        "the probe was already triggered at the start of the positioning move at X{x:+.4} Y{y:+.4} Z{z:+.4} (the stylus touches something: a start inside material?); only a retraction straight out of the contact may start like this; nothing moved. Retract by hand"
+    )
+}
+
+/// The refusal of a probing move that would start with the probe signal high, at `at`.
+pub fn deflected_before_probing(at: [f64; 3]) -> String {
+    let [x, y, z] = at;
+    format!(
+        "the probe was already triggered at the start of the probing move at X{x:+.4} Y{y:+.4} Z{z:+.4} (the stylus touches something: a start inside material?); nothing moved"
+    )
+}
+
 /// The probe input as a backend sees it cycle by cycle: tells a rising edge, which
 /// during a positioning move (probe not armed) is a collision: brake all axes and
 /// fail the move with [`ErrorKind::ProbeCollision`], without faulting the machine
@@ -244,6 +275,11 @@ impl ProbeInput {
         let rising = level && !self.level;
         self.level = level;
         rising
+    }
+
+    /// Is the probe deflected (the last level taken)?
+    pub fn is_high(&self) -> bool {
+        self.level
     }
 
     /// Is a rising input at this point a collision? Yes while positioning.

@@ -273,6 +273,36 @@ pub fn deflected_at_start_moves_nothing<B: Backend>() {
     assert_eq!(m.positions().unwrap(), before);
 }
 
+/// With the stylus pressed in (after a collision) no rising edge can tell a further
+/// collision: a positioning move deeper or sideways is refused with the point before
+/// anything moves; the retraction straight out of the contact runs. Before this rule
+/// the move deeper ran until the probe's overtravel was used up and the drives
+/// faulted (EMCY 0xFF01 on CANopen, a PLC fault over Modbus).
+pub fn moves_deeper_from_a_contact_are_refused<B: Backend>() {
+    let mut m = B::open(&plane_scenario(10.0, 3.0));
+    m.move_to(&AxisPositions::linear([5.0, 5.0, 30.0]), 5000.0)
+        .unwrap();
+    let e = m
+        .move_to(&AxisPositions::linear([5.0, 5.0, 12.0]), 5000.0)
+        .unwrap_err();
+    assert_eq!(e.kind, ErrorKind::ProbeCollision, "{e}");
+    let before = m.positions().unwrap();
+    for target in [[5.0, 5.0, 0.0], [40.0, 5.0, before.get(Axis::Z).unwrap()]] {
+        let e = m
+            .move_to(&AxisPositions::linear(target), 1000.0)
+            .unwrap_err();
+        assert_eq!(e.kind, ErrorKind::AlreadyDeflected, "{e}");
+        assert!(
+            e.to_string()
+                .contains("already triggered at the start of the positioning move at X+5.0000"),
+            "{e}"
+        );
+        assert_eq!(m.positions().unwrap(), before);
+    }
+    m.move_to(&AxisPositions::linear([5.0, 5.0, 30.0]), 5000.0)
+        .unwrap();
+}
+
 /// A positioning move that runs the stylus into material brakes with ProbeCollision
 /// well within the probe's overtravel; retracting from there works.
 pub fn positioning_into_material_is_a_collision<B: Backend>() {
@@ -379,6 +409,7 @@ macro_rules! machine_conformance {
             not_triggered_within_max_distance,
             deflected_at_start_moves_nothing,
             positioning_into_material_is_a_collision,
+            moves_deeper_from_a_contact_are_refused,
             software_limits_refuse_before_moving,
             move_arrives_on_all_axes,
             contact_latches_rotary_axes,

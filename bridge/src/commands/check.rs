@@ -1,7 +1,8 @@
 //! `probebridge check PROGRAM`: parse and validate a program against the machine's
 //! configuration (probe table, PREDEF values) and run every check `run` makes before
-//! the first move (cycle 451's plan against the machine and its active kinematics);
-//! nothing moves and no bus is opened.
+//! the first move (cycle 451's plan against the machine and its active kinematics; the
+//! moves of `L` blocks and cycles 431 and 444 against the motion guard); nothing moves
+//! and no bus is opened.
 
 use crate::session::{cycles_config_with_presets, resolve_machine, MachineOptions};
 use cycles::kinematics_file::ActiveKinematics;

@@ -74,15 +74,17 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
         .map_err(|e| format!("cannot create {}: {e}", out_dir.display()))?;
     crate::output::check_output(args.json.as_deref())?;
 
+    // The session first: it claims the `--service` prefix, so a second run on the
+    // same prefix is refused before it looks for an estimator.
+    let mut session = Session::open(&args.machine).map_err(|e| e.to_string())?;
     // Cycle 451 fits its spheres and solves its identification in the estimator
     // process: use the one serving this prefix, or start one. It must subscribe before
-    // the first contact is published.
+    // the first contact is published (no probing move has run yet).
     let estimator = if program.cycles().any(|c| c.head.cycle == 451) {
         estimator_link(&args.machine.service)
     } else {
         None
     };
-    let mut session = Session::open(&args.machine).map_err(|e| e.to_string())?;
     for note in &session.notes {
         tell!("note: {note}");
     }

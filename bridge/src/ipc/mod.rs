@@ -30,6 +30,7 @@ mod identify;
 mod payload;
 mod process_watch;
 mod publisher;
+mod service_lock;
 mod subscriber;
 
 pub use client::{EstimatorChild, EstimatorClient};
@@ -40,6 +41,7 @@ pub use payload::{
     REQUEST_MAX_RUNS, REQUEST_PARAMS,
 };
 pub use publisher::{ContactPublisher, PublisherStats};
+pub use service_lock::{ServiceLock, ServiceLockError, ServiceLockErrorKind};
 pub use subscriber::ContactSubscriber;
 
 use core::time::Duration;

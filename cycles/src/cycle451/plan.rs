@@ -19,8 +19,9 @@ pub enum PlanErrorKind {
     NoAxisToMeasure,
     /// Q408 = 0 (follow the sphere) with a Hirth axis.
     DirectMoveWithHirth,
-    /// Q253 = 0.
-    ZeroFeed,
+    /// Q253 (or the probe's FMAX it falls back to) below the motion guard's minimum
+    /// feed or above the fastest axis's `max_feed`.
+    Feed,
     /// An angle the cycle would command is outside the software limits.
     SoftwareLimit,
     /// Q406 = 3 but no measured axis has a machine datum to take up its error.
@@ -132,11 +133,26 @@ pub fn plan(
         Feed::Fmax => probe.fmax,
         Feed::Value(v) => v,
     };
-    if positioning_feed <= 0.0 {
-        return Err(PlanError::new(
-            PlanErrorKind::ZeroFeed,
-            "Q253=0: the pre-positioning feed must be > 0",
-        ));
+    // The motion guard refuses a feed below its minimum (the move would look like a
+    // hang) or above the fastest axis: refused here, before the first move.
+    let fastest = cfg.axes.iter().map(|a| a.max_feed).fold(0.0, f64::max);
+    let feed_range = hal::motion_guard::MIN_FEED..=fastest;
+    for (what, feed) in [
+        (
+            "the linear pre-positioning feed min(Q253, FMAX)",
+            positioning_feed,
+        ),
+        ("the rotary positioning feed", rotary_feed),
+    ] {
+        if !feed_range.contains(&feed) {
+            return Err(PlanError::new(
+                PlanErrorKind::Feed,
+                format!(
+                    "Q253: {what} {feed} must be between {} and the machine's fastest max_feed {fastest} (mm/min, deg/min); nothing moved",
+                    hal::motion_guard::MIN_FEED
+                ),
+            ));
+        }
     }
     check_limits(&params, &present, &incidence, &axes, cfg)?;
     if params.mode == Mode::MachineDatum {

@@ -58,7 +58,16 @@ pub enum Detail {
     NotTriggered {
         distance: f64,
     },
-    Deflected,
+    /// The probing move was to start with the probe signal high, at `at` (machine
+    /// X, Y, Z).
+    Deflected {
+        at: [f64; 3],
+    },
+    /// A positioning move was to start from `at` with the stylus in contact, other
+    /// than straight out of it.
+    DeflectedBeforeMove {
+        at: [f64; 3],
+    },
     Collision,
     Emcy,
     FaultBit,
@@ -104,7 +113,8 @@ impl From<RtError> for MachineError {
             Detail::NotTriggered { distance } => {
                 format!("no contact within {distance:.3} mm; axes stopped at the end of the path")
             }
-            Detail::Deflected => "the probe signal is high before the move; nothing moved".into(),
+            Detail::Deflected { at } => crate::motion_guard::deflected_before_probing(at),
+            Detail::DeflectedBeforeMove { at } => crate::motion_guard::deflected_before_move(at),
             Detail::Collision => {
                 "the stylus touched something while positioning; all axes braked. Retract away from the contact".into()
             }

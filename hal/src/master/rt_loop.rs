@@ -28,7 +28,7 @@ use crate::config::{CanOpenBusConfig, MachineConfig};
 use crate::contact_sample::{ContactSample, SampleSink, FLAG_HW_LATCH};
 use crate::machine::ErrorKind;
 use crate::motion::{AxisLimits, Profile};
-use crate::motion_guard::ProbeInput;
+use crate::motion_guard::{may_start_deflected, ProbeInput};
 
 pub use super::pacing::Pacing;
 
@@ -237,6 +237,10 @@ pub struct RtLoop<S: SampleSink> {
     /// goes out.
     stop_pending_since: Option<(u64, u64)>,
     contact: Option<PendingContact>,
+    /// The linear direction of the motion during which the probe signal last rose
+    /// (a probing contact or a collision); `None` when it rose at rest (the stylus
+    /// was in contact before anything moved). See [`RtLoop::deflected_move`].
+    deflected_along: Option<[f64; 3]>,
     stats: LoopStats,
 }
 
@@ -276,6 +280,7 @@ impl<S: SampleSink> RtLoop<S> {
             sequence: 0,
             stop_pending_since: None,
             contact: None,
+            deflected_along: None,
             stats: LoopStats::default(),
         }
     }
@@ -366,6 +371,10 @@ impl<S: SampleSink> RtLoop<S> {
                         to[i] = target[i];
                     }
                 }
+                if let Some(err) = self.deflected_move(&from, &to) {
+                    self.reply = Some(Reply::Error(err));
+                    return;
+                }
                 self.activity = Activity::Moving {
                     profile: Profile::line(from, to, feed, &self.limits),
                     t: 0.0,
@@ -390,6 +399,30 @@ impl<S: SampleSink> RtLoop<S> {
             }
             Command::Positions | Command::Stop | Command::Shutdown => {}
         }
+    }
+
+    /// A positioning move from `from` to `to` while the probe signal is already high
+    /// (no rising edge will tell a collision): allowed only straight out of the
+    /// contact, against the motion that made it (the retraction after a probing
+    /// contact or a collision), with no rotary axis turning. Anything else, and any
+    /// move when the stylus was deflected before the last motion (a start inside
+    /// material), would push the stylus further in until it breaks; it is refused with
+    /// the point, before anything moves.
+    fn deflected_move(&self, from: &[f64; MAX_AXES], to: &[f64; MAX_AXES]) -> Option<RtError> {
+        if !self.drives.iter().any(|d| d.probe_input.is_high()) {
+            return None;
+        }
+        let linear = [0, 1, 2].map(|i| to[i] - from[i]);
+        let rotary = (3..MAX_AXES).any(|i| to[i] != from[i]);
+        if may_start_deflected(self.deflected_along, linear, rotary) {
+            return None;
+        }
+        Some(RtError::new(
+            ErrorKind::AlreadyDeflected,
+            Detail::DeflectedBeforeMove {
+                at: [from[0], from[1], from[2]],
+            },
+        ))
     }
 
     /// The operator's stop: brake any motion and answer its command as aborted; a
@@ -522,6 +555,24 @@ impl<S: SampleSink> RtLoop<S> {
         d.tp_status_fresh = true;
         let st = TouchProbeStatus::from_bits(pd.touch_probe_status);
         let rising = d.probe_input.update(st.input_level(Probe::One));
+        // Every drive reports the same probe: the first one to see it rise tells the
+        // motion that made the contact (the others may see it after the brake began).
+        let first = rising
+            && self
+                .drives
+                .iter()
+                .enumerate()
+                .all(|(j, o)| j == i || !o.probe_input.is_high());
+        if first {
+            self.deflected_along = match &self.activity {
+                Activity::Moving { profile, .. } | Activity::Probing { profile, .. } => {
+                    let dir = profile.direction();
+                    Some([dir[0], dir[1], dir[2]])
+                }
+                _ => None,
+            };
+        }
+        let d = &mut self.drives[i];
         let positioning = matches!(self.activity, Activity::Moving { .. });
         if ProbeInput::is_collision(rising, positioning) {
             self.abort_motion(RtError::new(ErrorKind::ProbeCollision, Detail::Collision));
@@ -847,7 +898,9 @@ impl<S: SampleSink> RtLoop<S> {
                 .iter()
                 .find(|d| TouchProbeStatus::from_bits(d.tp_status).input_level(Probe::One))
             {
-                let err = RtError::new(ErrorKind::AlreadyDeflected, Detail::Deflected).node(d.node);
+                let at = [self.setpoint[0], self.setpoint[1], self.setpoint[2]];
+                let err = RtError::new(ErrorKind::AlreadyDeflected, Detail::Deflected { at })
+                    .node(d.node);
                 self.disarm_all();
                 self.reply = Some(Reply::Error(err));
                 self.activity = Activity::Idle;

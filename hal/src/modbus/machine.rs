@@ -20,7 +20,9 @@ use crate::clock::monotonic_ns;
 use crate::config::MachineConfig;
 use crate::contact_sample::{ContactSample, SampleSink, FLAG_HW_LATCH};
 use crate::machine::{Contact, ErrorKind, Machine, MachineError, ProbeMove};
-use crate::motion_guard::MotionGuard;
+use crate::motion_guard::{
+    deflected_before_move, deflected_before_probing, may_start_deflected, MotionGuard,
+};
 use std::time::{Duration, Instant};
 
 /// Attempts of an idempotent request that timed out or lost its connection.
@@ -89,6 +91,10 @@ pub struct ModbusMachine {
     /// The last status read, and the bridge's clock at that read (mid request).
     status: StatusBlock,
     status_ns: u64,
+    /// The linear direction of the motion that put the stylus in contact (the last
+    /// probing contact or collision), while it may still be; see
+    /// [`may_start_deflected`].
+    contact_along: Option<[f64; 3]>,
 }
 
 fn exception_error(what: &str, e: tokio_modbus::ExceptionCode) -> MachineError {
@@ -135,6 +141,7 @@ impl ModbusMachine {
             last_capture: None,
             status: StatusBlock::default(),
             status_ns: 0,
+            contact_along: None,
         };
         let s = m.read_status()?;
         m.tracker = LatchTracker::resume(layout, s.latch_ack);
@@ -517,9 +524,37 @@ impl Machine for ModbusMachine {
             self.config.axis_mask(),
         );
         self.guard.check_move_from(&here, target, feed)?;
+        let mut linear = [0.0; 3];
+        let mut rotary = false;
+        for (axis, v) in target.iter() {
+            let d = v - here.get(axis).unwrap_or(v);
+            match axis.index() {
+                i @ 0..=2 => linear[i] = d,
+                _ => rotary |= d != 0.0,
+            }
+        }
+        // A stylus already in contact gives no rising edge: the PLC would not see a
+        // collision, only the broken stylus.
+        if self.status.has(bits::DEFLECTED)
+            && !may_start_deflected(self.contact_along, linear, rotary)
+        {
+            return Err(MachineError::new(
+                ErrorKind::AlreadyDeflected,
+                deflected_before_move(here.xyz()),
+            ));
+        }
         let (s, _) = self.run(CommandCode::Move, target, feed)?;
         match ResultCode::from_u16(s.result) {
-            Some(ResultCode::Ok) => Ok(()),
+            Some(ResultCode::Ok) => {
+                if !s.has(bits::DEFLECTED) {
+                    self.contact_along = None;
+                }
+                Ok(())
+            }
+            Some(ResultCode::Collision) => {
+                self.contact_along = Some(linear);
+                Err(self.result_error(&s, "move", 0.0))
+            }
             _ => Err(self.result_error(&s, "move", 0.0)),
         }
     }
@@ -549,9 +584,10 @@ impl Machine for ModbusMachine {
         if self.status.has(bits::DEFLECTED) {
             return Err(MachineError::new(
                 ErrorKind::AlreadyDeflected,
-                "the probe signal is high before the move; nothing moved",
+                deflected_before_probing(here.xyz()),
             ));
         }
+        self.contact_along = Some(dir);
         let (s, latch) = self.run(CommandCode::Probe, &end, mv.feed)?;
         match (ResultCode::from_u16(s.result), latch) {
             (Some(ResultCode::Contact), None) => {
