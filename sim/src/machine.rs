@@ -115,9 +115,7 @@ impl core::fmt::Debug for LatchLog {
 }
 
 impl SimMachine {
-    /// Drives of `scenario.machine` at the home position: Z 50 mm below its upper
-    /// limit (clear of the table), every other axis at 0.
-    /// Drives start at [`Self::start_positions`].
+    /// Drives of `scenario.machine` at [`Self::start_positions`].
     pub fn new(scenario: &Scenario) -> Self {
         Self::with_positions(scenario, &Self::start_positions(scenario))
     }
@@ -130,6 +128,8 @@ impl SimMachine {
         }
     }
 
+    /// The home position of a vertical spindle: Z 50 mm below its upper limit (clear
+    /// of the table), every other axis at 0.
     pub fn home(cfg: &MachineConfig) -> AxisPositions {
         let mut p = AxisPositions::new();
         if let Some(z) = cfg.axis(hal::Axis::Z) {
