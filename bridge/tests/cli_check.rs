@@ -316,3 +316,39 @@ fn a_second_run_on_the_same_service_is_refused_at_once() {
     let third = run(start("third.log").arg("--yes"));
     assert_eq!(third.status.code(), Some(0));
 }
+
+/// The tool axis Y on a machine whose spindle is vertical (`table-ac`, `[cycles]
+/// tool_axes` left at Z): `check` and `run` refuse the shipped `431-plane-y.h` at its
+/// TOOL CALL's line, nothing moves; on the horizontal spindle it checks clean.
+#[test]
+fn a_tool_axis_the_machine_has_no_spindle_for_is_refused_by_check_and_run_alike() {
+    let text = std::fs::read_to_string(configs().join("programs/431-plane-y.h")).unwrap();
+    let (check, err, run, opened) = check_and_run("tool-axis", text.as_bytes());
+    assert_eq!(check, Some(2), "{err}");
+    assert!(
+        err.contains("line 7: TOOL CALL: tool axis Y: machine table-ac has no spindle along Y; its [cycles] tool_axes are Z"),
+        "{err}"
+    );
+    assert_eq!(run, Some(2));
+    assert!(!opened, "run opened the machine");
+    let ok = common::run(
+        bin()
+            .args([
+                "check",
+                configs().join("programs/431-plane-y.h").to_str().unwrap(),
+            ])
+            .args([
+                "--scenario",
+                configs()
+                    .join("scenarios/tilted-plane-y.toml")
+                    .to_str()
+                    .unwrap(),
+            ]),
+    );
+    assert_eq!(
+        ok.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+}

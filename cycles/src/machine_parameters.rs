@@ -2,6 +2,7 @@
 //! (`maxDevCalBall`, `maxModification`, and `[cycles.predef]` for PREDEF). Read and
 //! validated here, not by hal, which accepts the section unread.
 
+use crate::probe_axis::ProbeAxis;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 
@@ -18,6 +19,12 @@ pub struct MachineParameters {
     /// Values of parameters given as `PREDEF` in a program, by Q number ("Q320").
     #[serde(default)]
     pub predef: BTreeMap<String, f64>,
+    /// The directions the spindle can take on this machine: the tool axes a `TOOL
+    /// CALL` may name (a vertical spindle: `["Z"]`, the default; a horizontal one along
+    /// Y: `["Y"]`; a universal head: both). A probe called along any other axis would
+    /// come at the workpiece from a side the stylus does not point to.
+    #[serde(default = "default_tool_axes")]
+    pub tool_axes: Vec<ProbeAxis>,
 }
 
 fn default_max_dev_cal_ball() -> f64 {
@@ -26,6 +33,9 @@ fn default_max_dev_cal_ball() -> f64 {
 fn default_max_modification() -> f64 {
     0.5
 }
+fn default_tool_axes() -> Vec<ProbeAxis> {
+    vec![ProbeAxis::Z]
+}
 
 impl Default for MachineParameters {
     fn default() -> Self {
@@ -33,6 +43,7 @@ impl Default for MachineParameters {
             max_dev_cal_ball: default_max_dev_cal_ball(),
             max_modification: default_max_modification(),
             predef: BTreeMap::new(),
+            tool_axes: default_tool_axes(),
         }
     }
 }
@@ -70,6 +81,12 @@ impl MachineParameters {
                     return Some((key, format!("{v} is outside {min} .. {max}")));
                 }
             }
+        }
+        if self.tool_axes.is_empty() {
+            return Some((
+                "cycles.tool_axes",
+                "must name at least one tool axis (\"X\", \"Y\" or \"Z\")",
+            ));
         }
         None
     }

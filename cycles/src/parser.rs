@@ -897,6 +897,30 @@ fn tool_call(
             _ => previous,
         }
     };
+    let allowed = &cfg.parameters.tool_axes;
+    if !allowed.contains(&axis) {
+        let names: Vec<String> = allowed.iter().map(ToString::to_string).collect();
+        let written = axis_word.is_some_and(|w| {
+            let w = w.to_ascii_uppercase();
+            ProbeAxis::from_name(&w).is_some() || (iso && ["G17", "G18", "G19"].contains(&&*w))
+        });
+        let how = if written {
+            ""
+        } else {
+            " (no axis written: the previous one, or Z)"
+        };
+        err(
+            diags,
+            line,
+            format!(
+                "TOOL CALL: tool axis {axis}{how}: machine {} has no spindle along {axis}; its [cycles] tool_axes are {} ({})",
+                cfg.machine.name,
+                names.join(", "),
+                cfg.machine.path.display()
+            ),
+        );
+        return None;
+    }
     let known = || {
         cfg.probes
             .iter()

@@ -1,10 +1,12 @@
 //! The probe (tool) axis of a `TOOL CALL` and the cycle coordinates it fixes.
 
+use serde::Deserialize;
 use std::fmt;
 
 /// The probe (tool) axis chosen by `TOOL CALL ... Z|X|Y`; it fixes which machine axes
-/// are the main, minor and tool axis of the cycle coordinates.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// are the main, minor and tool axis of the cycle coordinates. In the machine TOML
+/// (`[cycles] tool_axes`) it is written "X", "Y" or "Z".
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
 pub enum ProbeAxis {
     X,
     Y,

@@ -136,3 +136,38 @@ fn implausible_values_duplicate_probes_and_unknown_predef_are_refused() {
         }
     }
 }
+
+#[test]
+fn tool_axes_default_to_z_and_are_checked() {
+    use probebridge_cycles::program::ProbeAxis;
+    let c = parse(common::CONFIG).unwrap();
+    assert_eq!(c.parameters.tool_axes, [ProbeAxis::Z]);
+    let text = common::CONFIG.replace(
+        "[cycles.predef]",
+        "[cycles]\ntool_axes = [\"Y\", \"Z\"]\n[cycles.predef]",
+    );
+    assert_eq!(
+        parse(&text).unwrap().parameters.tool_axes,
+        [ProbeAxis::Y, ProbeAxis::Z]
+    );
+    let text = common::CONFIG.replace(
+        "[cycles.predef]",
+        "[cycles]\ntool_axes = []\n[cycles.predef]",
+    );
+    match parse(&text).unwrap_err() {
+        ConfigError::Invalid { key, message, .. } => {
+            assert_eq!(key, "cycles.tool_axes");
+            assert!(message.contains("at least one"), "{message}");
+        }
+        e => panic!("{e}"),
+    }
+    let text = common::CONFIG.replace(
+        "[cycles.predef]",
+        "[cycles]\ntool_axes = [\"W\"]\n[cycles.predef]",
+    );
+    let e = parse(&text).unwrap_err().to_string();
+    assert!(
+        e.contains("m.toml") && e.contains("tool_axes") && e.contains("W"),
+        "{e}"
+    );
+}

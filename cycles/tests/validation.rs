@@ -522,3 +522,36 @@ fn a_mistyped_block_is_an_error_at_its_line_never_skipped() {
         );
     }
 }
+
+/// A machine whose spindle is vertical (`[cycles] tool_axes` left at Z) refuses a TOOL
+/// CALL along X or Y at its line, in both dialects; the cycle after it is not run.
+#[test]
+fn tool_axis_the_machine_has_no_spindle_for_is_refused() {
+    let cfg = probebridge_cycles::CyclesConfig::parse(
+        common::CONFIG,
+        std::path::Path::new("vertical.toml"),
+    )
+    .unwrap();
+    let d: Vec<String> = check_program(
+        "0 BEGIN PGM T MM\n1 TOOL CALL \"TOUCH_PROBE\" X\n2 END PGM T MM",
+        &cfg,
+    )
+    .into_iter()
+    .map(|d| d.to_string())
+    .collect();
+    assert_eq!(
+        d,
+        ["line 2: TOOL CALL: tool axis X: machine mock has no spindle along X; its [cycles] tool_axes are Z (vertical.toml)"]
+    );
+    let d: Vec<String> = check_program("N10 T1 G18 *", &cfg)
+        .into_iter()
+        .map(|d| d.to_string())
+        .collect();
+    assert_eq!(d.len(), 1, "{d:?}");
+    assert!(
+        d[0].starts_with("line 1: TOOL CALL: tool axis Y: machine mock has no spindle along Y"),
+        "{d:?}"
+    );
+    // Z, written or not, is the spindle's.
+    assert!(check_program("1 TOOL CALL \"TOUCH_PROBE\" Z\n2 TOOL CALL 2", &cfg).is_empty());
+}

@@ -115,12 +115,21 @@ impl core::fmt::Debug for LatchLog {
 }
 
 impl SimMachine {
-    /// Drives of `scenario.machine` at the home position: Z 50 mm below its upper
-    /// limit (clear of the table), every other axis at 0.
+    /// Drives of `scenario.machine` at [`Self::start_positions`].
     pub fn new(scenario: &Scenario) -> Self {
-        Self::with_positions(scenario, &Self::home(&scenario.machine))
+        Self::with_positions(scenario, &Self::start_positions(scenario))
     }
 
+    /// Where the axes of `scenario` start: its `home`, else [`Self::home`].
+    pub fn start_positions(scenario: &Scenario) -> AxisPositions {
+        match scenario.home {
+            Some(xyz) => AxisPositions::linear(xyz),
+            None => Self::home(&scenario.machine),
+        }
+    }
+
+    /// The home position of a vertical spindle: Z 50 mm below its upper limit (clear
+    /// of the table), every other axis at 0.
     pub fn home(cfg: &MachineConfig) -> AxisPositions {
         let mut p = AxisPositions::new();
         if let Some(z) = cfg.axis(hal::Axis::Z) {

@@ -6,6 +6,8 @@
 //! ```toml
 //! machine = "table-ac"   # configs/machines/table-ac.toml, or a path to a .toml
 //! seed = 1               # noise seed (default 0)
+//! home = [0.0, 250.0, 0.0] # optional: where X, Y, Z start (rotary axes at 0); default
+//!                        # X 0, Y 0, Z 50 below its max (a vertical spindle's top)
 //! [probe]
 //! ball_radius = 3.0      # true stylus ball radius, mm
 //! noise = 0.0            # mm, 1 sigma, along the probing direction (default 0)
@@ -258,6 +260,10 @@ pub struct Scenario {
     /// `preset`: the number of the preset table row the control starts with (the
     /// cycles check it against the machine's preset table); `None`: the table's own.
     pub preset: Option<u32>,
+    /// `home`: where the X, Y, Z drives start, inside the software limits (a machine
+    /// whose spindle is horizontal starts with the probe back along its tool axis);
+    /// `None`: [`crate::machine::SimMachine::home`].
+    pub home: Option<[f64; 3]>,
     pub probe: ProbeTruth,
     pub truth: Truth,
     pub spheres: Vec<Sphere>,
@@ -276,6 +282,8 @@ struct RawScenario {
     seed: u64,
     #[serde(default)]
     preset: Option<u32>,
+    #[serde(default)]
+    home: Option<[f64; 3]>,
     probe: RawProbe,
     #[serde(default)]
     truth: BTreeMap<String, f64>,
@@ -418,10 +426,19 @@ impl Scenario {
         let truth = build_truth(&raw.truth, path, &machine)?;
         let (spheres, planes, cylinders) = build_artefacts(&raw, path)?;
         let faults = build_faults(&raw.fault, path, &machine)?;
+        if let Some(home) = raw.home {
+            for (axis, v) in Axis::LINEAR.into_iter().zip(home) {
+                let Some(a) = machine.axis(axis) else {
+                    continue;
+                };
+                check_range(path, &format!("home ({axis})"), v, a.min, a.max, true)?;
+            }
+        }
         Ok(Self {
             machine,
             seed: raw.seed,
             preset: raw.preset,
+            home: raw.home,
             probe,
             truth,
             spheres,

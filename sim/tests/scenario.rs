@@ -298,3 +298,20 @@ fn errors_carry_their_kind() {
     let missing = Scenario::load(Path::new("/nonexistent/scenario.toml"), None).unwrap_err();
     assert_eq!(missing.kind(), ConfigErrorKind::Read);
 }
+
+#[test]
+fn home_is_where_the_axes_start_inside_the_software_limits() {
+    use probebridge_sim::machine::SimMachine;
+    let s = scenario("table-ac", PROBE);
+    assert_eq!(s.home, None);
+    // The default: a vertical spindle 50 mm below its top.
+    let start = SimMachine::start_positions(&s);
+    assert_eq!(start.get(Axis::Z), Some(350.0));
+    let s = scenario("table-ac", &format!("home = [1.0, 250.0, -2.0]\n{PROBE}"));
+    let start = SimMachine::start_positions(&s);
+    assert_eq!(start.xyz(), [1.0, 250.0, -2.0]);
+    assert_err(
+        &format!("home = [0.0, 301.0, 0.0]\n{PROBE}"),
+        &["home (Y)", "301"],
+    );
+}

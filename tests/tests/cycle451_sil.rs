@@ -800,3 +800,167 @@ fn the_preset_and_save_restore_examples_run() {
     assert!(k451.written, "451 changed the kinematics in between");
     assert_eq!(std::fs::read_to_string(&kin).unwrap(), text);
 }
+
+// ---------------------------------------------------------------------------------
+// Tool axis X and Y (TOOL CALL ... X|Y) on machines whose spindle lies that way.
+
+/// `p` with the tool axis `axis`: the probe comes back along the spindle, over the
+/// sphere at `centre` in the working plane, then 5 mm off the pole along the tool axis.
+fn program_along(p: &P451, centre: [f64; 3], axis: char) -> String {
+    let t = match axis {
+        'X' => 0,
+        'Y' => 1,
+        'Z' => 2,
+        _ => panic!("tool axis {axis}"),
+    };
+    let names = ['X', 'Y', 'Z'];
+    let plane: Vec<String> = (0..3)
+        .filter(|&i| i != t)
+        .map(|i| format!("{}{:+}", names[i], centre[i]))
+        .collect();
+    let pole = centre[t] + p.radius + 3.0 + 2.0 + 5.0;
+    format!(
+        "0 BEGIN PGM K451 MM\n1 TOOL CALL \"TOUCH_PROBE\" {axis}\n2 L {axis}{:+} R0 FMAX\n\
+         3 L {} R0 FMAX\n4 L {axis}{pole:+} R0 FMAX\n{}5 END PGM K451 MM\n",
+        pole + 100.0,
+        plane.join(" "),
+        cycle_block(p)
+    )
+}
+
+fn load_scenario(name: &str) -> sim::Scenario {
+    sim::Scenario::load(
+        &configs_dir().join("scenarios").join(name),
+        Some(&configs_dir().join("machines")),
+    )
+    .unwrap()
+}
+
+/// The run succeeded, identified the injected location errors of `axes` to 1e-4 and
+/// agrees with the independent computation of the spec; its JSON.
+fn assert_recovers(r: &Run, sc: &sim::Scenario, axes: &[char]) -> serde_json::Value {
+    ok_cycle(r);
+    let v = json(r);
+    let after = errors_of(&v["kinematics"]["errors_after"]);
+    for name in all_location_errors(axes) {
+        let truth = sc.truth.get(&name).unwrap();
+        assert!(
+            (after[&name] - truth).abs() < 1e-4,
+            "{name}: identified {} vs injected {truth}",
+            after[&name]
+        );
+    }
+    check_results_against_spec(&v, &machine_config(sc));
+    v
+}
+
+/// Tool axis Y on the A/C table machine with a horizontal spindle: the same sphere and
+/// errors as demo-sphere.toml, recovered to 1e-4 and matching the spec; pre-positioned
+/// (Q431 = 1) and from the preset of cycle 247 (Q431 = 0) alike.
+#[test]
+fn tool_axis_y_on_a_horizontal_spindle_recovers_the_injected_errors() {
+    let sc = load_scenario("horizontal-y-sphere.toml");
+    let p = P451 {
+        a: Ax(-90.0, 90.0, 0.0, 4),
+        c: Ax(90.0, 270.0, 0.0, 3),
+        ..P451::default()
+    };
+    let centre = [50.0, -30.0, 80.0];
+    let dir = temp_dir("tool-y");
+    let mut directions = Vec::new();
+    let text = program_along(&p, centre, 'Y');
+    let r = {
+        let cfg = cycles_config(&sc);
+        let program = Program::parse(&text, &cfg).unwrap_or_else(|e| panic!("{e}"));
+        let mut m = CanInproc::open(&sc);
+        let mut confirm = |_: &str| true;
+        let mut progress = |ev| {
+            if let cycles::progress::ProgressEvent::Probe { direction, .. } = ev {
+                directions.push(direction);
+            }
+        };
+        let mut opts = RunOptions {
+            out_dir: dir.clone(),
+            confirm: &mut confirm,
+            progress: &mut progress,
+            kinematics: Some(dir.join("kinematics.toml")),
+            estimator: None,
+        };
+        Run {
+            report: run_program(&program, &mut m, &cfg, &mut opts),
+            confirmations: Vec::new(),
+        }
+    };
+    let v = assert_recovers(&r, &sc, &['A', 'C']);
+    // Locating the sphere and its pole: along -Y; at A = C = 0 the four equator
+    // points lie in the ZX plane, the first (Q380 = 0) on the main axis Z.
+    let along = |d: [f64; 3], want: [f64; 3]| (0..3).all(|i| (d[i] - want[i]).abs() < 1e-12);
+    assert!(along(directions[0], [0.0, -1.0, 0.0]), "{directions:?}");
+    assert!(along(directions[1], [0.0, -1.0, 0.0]), "{directions:?}");
+    assert!(along(directions[2], [0.0, 0.0, -1.0]), "{directions:?}");
+    assert!(
+        directions[2..6].iter().all(|d| d[1].abs() < 1e-12),
+        "{directions:?}"
+    );
+    // Q431 = 0: cycle 247 activates the sphere centre, the start 100 mm away in X.
+    let mut cfg = cycles_config(&sc);
+    let mut row = cycles::preset_table::Preset::origin(1);
+    [row.x, row.y, row.z] = centre;
+    cfg.presets.rows.push(row);
+    let text = format!(
+        "0 BEGIN PGM K451 MM\n1 TOOL CALL \"TOUCH_PROBE\" Y\n\
+2 CYCL DEF 247 DATUM SETTING ~\n  Q339=+1 ;DATUM NUMBER\n\
+3 L Y+40 R0 FMAX\n4 L X+100 Z+0 R0 FMAX\n{}5 END PGM K451 MM\n",
+        cycle_block(&P451 { preset: 0, ..p })
+    );
+    let dir = temp_dir("tool-y-247");
+    let r0 = run_with(&text, &sc, &cfg, &dir, true);
+    let v0 = assert_recovers(&r0, &sc, &['A', 'C']);
+    for q in ["Q147", "Q148", "Q149"] {
+        assert!(
+            v0["q"][q].as_f64().unwrap().abs() < 1e-6,
+            "{q}: {}",
+            v0["q"][q]
+        );
+    }
+    assert_eq!(spheres_measured(&v), 9);
+    assert_eq!(spheres_measured(&v0), 9);
+}
+
+/// Tool axis X in a B swivel head: the probe direction turns with B in the XZ plane.
+/// Q431 = 3 sets the active preset row at the sphere centre (1e-6 mm, noise 0) and the
+/// injected errors of both axes are recovered to 1e-4, matching the spec.
+#[test]
+fn tool_axis_x_in_a_swivel_head_recovers_the_errors_and_sets_the_preset() {
+    let sc = load_scenario("horizontal-x-head-b-table-c.toml");
+    let cfg = cycles_config(&sc);
+    let p = P451 {
+        b: Ax(-60.0, 60.0, 0.0, 4),
+        c: Ax(90.0, 270.0, 0.0, 3),
+        preset: 3,
+        ..P451::default()
+    };
+    let centre = [40.0, 25.0, 60.0];
+    let dir = temp_dir("tool-x");
+    let r = run_with(&program_along(&p, centre, 'X'), &sc, &cfg, &dir, true);
+    let v = assert_recovers(&r, &sc, &['B', 'C']);
+    let table = cycles::preset_table::PresetTable::load(&cfg.presets.path, &cfg.machine).unwrap();
+    for (got, want) in table.active_row().xyz().iter().zip(centre) {
+        assert!((got - want).abs() < 1e-6, "{:?}", table.active_row());
+    }
+    assert_eq!(spheres_measured(&v), 9);
+}
+
+/// A machine whose spindle lies along Y refuses a 451 program written for a vertical
+/// spindle: at the TOOL CALL's line, before anything moves.
+#[test]
+fn a_tool_axis_the_machine_has_no_spindle_for_is_refused() {
+    let sc = load_scenario("horizontal-y-sphere.toml");
+    let cfg = cycles_config(&sc);
+    let text = program(&P451::default(), [50.0, -30.0, 80.0]);
+    let e = Program::parse(&text, &cfg).unwrap_err().to_string();
+    assert!(
+        e.contains("line 2: TOOL CALL: tool axis Z: machine horizontal-y-table-ac has no spindle along Z; its [cycles] tool_axes are Y"),
+        "{e}"
+    );
+}

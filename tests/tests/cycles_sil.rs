@@ -75,28 +75,69 @@ fn rotate_z_axis(a: f64, b: f64, c: f64) -> V {
     [cc * v[0] - sc * v[1], sc * v[0] + cc * v[1], v[2]]
 }
 
-fn program_431(pts: [[f64; 3]; 3], q260: f64) -> String {
+/// The machines of the tests with the tool axis each one's spindle has.
+const TOOL_AXES: [(&str, char); 3] = [
+    ("table-ac", 'Z'),
+    ("horizontal-y-table-ac", 'Y'),
+    ("horizontal-x-head-b-table-c", 'X'),
+];
+
+/// Where the probe starts: back along the spindle, clear of the table.
+fn home(axis: char) -> String {
+    match axis {
+        'X' => "home = [350.0, 0.0, 0.0]\n".into(),
+        'Y' => "home = [0.0, 250.0, 0.0]\n".into(),
+        _ => String::new(),
+    }
+}
+
+/// (main, minor, tool) to machine X, Y, Z for a tool axis, as the TNC lays out its
+/// working planes (written here independently): Z: X Y Z, X: Y Z X, Y: Z X Y.
+fn to_machine(axis: char, c: V) -> V {
+    match axis {
+        'Z' => c,
+        'X' => [c[2], c[0], c[1]],
+        'Y' => [c[1], c[2], c[0]],
+        _ => panic!("tool axis {axis}"),
+    }
+}
+
+fn program_431(pts: [[f64; 3]; 3], q260: f64, axis: char) -> String {
     format!(
-        "0 BEGIN PGM SIL431 MM\n1 TOOL CALL \"TOUCH_PROBE\" Z\n2 TCH PROBE 431 MESSEN EBENE ~\n  Q263={:+} ;1. PUNKT 1. ACHSE ~\n  Q264={:+} ;1. PUNKT 2. ACHSE ~\n  Q294={:+} ;1. PUNKT 3. ACHSE ~\n  Q265={:+} ;2. PUNKT 1. ACHSE ~\n  Q266={:+} ;2. PUNKT 2. ACHSE ~\n  Q295={:+} ;2. PUNKT 3. ACHSE ~\n  Q296={:+} ;3. PUNKT 1. ACHSE ~\n  Q297={:+} ;3. PUNKT 2. ACHSE ~\n  Q298={:+} ;3. PUNKT 3. ACHSE ~\n  Q320=+2 ;SICHERHEITS-ABST. ~\n  Q260={q260:+} ;SICHERE HOEHE ~\n  Q281=+0 ;MESSPROTOKOLL\n3 END PGM SIL431 MM\n",
+        "0 BEGIN PGM SIL431 MM\n1 TOOL CALL \"TOUCH_PROBE\" {axis}\n2 TCH PROBE 431 MESSEN EBENE ~\n  Q263={:+} ;1. PUNKT 1. ACHSE ~\n  Q264={:+} ;1. PUNKT 2. ACHSE ~\n  Q294={:+} ;1. PUNKT 3. ACHSE ~\n  Q265={:+} ;2. PUNKT 1. ACHSE ~\n  Q266={:+} ;2. PUNKT 2. ACHSE ~\n  Q295={:+} ;2. PUNKT 3. ACHSE ~\n  Q296={:+} ;3. PUNKT 1. ACHSE ~\n  Q297={:+} ;3. PUNKT 2. ACHSE ~\n  Q298={:+} ;3. PUNKT 3. ACHSE ~\n  Q320=+2 ;SICHERHEITS-ABST. ~\n  Q260={q260:+} ;SICHERE HOEHE ~\n  Q281=+0 ;MESSPROTOKOLL\n3 END PGM SIL431 MM\n",
         pts[0][0], pts[0][1], pts[0][2], pts[1][0], pts[1][1], pts[1][2], pts[2][0], pts[2][1], pts[2][2]
     )
 }
 
+/// With every tool axis: the plane is given in (main, minor, tool) coordinates and
+/// put on the machine turned accordingly; the cycle's results are in those
+/// coordinates and must be the same for all three.
 #[test]
 fn cycle_431_on_tilted_planes_matches_spec_and_truth() {
+    for (machine, axis) in TOOL_AXES {
+        cycle_431_on_tilted_planes(machine, axis);
+    }
+}
+
+fn cycle_431_on_tilted_planes(machine: &str, axis: char) {
     // Plane normals written by hand: through (20, 10, 15).
     for normal in [[0.05, -0.12, 1.0], [-0.2, 0.03, 1.0], [0.0, 0.0, 1.0]] {
+        let (point, normal_m) = (
+            to_machine(axis, [20.0, 10.0, 15.0]),
+            to_machine(axis, normal),
+        );
         let sc = scenario(&format!(
-            "machine = \"table-ac\"\n[probe]\nball_radius = 2.0\n[[plane]]\npoint = [20.0, 10.0, 15.0]\nnormal = [{}, {}, {}]\n",
-            normal[0], normal[1], normal[2]
+            "machine = \"{machine}\"\n{}[probe]\nball_radius = 2.0\n[[plane]]\npoint = [{}, {}, {}]\nnormal = [{}, {}, {}]\n",
+            home(axis),
+            point[0], point[1], point[2], normal_m[0], normal_m[1], normal_m[2]
         ));
         let n = unit(normal);
         let height = |x: f64, y: f64| 15.0 - (n[0] * (x - 20.0) + n[1] * (y - 10.0)) / n[2];
         let xy = [[0.0, 0.0], [60.0, 5.0], [10.0, 55.0]];
         let pts = xy.map(|p| [p[0], p[1], height(p[0], p[1])]);
-        let report = run(&program_431(pts, 60.0), &sc);
+        let report = run(&program_431(pts, 60.0, axis), &sc);
         let c = &report.cycles[0];
-        assert_eq!(c.status, Status::Ok, "{:?}", c.message);
+        assert_eq!(c.status, Status::Ok, "tool axis {axis}: {:?}", c.message);
         let q = |k: &str| c.q[k];
         // Independent computation from the measured points the cycle reports.
         let measured = [
@@ -108,7 +149,7 @@ fn cycle_431_on_tilted_planes_matches_spec_and_truth() {
         for (i, k) in ["Q170", "Q171", "Q172", "Q158", "Q159"].iter().enumerate() {
             assert!(
                 (q(k) - want[i]).abs() < 1e-6,
-                "{k} = {} but spec gives {}",
+                "tool axis {axis}: {k} = {} but spec gives {}",
                 q(k),
                 want[i]
             );
@@ -116,18 +157,21 @@ fn cycle_431_on_tilted_planes_matches_spec_and_truth() {
         // Against the truth: the plane's own projection angles.
         assert!(
             (q("Q158") - deg((-n[1]).atan2(n[2]))).abs() < 1e-6,
-            "Q158 {}",
+            "tool axis {axis}: Q158 {}",
             q("Q158")
         );
         assert!(
             (q("Q159") - deg(n[0].atan2(n[2]))).abs() < 1e-6,
-            "Q159 {}",
+            "tool axis {axis}: Q159 {}",
             q("Q159")
         );
         // Rotating (0, 0, 1) by the spatial angles reproduces the plane normal.
         let r = rotate_z_axis(q("Q170"), q("Q171"), q("Q172"));
         for i in 0..3 {
-            assert!((r[i] - n[i]).abs() < 2e-8, "normal {r:?} vs {n:?}");
+            assert!(
+                (r[i] - n[i]).abs() < 2e-8,
+                "tool axis {axis}: normal {r:?} vs {n:?}"
+            );
         }
     }
 }
@@ -140,7 +184,11 @@ fn block_444(p: V, n: V, tol: &str, q309: u8) -> String {
 }
 
 fn program_444(blocks: &[String]) -> String {
-    let mut s = String::from("BEGIN PGM SIL444 MM\nTOOL CALL \"TOUCH_PROBE\" Z\n");
+    program_444_along(blocks, 'Z')
+}
+
+fn program_444_along(blocks: &[String], axis: char) -> String {
+    let mut s = format!("BEGIN PGM SIL444 MM\nTOOL CALL \"TOUCH_PROBE\" {axis}\n");
     for b in blocks {
         s.push_str(b);
     }
@@ -167,17 +215,26 @@ fn spec_status(dev: f64, tol: &str) -> f64 {
 }
 
 /// A sphere larger or smaller than the nominal surface by a known offset: Q164 is the
-/// offset, Q151..Q163 follow from the contact, Q183 from every QS400 example.
+/// offset, Q151..Q163 follow from the contact, Q183 from every QS400 example; with
+/// every tool axis (points, normals and results in (main, minor, tool) coordinates).
 #[test]
 fn cycle_444_known_offsets_and_every_tolerance_example() {
+    for (machine, axis) in TOOL_AXES {
+        cycle_444_known_offsets(machine, axis);
+    }
+}
+
+fn cycle_444_known_offsets(machine: &str, axis: char) {
     let (centre, nominal_r) = ([30.0, -20.0, 40.0], 20.0);
     let tolerances = ["0.4-0.1", "0.4", "-0.1", "1-1", " ", "0", "0.1+0.1"];
     for offset in [0.05, 0.5, -0.05, -0.2] {
+        let centre_m = to_machine(axis, centre);
         let sc = scenario(&format!(
-            "machine = \"table-ac\"\n[probe]\nball_radius = 3.0\n[[sphere]]\ncenter = [{}, {}, {}]\nradius = {}\n",
-            centre[0],
-            centre[1],
-            centre[2],
+            "machine = \"{machine}\"\n{}[probe]\nball_radius = 3.0\n[[sphere]]\ncenter = [{}, {}, {}]\nradius = {}\n",
+            home(axis),
+            centre_m[0],
+            centre_m[1],
+            centre_m[2],
             nominal_r + offset
         ));
         // Points on the nominal sphere, normals pointing out of the material.
@@ -199,10 +256,15 @@ fn cycle_444_known_offsets_and_every_tolerance_example() {
             blocks.push(block_444(p, n, tol, 0));
             nominal.push((p, n, *tol));
         }
-        let report = run(&program_444(&blocks), &sc);
-        assert_eq!(report.cycles.len(), tolerances.len());
+        let report = run(&program_444_along(&blocks, axis), &sc);
+        assert_eq!(
+            report.cycles.len(),
+            tolerances.len(),
+            "{:?}",
+            report.stopped
+        );
         for (c, (p, n, tol)) in report.cycles.iter().zip(nominal) {
-            assert_eq!(c.status, Status::Ok, "{:?}", c.message);
+            assert_eq!(c.status, Status::Ok, "tool axis {axis}: {:?}", c.message);
             let q = |k: &str| c.q[k];
             let actual = [q("Q151"), q("Q152"), q("Q153")];
             let want_actual = [
@@ -213,7 +275,7 @@ fn cycle_444_known_offsets_and_every_tolerance_example() {
             for i in 0..3 {
                 assert!(
                     (actual[i] - want_actual[i]).abs() < 1e-6,
-                    "actual {actual:?} vs {want_actual:?}"
+                    "tool axis {axis}: actual {actual:?} vs {want_actual:?}"
                 );
                 let dev = ["Q161", "Q162", "Q163"][i];
                 assert!((q(dev) - (actual[i] - p[i])).abs() < 1e-9);
@@ -223,7 +285,7 @@ fn cycle_444_known_offsets_and_every_tolerance_example() {
             assert!((q("Q164") - q164).abs() < 1e-9);
             assert!(
                 (q("Q164") - offset).abs() < 1e-6,
-                "Q164 {} for offset {offset}",
+                "tool axis {axis}: Q164 {} for offset {offset}",
                 q("Q164")
             );
             assert_eq!(

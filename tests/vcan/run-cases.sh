@@ -13,13 +13,18 @@
 # PROBEBRIDGE_VCAN_CONFIGS: a folder holding configs/scenarios and configs/machines to
 #   use instead of the repository's (.ci/vcan/run writes one with the bus timing
 #   relaxed for the emulated VM); programs always come from the repository.
+# The files a program writes (`--presets FILE`, `--kinematics FILE` in ARGS: the preset
+# table, the active kinematics) are copied first to RESULTS/NAME.state/ (FILE relative
+# to PROBEBRIDGE_VCAN_CONFIGS; a FILE that does not exist there starts absent), and the
+# case works on the copy: the VM sees the repository read-only, and the shipped files
+# stay as they are.
 set -u
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
 RESULTS=$1
 IFACE=${2:-}
 BIN=${PROBEBRIDGE_BIN:-$ROOT/target/release/probebridge}
 CONFIGS=${PROBEBRIDGE_VCAN_CONFIGS:-$ROOT}
-CASE_TIMEOUT=${PROBEBRIDGE_CASE_TIMEOUT:-240}
+CASE_TIMEOUT=${PROBEBRIDGE_CASE_TIMEOUT:-420}
 mkdir -p "$RESULTS"
 cd "$ROOT"
 
@@ -43,6 +48,17 @@ while IFS='|' read -r name scenario args expect; do
         *) echo "tests/vcan/cases: $name: unknown command ${argv[0]}" >&2 ;;
     esac
     rm -rf "$RESULTS/$name".*
+    for ((i = 0; i + 1 < ${#argv[@]}; i++)); do
+        case "${argv[$i]}" in
+            --presets|--kinematics)
+                src=${argv[$((i + 1))]}
+                dst="$RESULTS/$name.state/$(basename "$src")"
+                mkdir -p "$RESULTS/$name.state"
+                if [ -f "$CONFIGS/$src" ]; then cp "$CONFIGS/$src" "$dst"; fi
+                argv[i+1]=$dst
+                ;;
+        esac
+    done
     sim_pid=
     if [ -n "$IFACE" ]; then
         cansend "$IFACE" "7FF#$(printf '%02X' "$n")"

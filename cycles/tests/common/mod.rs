@@ -57,8 +57,13 @@ Q320 = 0.5
 Q260 = 150.0
 "#;
 
+/// [`CONFIG`] with a universal head: the spindle vertical or horizontal along X or Y.
 pub fn config() -> CyclesConfig {
-    CyclesConfig::parse(CONFIG, Path::new("mock.toml")).unwrap()
+    let text = CONFIG.replace(
+        "[cycles.predef]",
+        "[cycles]\ntool_axes = [\"Z\", \"X\", \"Y\"]\n\n[cycles.predef]",
+    );
+    CyclesConfig::parse(&text, Path::new("mock.toml")).unwrap()
 }
 
 /// Surfaces; normals point out of the material.

@@ -71,7 +71,7 @@ impl PlcProgram {
     /// its mailbox where `bus` says.
     pub fn new(scenario: &Scenario, bus: &ModbusBusConfig) -> Self {
         let cfg = &scenario.machine;
-        let home = crate::machine::SimMachine::home(cfg);
+        let home = crate::machine::SimMachine::start_positions(scenario);
         let mut increments = [1.0; MAX_AXES];
         let mut min = [0.0; MAX_AXES];
         let mut max = [0.0; MAX_AXES];

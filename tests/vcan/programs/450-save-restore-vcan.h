@@ -1,0 +1,44 @@
+0 BEGIN PGM 450-save-restore-vcan MM
+; configs/programs/450-save-restore.h for the vcan VM (tests/vcan/cases): the same
+; program with Q253 (pre-positioning feed) 5000 instead of 750, so that it runs in
+; about a third of the real time. tests/vcan/check.rs makes sure the two differ in
+; nothing else.
+1 ; Cycle 450 SAVE KINEMATICS around a cycle 451 in mode 1, on
+2 ; configs/scenarios/demo-sphere.toml: save the active kinematics under designation
+3 ; 1, let 451 optimise and write the positions, then restore what was saved: the
+4 ; kinematics file is as before the program (its 451 result stays in the protocol).
+5 ; Give --kinematics FILE and --presets FILE to keep the shipped files as they are.
+6 TOOL CALL "TOUCH_PROBE" Z
+7 TCH PROBE 450 SAVE KINEMATICS ~
+    Q410=+0        ;MODE ~
+    Q409=+1        ;MEMORY DESIGNATION
+8 L Z+150 R0 FMAX
+9 L X+50 Y-30 R0 FMAX
+10 L Z+102.5 R0 FMAX
+12 TCH PROBE 451 MEASURE KINEMATICS ~
+    Q406=+1        ;MODE ~
+    Q407=+12.5     ;SPHERE RADIUS ~
+    Q320=+0        ;SET-UP CLEARANCE ~
+    Q408=+0        ;RETR. HEIGHT ~
+    Q253=+5000     ;F PRE-POSITIONING ~
+    Q380=+0        ;REFERENCE ANGLE ~
+    Q411=-90       ;START ANGLE A AXIS ~
+    Q412=+90       ;END ANGLE A AXIS ~
+    Q413=+0        ;INCID. ANGLE A AXIS ~
+    Q414=+3        ;MEAS. POINTS A AXIS ~
+    Q415=+0        ;START ANGLE B AXIS ~
+    Q416=+0        ;END ANGLE B AXIS ~
+    Q417=+0        ;INCID. ANGLE B AXIS ~
+    Q418=+0        ;MEAS. POINTS B AXIS ~
+    Q419=+90       ;START ANGLE C AXIS ~
+    Q420=+270      ;END ANGLE C AXIS ~
+    Q421=+0        ;INCID. ANGLE C AXIS ~
+    Q422=+3        ;MEAS. POINTS C AXIS ~
+    Q423=+4        ;NO. OF PROBE POINTS ~
+    Q431=+1        ;PRESET ~
+    Q432=+0        ;BACKLASH, ANG. RANGE
+13 L Z+150 R0 FMAX
+14 TCH PROBE 450 SAVE KINEMATICS ~
+    Q410=+1        ;MODE ~
+    Q409=+1        ;MEMORY DESIGNATION
+15 END PGM 450-save-restore-vcan MM

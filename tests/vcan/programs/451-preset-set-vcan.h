@@ -1,0 +1,39 @@
+0 BEGIN PGM 451-preset-set-vcan MM
+; configs/programs/451-preset-set.h for the vcan VM (tests/vcan/cases): the same
+; program with Q253 (pre-positioning feed) 5000 instead of 750, so that it runs in
+; about a third of the real time. tests/vcan/check.rs makes sure the two differ in
+; nothing else.
+1 ; Cycle 451 MEASURE KINEMATICS, mode 1 (optimise position), on
+2 ; configs/scenarios/demo-sphere.toml, with Q431=3: the probe is put roughly over the
+3 ; sphere (R12.5 at X+50 Y-30 Z+80); the cycle locates it, sets the active preset to
+4 ; its centre before measuring and again after. In modes 1..3 the active row of the
+5 ; preset table and the kinematics file are written once the cycle succeeded: give
+6 ; --presets FILE and --kinematics FILE to keep the shipped ones as they are.
+7 TOOL CALL "TOUCH_PROBE" Z
+8 L Z+150 R0 FMAX
+9 L X+50 Y-30 R0 FMAX
+10 L Z+102.5 R0 FMAX
+11 TCH PROBE 451 MEASURE KINEMATICS ~
+    Q406=+1        ;MODE ~
+    Q407=+12.5     ;SPHERE RADIUS ~
+    Q320=+0        ;SET-UP CLEARANCE ~
+    Q408=+0        ;RETR. HEIGHT ~
+    Q253=+5000     ;F PRE-POSITIONING ~
+    Q380=+0        ;REFERENCE ANGLE ~
+    Q411=-90       ;START ANGLE A AXIS ~
+    Q412=+90       ;END ANGLE A AXIS ~
+    Q413=+0        ;INCID. ANGLE A AXIS ~
+    Q414=+3        ;MEAS. POINTS A AXIS ~
+    Q415=+0        ;START ANGLE B AXIS ~
+    Q416=+0        ;END ANGLE B AXIS ~
+    Q417=+0        ;INCID. ANGLE B AXIS ~
+    Q418=+0        ;MEAS. POINTS B AXIS ~
+    Q419=+90       ;START ANGLE C AXIS ~
+    Q420=+270      ;END ANGLE C AXIS ~
+    Q421=+0        ;INCID. ANGLE C AXIS ~
+    Q422=+3        ;MEAS. POINTS C AXIS ~
+    Q423=+4        ;NO. OF PROBE POINTS ~
+    Q431=+3        ;PRESET ~
+    Q432=+0        ;BACKLASH, ANG. RANGE
+12 L Z+50 R0 FMAX
+13 END PGM 451-preset-set-vcan MM
