@@ -44,6 +44,11 @@ struct MachineArgs {
     /// Record the CAN traffic of the session in candump's log format.
     #[arg(long)]
     candump: Option<PathBuf>,
+    /// Inject seeded faults between the master and the CAN bus (a demonstration of
+    /// how it copes), e.g. `drop=0.01,duplicate=0.001,delay=0.001,reorder=0.001,seed=7`;
+    /// `tx-`/`rx-` before a name sets one direction.
+    #[arg(long, value_name = "SPEC", value_parser = hal::can::fault_injection::BusFaults::parse, conflicts_with = "modbus")]
+    bus_faults: Option<hal::can::fault_injection::BusFaults>,
 }
 
 impl MachineArgs {
@@ -56,6 +61,7 @@ impl MachineArgs {
             realtime: self.realtime,
             service: self.service.clone(),
             candump: self.candump.clone(),
+            bus_faults: self.bus_faults.clone(),
             abort: None,
         }
     }

@@ -39,6 +39,9 @@ pub struct MachineOptions {
     pub candump: Option<PathBuf>,
     /// The operator's stop (the signal handler's flag): brakes a move under way.
     pub abort: Option<hal::AbortFlag>,
+    /// Seeded faults injected between the CANopen master and the bus (drop,
+    /// duplicate, delay, reorder), to show how it copes.
+    pub bus_faults: Option<hal::can::fault_injection::BusFaults>,
 }
 
 /// Any backend, as the commands drive it.
@@ -225,6 +228,21 @@ impl Session {
                     (Box::new(bus.endpoint()), Some(sim), pacing)
                 }
             };
+        let mut notes = Vec::new();
+        // Below the recorder: the log shows what the master sent and received.
+        let transport: Box<dyn CanTransport> = match &opts.bus_faults {
+            Some(faults) => {
+                notes.push(format!(
+                    "bus faults injected (seed {}): transmit {:?}, receive {:?}",
+                    faults.seed, faults.transmit, faults.receive
+                ));
+                Box::new(hal::can::fault_injection::FaultyTransport::new(
+                    transport,
+                    faults.clone(),
+                ))
+            }
+            None => transport,
+        };
         let mut candump = None;
         let transport: Box<dyn CanTransport> = match &opts.candump {
             Some(path) => {
@@ -245,11 +263,12 @@ impl Session {
             ..MasterOptions::default()
         };
         let (machine, startup) = CanMachine::start(&config, transport, sink, options)?;
+        notes.extend(startup.notes.iter().cloned());
         Ok(Self {
             machine: Box::new(machine),
             config,
             scenario,
-            notes: startup.notes.clone(),
+            notes,
             startup: Some(startup),
             plc: None,
             sim,

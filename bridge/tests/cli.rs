@@ -226,6 +226,37 @@ fn run_431_on_the_tilted_plane() {
     assert!(dir.join("TCHPR431.TXT").exists());
 }
 
+/// `--bus-faults`: the same 431 with 1 % of the frames lost between the master and
+/// the simulated drives gives the same angles, and says the faults were on; a bad
+/// specification is refused before anything opens.
+#[test]
+fn run_431_with_injected_bus_faults() {
+    let dir = tmpdir("p431faults");
+    let (out, v) = run_program(
+        &configs().join("programs/431-plane.h"),
+        &configs().join("scenarios/tilted-plane.toml"),
+        &dir,
+        &["--bus-faults", "drop=0.01,seed=3"],
+    );
+    assert!(out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("bus faults injected (seed 3)"), "{stderr}");
+    let v = v.unwrap();
+    assert!((q(&v, 0, "Q158") - 5.0).abs() < 1e-6, "{v}");
+    assert!((q(&v, 0, "Q159") + 3.0).abs() < 1e-6, "{v}");
+
+    let out = bin()
+        .args(["run", "x.h", "--bus-faults", "drop=0.7,duplicate=0.7"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("--bus-faults") && stderr.contains("add up to"),
+        "{stderr}"
+    );
+}
+
 /// Out-of-range values are refused with the line and the range; nothing runs and
 /// nothing is written.
 #[test]

@@ -228,3 +228,95 @@ fn check_refuses_what_run_would_refuse_before_moving() {
     // Nothing was written beside the program or the kinematics file.
     assert!(!dir.join("other.toml.prev").exists());
 }
+
+/// The estimator child killed mid-run (SIGKILL after the first contact): the bridge
+/// starts it again, sends it the sphere's contacts again and repeats the request; the
+/// run completes with the results of an undisturbed run and says what happened.
+#[test]
+fn run_451_restarts_a_killed_estimator_and_gives_the_same_results() {
+    use std::io::{BufRead, BufReader};
+    use std::process::Stdio;
+    let dir = tmpdir("restart451");
+    let scenario = dir.join("scenario.toml");
+    std::fs::write(
+        &scenario,
+        format!(
+            "machine = \"{}\"\n{SCENARIO}",
+            configs().join("machines/table-ac.toml").display()
+        ),
+    )
+    .unwrap();
+    let program = dir.join("k.h");
+    std::fs::write(&program, PROGRAM).unwrap();
+
+    let clean = dir.join("clean");
+    std::fs::create_dir_all(&clean).unwrap();
+    let kin_clean = clean.join("k.toml");
+    let (out, want) = run_program(
+        &program,
+        &scenario,
+        &clean,
+        &["--kinematics", kin_clean.to_str().unwrap()],
+    );
+    assert!(out.status.success());
+    let want = want.unwrap();
+
+    let killed = dir.join("killed");
+    std::fs::create_dir_all(&killed).unwrap();
+    let kin = killed.join("k.toml");
+    let json = killed.join("r.json");
+    let mut child = bin()
+        .args(["run", program.to_str().unwrap()])
+        .args(["--scenario", scenario.to_str().unwrap()])
+        .args(["--out", killed.to_str().unwrap()])
+        .args(["--json", json.to_str().unwrap()])
+        .args([
+            "--service",
+            &format!("pb-cli-restart451-{}", std::process::id()),
+        ])
+        .args(["--presets", killed.join("presets.toml").to_str().unwrap()])
+        .args(["--kinematics", kin.to_str().unwrap()])
+        .stderr(Stdio::piped())
+        .stdout(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut estimator: Option<i32> = None;
+    let mut killed_it = false;
+    let mut said = String::new();
+    for line in BufReader::new(child.stderr.take().unwrap()).lines() {
+        let line = line.unwrap();
+        if let Some(rest) = line.split_once("started the estimator process (pid ") {
+            estimator = rest.1.split(')').next().and_then(|p| p.parse().ok());
+        }
+        if !killed_it && line.contains("contact at") {
+            let pid = estimator.expect("the estimator was started before the first contact");
+            // SAFETY: SIGKILL to the estimator child of the run we started.
+            assert_eq!(unsafe { libc::kill(pid, libc::SIGKILL) }, 0);
+            killed_it = true;
+        }
+        said.push_str(&line);
+        said.push('\n');
+    }
+    let status = child.wait().unwrap();
+    assert!(killed_it, "{said}");
+    assert!(status.success(), "{said}");
+    assert!(
+        said.contains("died during") && said.contains("restarted it (pid"),
+        "{said}"
+    );
+    let got: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let (w, g) = (&want["cycles"][0], &got["cycles"][0]);
+    assert_eq!(g["status"], "ok", "{g}");
+    assert_eq!(w["q"], g["q"]);
+    assert_eq!(w["qs"], g["qs"]);
+    assert_eq!(
+        w["kinematics"]["errors_after"],
+        g["kinematics"]["errors_after"]
+    );
+    assert_eq!(g["kinematics"]["written"], true);
+    assert_eq!(
+        std::fs::read_to_string(&kin_clean).unwrap(),
+        std::fs::read_to_string(&kin).unwrap()
+    );
+}

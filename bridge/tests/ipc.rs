@@ -469,6 +469,44 @@ fn child_entry() {
                 std::thread::park();
             }
         }
+        "pings-then-dies" => {
+            // An estimator that answers pings (so it counts as started) and crashes
+            // on any other request.
+            use probebridge::ipc::{
+                create_node, open_event_service, open_request_service, EstimatorReply, RequestKind,
+            };
+            let node = create_node("pb-test-mortal-estimator").unwrap();
+            let names = ServiceNames::new(prefix).unwrap();
+            let server = open_request_service(&node, &names)
+                .unwrap()
+                .server_builder()
+                .create()
+                .unwrap();
+            let results = open_event_service(&node, &names.results_event)
+                .unwrap()
+                .notifier_builder()
+                .create()
+                .unwrap();
+            loop {
+                while let Some(active) = server.receive().unwrap() {
+                    let request = *active.payload();
+                    if request.request_kind() != Some(RequestKind::Ping) {
+                        std::process::abort();
+                    }
+                    let mut reply = EstimatorReply::new(&request, ReplyStatus::Ok);
+                    reply.server_pid = std::process::id();
+                    active
+                        .loan_uninit()
+                        .unwrap()
+                        .write_payload(reply)
+                        .send()
+                        .unwrap();
+                    drop(active);
+                    results.notify().unwrap();
+                }
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        }
         other => panic!("unknown child role {other}"),
     }
 }
@@ -591,6 +629,81 @@ fn a_killed_estimator_ends_a_pending_request_at_once_not_at_its_timeout() {
     // Dropping the handle neither hangs nor leaves the zombie behind.
     drop(child);
     assert!(!std::path::Path::new(&format!("/proc/{pid}")).exists());
+}
+
+/// Contacts on a sphere of radius 20 around (0, 0, 100), as a cycle holds them.
+fn sphere_contacts() -> Vec<hal::Contact> {
+    let mut out = Vec::new();
+    for (i, (a, b)) in [
+        (0.0f64, 0.0f64),
+        (90.0, 0.0),
+        (180.0, 0.0),
+        (270.0, 0.0),
+        (0.0, 60.0),
+        (120.0, 45.0),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let (a, b) = (a.to_radians(), b.to_radians());
+        let p = [
+            20.0 * b.cos() * a.cos(),
+            20.0 * b.cos() * a.sin(),
+            100.0 + 20.0 * b.sin(),
+        ];
+        out.push(hal::Contact {
+            positions: hal::AxisPositions::linear(p),
+            trigger_ns: i as u64,
+            sequence: i as u64 + 1,
+            direction: [0.0, 0.0, -1.0],
+        });
+    }
+    out
+}
+
+/// The estimator child died (killed here, before the request): the request finds
+/// it dead, starts it again, sends the run's contacts again and gets the same sphere.
+#[test]
+fn a_dead_estimator_child_is_restarted_and_the_request_repeated() {
+    use cycles::kinematics::Estimator;
+    let prefix = unique_prefix("restart");
+    let mut child =
+        EstimatorChild::spawn_command(child_command("estimator", &prefix), &prefix, T).unwrap();
+    let first = child.id();
+    // SAFETY: SIGKILL to the child we started.
+    assert_eq!(unsafe { libc::kill(first as i32, libc::SIGKILL) }, 0);
+    let contacts = sphere_contacts();
+    let mut est = probebridge::ipc::IpcEstimator::restartable(&mut child, T);
+    let fit = est.fit_sphere(42, &contacts).unwrap();
+    assert_eq!(est.restarts, 1);
+    assert!((fit.radius - 20.0).abs() < 1e-9, "{fit:?}");
+    assert!((fit.centre.z - 100.0).abs() < 1e-9, "{fit:?}");
+    drop(est);
+    assert_ne!(child.id(), first, "a new process serves");
+    assert!(!std::path::Path::new(&format!("/proc/{first}")).exists());
+}
+
+/// A restarted estimator that dies again in the same request: the request fails and
+/// says so; there is no third try.
+#[test]
+fn a_second_death_in_the_same_request_fails_it_clearly() {
+    use cycles::kinematics::Estimator;
+    let prefix = unique_prefix("restart2");
+    let mut child =
+        EstimatorChild::spawn_command(child_command("pings-then-dies", &prefix), &prefix, T)
+            .unwrap();
+    // SAFETY: SIGKILL to the child we started.
+    assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGKILL) }, 0);
+    let mut est = probebridge::ipc::IpcEstimator::restartable(&mut child, T);
+    let t0 = Instant::now();
+    // The restarted one crashes on the repeated request.
+    let e = est
+        .fit_sphere(43, &sphere_contacts())
+        .unwrap_err()
+        .to_string();
+    assert_eq!(est.restarts, 1);
+    assert!(e.contains("already been restarted once"), "{e}");
+    assert!(t0.elapsed() < T, "noticed at once, not at the timeout");
 }
 
 #[test]

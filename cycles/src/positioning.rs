@@ -66,14 +66,31 @@ impl<M: Machine> Positioner<'_, M> {
             direction,
             max_distance,
         });
-        let contact = self
-            .machine
-            .probe(&mv)
-            .map_err(|e| CycleError::machine(step, &e))?;
+        let contact =
+            probe_again_if_lost(self.machine, &mv).map_err(|e| CycleError::machine(step, &e))?;
         (self.progress)(ProgressEvent::Contact {
             block: self.block,
             centre: contact.positions.xyz(),
         });
         Ok(contact)
+    }
+}
+
+/// A probing move. When the probe touched but the contact's data was lost on its way
+/// ([`hal::ErrorKind::ContactLost`]: the machine braked and is fine), back along the
+/// path to where the move started, at the probing feed, and probe once more. A second
+/// loss, or any other error, is the caller's.
+pub(crate) fn probe_again_if_lost<M: Machine + ?Sized>(
+    machine: &mut M,
+    mv: &ProbeMove,
+) -> Result<Contact, M::Error> {
+    use hal::machine::Error as _;
+    let start = machine.positions()?;
+    match machine.probe(mv) {
+        Err(e) if e.kind() == hal::ErrorKind::ContactLost => {
+            machine.move_to(&start, mv.feed)?;
+            machine.probe(mv)
+        }
+        r => r,
     }
 }

@@ -66,6 +66,28 @@ fn every_machine_error_ends_the_program_at_that_cycle() {
 }
 
 #[test]
+fn a_contact_lost_in_transfer_is_probed_again_from_the_start_of_its_move() {
+    let mut clean = MockMachine::new(flat());
+    let (want, _) = common::run(
+        &three_points(),
+        &mut clean,
+        &common::temp_dir("run-clean"),
+        true,
+    );
+    let mut m = MockMachine::new(flat());
+    m.fail_probe = Some((1, ErrorKind::ContactLost));
+    let (report, _) = common::run(&three_points(), &mut m, &common::temp_dir("run-lost"), true);
+    assert!(report.completed(), "{}", report.to_json());
+    for (w, g) in want.cycles.iter().zip(&report.cycles) {
+        assert_eq!(w.q, g.q);
+    }
+    // One probing move more, the same move again, after a move back to its start.
+    assert_eq!(m.probes.len(), clean.probes.len() + 1);
+    assert_eq!(m.probes[1], m.probes[2]);
+    assert_eq!(m.moves.len(), clean.moves.len() + 1);
+}
+
+#[test]
 fn surface_out_of_reach_is_probe_did_not_trigger() {
     let mut m = MockMachine::new(vec![Surface::Plane {
         point: Vector3::new(0.0, 0.0, -50.0),

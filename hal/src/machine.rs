@@ -25,6 +25,10 @@ pub enum ErrorKind {
     SoftwareLimit,
     /// The transport failed (socket error, bus off, queue overrun).
     Bus,
+    /// The probe touched, but the data of the contact was lost on its way (a latch
+    /// frame lost on the bus): the axes were braked and the machine is fine, so the
+    /// probing move may be made again from where it started.
+    ContactLost,
     /// The request itself is invalid (unknown axis, zero direction, bad feed).
     InvalidRequest,
     /// The operator stopped the machine (a signal, a stop request): motion was braked,
@@ -45,6 +49,7 @@ impl ErrorKind {
             ErrorKind::Timeout => "timeout",
             ErrorKind::SoftwareLimit => "software limit",
             ErrorKind::Bus => "bus error",
+            ErrorKind::ContactLost => "contact lost in transfer",
             ErrorKind::InvalidRequest => "invalid request",
             ErrorKind::Aborted => "aborted",
             ErrorKind::Other => "error",

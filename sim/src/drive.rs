@@ -592,6 +592,12 @@ impl SimDrive {
         self.send_emcy(tx);
     }
 
+    /// The node restarts on its own (a watchdog reset, a power dip): as an NMT reset
+    /// node, it sends its boot-up and is pre-operational with its defaults.
+    pub fn reboot(&mut self, tx: &mut dyn FnMut(&CanFrame)) {
+        self.on_nmt(NmtCommand::ResetNode, tx);
+    }
+
     fn on_nmt(&mut self, cmd: NmtCommand, tx: &mut dyn FnMut(&CanFrame)) {
         match cmd {
             NmtCommand::Start => self.nmt = NmtState::Operational,

@@ -297,6 +297,7 @@ impl SimMachine {
                 match f.kind {
                     FaultKind::Emcy => d.drive.raise_fault(f.code),
                     FaultKind::Silent => d.drive.silent = true,
+                    FaultKind::Reboot => d.drive.reboot(tx),
                 }
             }
         }

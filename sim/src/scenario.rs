@@ -238,6 +238,9 @@ pub enum FaultKind {
     Emcy,
     /// The node stops answering (no heartbeat, no PDO, no SDO).
     Silent,
+    /// The node restarts (as after a watchdog reset or a power dip): boot-up frame,
+    /// configuration back to defaults, pre-operational.
+    Reboot,
 }
 
 /// A fault the drive simulation injects.

@@ -288,10 +288,7 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
         }
     };
     let mut confirm = |_: &str| true;
-    let mut ipc = IpcEstimator {
-        client: estimator.client(),
-        timeout: Duration::from_secs(10),
-    };
+    let mut ipc = IpcEstimator::new(estimator.client(), Duration::from_secs(10));
     let t0 = std::time::Instant::now();
     let mut run = RunOptions {
         out_dir: dir.clone(),

@@ -80,7 +80,7 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     // Cycle 451 fits its spheres and solves its identification in the estimator
     // process: use the one serving this prefix, or start one. It must subscribe before
     // the first contact is published (no probing move has run yet).
-    let estimator = if program.cycles().any(|c| c.head.cycle == 451) {
+    let mut estimator = if program.cycles().any(|c| c.head.cycle == 451) {
         estimator_link(&args.machine.service)
     } else {
         None
@@ -134,9 +134,10 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
         kinematics: args.kinematics.clone(),
         estimator: None,
     };
-    let mut ipc = estimator.as_ref().map(|e| IpcEstimator {
-        client: e.client(),
-        timeout: ESTIMATOR_TIMEOUT,
+    let mut ipc = estimator.as_mut().map(|e| match e {
+        EstimatorLink::Running(c) => IpcEstimator::new(c, ESTIMATOR_TIMEOUT),
+        // Ours: started again if it dies during a request.
+        EstimatorLink::Child(c) => IpcEstimator::restartable(c, ESTIMATOR_TIMEOUT),
     });
     if let Some(e) = ipc.as_mut() {
         opts.estimator = Some(e);
@@ -173,15 +174,6 @@ enum EstimatorLink {
     Running(EstimatorClient),
     /// Started by this run; stops with it.
     Child(EstimatorChild),
-}
-
-impl EstimatorLink {
-    fn client(&self) -> &EstimatorClient {
-        match self {
-            EstimatorLink::Running(c) => c,
-            EstimatorLink::Child(c) => c.client(),
-        }
-    }
 }
 
 /// Connects to the estimator on `prefix`, or starts one as a child process. Without

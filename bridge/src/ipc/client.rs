@@ -255,6 +255,50 @@ impl core::fmt::Debug for EstimatorClient {
 pub struct EstimatorChild {
     client: Option<EstimatorClient>,
     child: Child,
+    /// How it was started, to start it again ([`EstimatorChild::restart`]).
+    recipe: Recipe,
+}
+
+/// A [`Command`] taken apart (it cannot be cloned), to build it again.
+#[derive(Clone, Debug)]
+struct Recipe {
+    program: std::ffi::OsString,
+    args: Vec<std::ffi::OsString>,
+    envs: Vec<(std::ffi::OsString, Option<std::ffi::OsString>)>,
+    dir: Option<std::path::PathBuf>,
+    prefix: String,
+    timeout: Duration,
+}
+
+impl Recipe {
+    fn of(c: &Command, prefix: &str, timeout: Duration) -> Self {
+        Self {
+            program: c.get_program().to_owned(),
+            args: c.get_args().map(ToOwned::to_owned).collect(),
+            envs: c
+                .get_envs()
+                .map(|(k, v)| (k.to_owned(), v.map(ToOwned::to_owned)))
+                .collect(),
+            dir: c.get_current_dir().map(ToOwned::to_owned),
+            prefix: prefix.to_string(),
+            timeout,
+        }
+    }
+
+    fn command(&self) -> Command {
+        let mut c = Command::new(&self.program);
+        c.args(&self.args);
+        for (k, v) in &self.envs {
+            match v {
+                Some(v) => c.env(k, v),
+                None => c.env_remove(k),
+            };
+        }
+        if let Some(d) = &self.dir {
+            c.current_dir(d);
+        }
+        c
+    }
 }
 
 impl EstimatorChild {
@@ -273,6 +317,7 @@ impl EstimatorChild {
         prefix: &str,
         timeout: Duration,
     ) -> Result<Self, IpcError> {
+        let recipe = Recipe::of(&command, prefix, timeout);
         // Open the client first, so a failure there does not leave a child behind.
         let client = EstimatorClient::open(prefix)?;
         // The estimator ends with the thread that started it, even when this process
@@ -290,6 +335,7 @@ impl EstimatorChild {
         let mut this = Self {
             client: Some(client),
             child,
+            recipe,
         };
         let child = &mut this.child;
         let ready = this
@@ -319,6 +365,25 @@ impl EstimatorChild {
     /// `Some(status)` if the process has exited.
     pub fn try_wait(&mut self) -> Result<Option<std::process::ExitStatus>, IpcError> {
         Ok(self.child.try_wait()?)
+    }
+
+    /// Starts the estimator again, as it was started, in place of this one (which
+    /// is killed if it still runs, and reaped); the resources the dead one left in
+    /// iceoryx2 are removed first, so the new one can serve the same prefix. The new
+    /// estimator knows nothing of the old one's samples and sessions.
+    pub fn restart(&mut self) -> Result<(), IpcError> {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+        }
+        let _ = self.child.wait();
+        self.client = None;
+        let _ = remove_stale_resources(Duration::from_millis(500));
+        let r = &self.recipe;
+        let fresh = Self::spawn_command(r.command(), &r.prefix.clone(), r.timeout)?;
+        // The old handle's process is reaped and its client closed: dropping it
+        // does nothing more.
+        let _old = std::mem::replace(self, fresh);
+        Ok(())
     }
 }
 

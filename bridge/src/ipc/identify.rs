@@ -27,8 +27,8 @@ use hal::Contact;
 use nalgebra::Vector3;
 
 use super::{
-    EstimatorClient, EstimatorReply, EstimatorRequest, IpcError, ReplyStatus, RequestKind,
-    REPLY_VALUES, REQUEST_PARAMS,
+    ContactPublisher, EstimatorChild, EstimatorClient, EstimatorReply, EstimatorRequest, IpcError,
+    ReplyStatus, RequestKind, REPLY_VALUES, REQUEST_PARAMS,
 };
 
 /// Values of input per [`RequestKind::IdentifyData`] request (`params[0]` is the offset).
@@ -227,42 +227,143 @@ impl EstimatorClient {
     }
 }
 
+/// The estimator process a cycle talks to.
+enum Source<'a> {
+    /// Serving already (a daemon, another bridge's): used as it is.
+    Client(&'a EstimatorClient),
+    /// Started by this bridge: started again when it dies.
+    Child(&'a mut EstimatorChild),
+}
+
 /// The cycle's estimator when the estimator process is there: spheres and
 /// identification over iceoryx2.
+///
+/// An estimator this bridge started ([`IpcEstimator::restartable`]) that dies during a
+/// request is started again once per request, and the request repeated: the bridge
+/// still holds everything the request needs (the contacts of the sphere, sent again;
+/// the whole identification input). A second death in the same request fails it. An
+/// estimator that is not ours is not restarted: its death fails the request.
 pub struct IpcEstimator<'a> {
-    pub client: &'a EstimatorClient,
+    source: Source<'a>,
     /// Longest wait for one answer; a sphere fit also waits this long for the last
     /// samples of its run to arrive.
     pub timeout: Duration,
+    /// Restarts so far (each one said on stderr).
+    pub restarts: u32,
+    /// Sends contacts again to a restarted estimator; kept, so the samples stay
+    /// readable until the estimator has taken them.
+    resend: Option<ContactPublisher>,
 }
 
-impl IpcEstimator<'_> {
+/// How one try of a request failed.
+enum Failure {
+    /// The estimator process ended (or is gone from the service): a restart may help.
+    Died(IpcError),
+    Other(EstimatorError),
+}
+
+impl<'a> IpcEstimator<'a> {
+    /// The estimator serving `client`'s prefix, not restarted when it dies.
+    pub fn new(client: &'a EstimatorClient, timeout: Duration) -> Self {
+        Self {
+            source: Source::Client(client),
+            timeout,
+            restarts: 0,
+            resend: None,
+        }
+    }
+
+    /// The estimator child this bridge started, restarted when it dies.
+    pub fn restartable(child: &'a mut EstimatorChild, timeout: Duration) -> Self {
+        Self {
+            source: Source::Child(child),
+            timeout,
+            restarts: 0,
+            resend: None,
+        }
+    }
+
+    fn client(&self) -> &EstimatorClient {
+        match &self.source {
+            Source::Client(c) => c,
+            Source::Child(c) => c.client(),
+        }
+    }
+
     fn transport(&self, e: impl core::fmt::Display) -> EstimatorError {
         EstimatorError::Transport {
             estimator: self.name(),
             message: e.to_string(),
         }
     }
-}
 
-impl Estimator for IpcEstimator<'_> {
-    fn name(&self) -> String {
-        format!("estimator process ({})", self.client.names().prefix)
+    fn failure(&self, e: IpcError) -> Failure {
+        match e {
+            IpcError::Died { .. } | IpcError::Dropped(_) | IpcError::NoEstimator(_) => {
+                Failure::Died(e)
+            }
+            e => Failure::Other(self.transport(e)),
+        }
     }
 
-    fn fit_sphere(
+    /// Runs `request` and, when the estimator died during it, restarts the estimator,
+    /// calls `again` (to give the new one what the request needs) and repeats it once.
+    fn with_restart<T>(
         &mut self,
-        run_id: u64,
-        contacts: &[Contact],
-    ) -> Result<SphereFit, EstimatorError> {
+        what: &str,
+        mut request: impl FnMut(&Self) -> Result<T, Failure>,
+        mut again: impl FnMut(&mut Self) -> Result<(), IpcError>,
+    ) -> Result<T, EstimatorError> {
+        let died = match request(self) {
+            Ok(v) => return Ok(v),
+            Err(Failure::Other(e)) => return Err(e),
+            Err(Failure::Died(e)) => e,
+        };
+        let Source::Child(child) = &mut self.source else {
+            return Err(self.transport(format!(
+                "{died}; it was not started by this bridge, so it is not restarted"
+            )));
+        };
+        let old = child.id();
+        if let Err(e) = child.restart() {
+            return Err(self.transport(format!(
+                "{died}; restarting it failed: {e}; nothing was computed from the interrupted {what}"
+            )));
+        }
+        self.restarts += 1;
+        tell!(
+            "estimator: the estimator process (pid {old}) died during {what}; restarted it (pid {}) and repeating the request",
+            self.client_pid()
+        );
+        let repeated = again(self)
+            .map_err(|e| self.failure(e))
+            .and_then(|()| request(self));
+        match repeated {
+            Ok(v) => Ok(v),
+            Err(Failure::Other(e)) => Err(e),
+            Err(Failure::Died(e)) => Err(self.transport(format!(
+                "{e}; it had already been restarted once during this {what}: giving up, nothing was computed from it"
+            ))),
+        }
+    }
+
+    fn client_pid(&self) -> u32 {
+        match &self.source {
+            Source::Child(c) => c.id(),
+            Source::Client(_) => 0,
+        }
+    }
+
+    /// One try: asks until the estimator has all `contacts` of the run.
+    fn fit_once(&self, run_id: u64, contacts: &[Contact]) -> Result<SphereFit, Failure> {
         // The samples travel through the forwarder and iceoryx2 while the cycle goes
         // on: ask until the estimator has all of them.
         let deadline = Instant::now() + self.timeout;
         loop {
             let fit = self
-                .client
+                .client()
                 .fit_sphere(run_id, self.timeout)
-                .map_err(|e| self.transport(e))?;
+                .map_err(|e| self.failure(e))?;
             let complete = fit.ok && fit.n_points as usize >= contacts.len();
             let waiting = matches!(
                 fit.error,
@@ -278,7 +379,7 @@ impl Estimator for IpcEstimator<'_> {
                 });
             }
             if !waiting || Instant::now() >= deadline {
-                return Err(self.transport(format!(
+                return Err(Failure::Other(self.transport(format!(
                     "sphere fit of run {run_id}: {} ({} of {} contacts arrived)",
                     if fit.ok {
                         "incomplete".into()
@@ -287,20 +388,75 @@ impl Estimator for IpcEstimator<'_> {
                     },
                     fit.n_points,
                     contacts.len()
-                )));
+                ))));
             }
             std::thread::sleep(Duration::from_millis(2));
         }
+    }
+}
+
+/// The contacts of a run as the samples the real-time loop published for them, sent
+/// again to a restarted estimator (which lost the first ones).
+fn send_again(
+    publisher: &mut Option<ContactPublisher>,
+    prefix: &str,
+    run_id: u64,
+    contacts: &[Contact],
+) -> Result<(), IpcError> {
+    if publisher.is_none() {
+        *publisher = Some(ContactPublisher::new(prefix)?);
+    }
+    let Some(publisher) = publisher.as_mut() else {
+        return Ok(());
+    };
+    for c in contacts {
+        let mut s = hal::ContactSample::zeroed();
+        s.sequence = c.sequence;
+        s.run_id = run_id;
+        s.trigger_ns = c.trigger_ns;
+        s.positions = c.positions.raw();
+        s.axis_mask = u32::from(c.positions.mask());
+        s.direction = c.direction;
+        s.flags = hal::contact_sample::FLAG_HW_LATCH;
+        hal::SampleSink::publish(publisher, &s).map_err(|e| {
+            IpcError::Process(format!("sending contact {} again: {e:?}", c.sequence))
+        })?;
+    }
+    Ok(())
+}
+
+impl Estimator for IpcEstimator<'_> {
+    fn name(&self) -> String {
+        format!("estimator process ({})", self.client().names().prefix)
+    }
+
+    fn fit_sphere(
+        &mut self,
+        run_id: u64,
+        contacts: &[Contact],
+    ) -> Result<SphereFit, EstimatorError> {
+        let prefix = self.client().names().prefix.clone();
+        self.with_restart(
+            &format!("the sphere fit of run {run_id}"),
+            |me| me.fit_once(run_id, contacts),
+            |me| send_again(&mut me.resend, &prefix, run_id, contacts),
+        )
     }
 
     fn identify(
         &mut self,
         input: &IdentificationInput,
     ) -> Result<IdentificationResult, EstimatorError> {
-        self.client
-            .identify(input, self.timeout)
-            .map_err(|e| self.transport(e))?
-            .map_err(EstimatorError::Identification)
+        let timeout = self.timeout;
+        self.with_restart(
+            "the identification",
+            |me| match me.client().identify(input, timeout) {
+                Ok(r) => r.map_err(|e| Failure::Other(EstimatorError::Identification(e))),
+                Err(e) => Err(me.failure(e)),
+            },
+            // The whole input goes up again with the repeated request.
+            |_| Ok(()),
+        )
     }
 }
 

@@ -285,6 +285,7 @@ impl GatewayConfig {
             realtime: self.machine.realtime,
             service: self.machine.service.clone(),
             candump: None,
+            bus_faults: None,
             // serve aborts through its own gate between moves (serve::abortable).
             abort: None,
         }

@@ -175,10 +175,7 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
         kinematics: cfg.machine.kinematics.clone(),
         estimator: None,
     };
-    let mut ipc = estimator.map(|e| IpcEstimator {
-        client: e.client(),
-        timeout: ESTIMATOR_TIMEOUT,
-    });
+    let mut ipc = estimator.map(|e| IpcEstimator::new(e.client(), ESTIMATOR_TIMEOUT));
     if let Some(e) = ipc.as_mut() {
         opts.estimator = Some(e);
     }

@@ -330,14 +330,15 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
             direction,
             max_distance: max,
         });
-        let c = self
-            .machine
-            .probe(&ProbeMove {
+        let c = crate::positioning::probe_again_if_lost(
+            self.machine,
+            &ProbeMove {
                 direction,
                 feed: self.probe.f,
                 max_distance: max,
-            })
-            .map_err(|e| CycleError::machine(step, &e))?;
+            },
+        )
+        .map_err(|e| CycleError::machine(step, &e))?;
         (self.ctx.progress)(ProgressEvent::Contact {
             block: self.block,
             centre: c.positions.xyz(),

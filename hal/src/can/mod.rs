@@ -2,6 +2,7 @@
 //! never touches a socket; a transport only moves frames.
 
 pub mod candump;
+pub mod fault_injection;
 mod frame;
 pub mod inproc;
 pub mod record;

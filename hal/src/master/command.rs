@@ -89,6 +89,10 @@ pub enum Detail {
     Busy,
     Stopped,
     Aborted,
+    /// The node sent a boot-up: it restarted and lost its configuration.
+    Restarted,
+    /// Some drives reported the contact, this node's latch never came.
+    LatchLost,
 }
 
 impl RtError {
@@ -138,6 +142,14 @@ impl From<RtError> for MachineError {
             Detail::Busy => "a command is already running".into(),
             Detail::Stopped => "the real-time loop has stopped".into(),
             Detail::Aborted => "stop requested; all axes braked".into(),
+            Detail::Restarted => format!(
+                "node {} restarted (boot-up received): its configuration is lost; all axes stopped",
+                e.node.unwrap_or(0)
+            ),
+            Detail::LatchLost => format!(
+                "contact reported, but the latch frame of node {} did not arrive (lost on the bus); all axes braked",
+                e.node.unwrap_or(0)
+            ),
         };
         let mut m = MachineError::new(e.kind, message);
         m.node = e.node;

@@ -305,6 +305,13 @@ fn run_thread<T: CanTransport, S: SampleSink>(
     // The startup Ready/Error goes out like any reply.
     let mut shutdown_cycles = 0;
     let lockstep = matches!(rt.pacing(), Pacing::Lockstep { .. });
+    // Periods in a row with a failing transport before the loop gives up: the
+    // heartbeat timeout, within which the drives still count on us.
+    let mut failing = 0u64;
+    let give_up_after = {
+        let c = rt.rt().config();
+        (c.heartbeat_timeout_ns / c.period_ns.max(1)).max(10)
+    };
     loop {
         if lockstep && !rt.is_busy() && !rt.is_shut_down() {
             // On a virtual clock nothing happens between commands: wait for one
@@ -317,17 +324,30 @@ fn run_thread<T: CanTransport, S: SampleSink>(
         } else if let Ok(cmd) = commands.try_recv() {
             rt.submit(cmd);
         }
-        if let Err(e) = rt.cycle() {
-            let _ = replies.try_send(Reply::Error(RtError::new(
-                ErrorKind::Bus,
-                Detail::Transport,
-            )));
-            // A closed or full stderr must not panic the loop thread.
-            let _ = writeln!(
-                std::io::stderr(),
-                "probebridge: real-time loop stopped: {e}"
-            );
-            return;
+        match rt.cycle() {
+            Ok(()) => failing = 0,
+            Err(e) => {
+                // The loop has faulted and brakes: keep cycling, so the braking
+                // setpoints reach the drives once the transport takes frames again
+                // (a bus-off recovers, a queue drains). A transport that stays down
+                // longer than the heartbeat timeout is given up.
+                if failing == 0 {
+                    // A closed or full stderr must not panic the loop thread.
+                    let _ = writeln!(std::io::stderr(), "probebridge: CAN transport failed: {e}");
+                }
+                failing += 1;
+                if failing > give_up_after {
+                    let _ = replies.try_send(Reply::Error(RtError::new(
+                        ErrorKind::Bus,
+                        Detail::Transport,
+                    )));
+                    let _ = writeln!(
+                        std::io::stderr(),
+                        "probebridge: real-time loop stopped: the transport failed for {failing} periods in a row ({e})"
+                    );
+                    return;
+                }
+            }
         }
         if let Some(r) = rt.take_reply() {
             let _ = replies.try_send(r);

@@ -119,23 +119,61 @@ impl<T: CanTransport, S: SampleSink> PacedLoop<T, S> {
     }
 
     /// One SYNC period: take in what the drives sent, tick, send setpoints and SYNC.
+    ///
+    /// A transport error does not end the period: the core is told (it faults and
+    /// brakes), the period still ticks on the grid, and the error is returned for the
+    /// driver to decide how long to keep trying.
     pub fn cycle(&mut self) -> Result<(), TransportError> {
-        let now = match self.rt.config().pacing {
-            Pacing::Lockstep { answer_timeout } => self.gather_lockstep(answer_timeout)?,
-            Pacing::RealTime => self.gather_real_time()?,
+        let gathered = match self.rt.config().pacing {
+            Pacing::Lockstep { answer_timeout } => self.gather_lockstep(answer_timeout),
+            Pacing::RealTime => self.gather_real_time(),
+        };
+        let mut failed = None;
+        let now = match gathered {
+            Ok(now) => now,
+            Err(e) => {
+                self.rt.transport_failed();
+                failed = Some(e);
+                self.next_tick_after_failure()
+            }
         };
         self.rt.tick(now, &mut self.frames);
         if let Pacing::Lockstep { .. } = self.rt.config().pacing {
             self.transport.advance_virtual_clock(now);
         }
-        self.transport.transmit_all(&self.frames)?;
+        if let Err(e) = self.transport.transmit_all(&self.frames) {
+            // The rest of this period's frames would fail the same way.
+            self.rt.transport_failed();
+            failed.get_or_insert(e);
+        }
         let sent = match self.rt.config().pacing {
             Pacing::RealTime => monotonic_ns(),
             Pacing::Lockstep { .. } => now,
         };
         self.rt.frames_sent(sent);
         self.slots += 1;
-        Ok(())
+        failed.map_or(Ok(()), Err)
+    }
+
+    /// The time of the next tick when receiving failed: one period on (lockstep), or
+    /// the next slot of the grid, waited for (real time), so a failing transport does
+    /// not spin the loop.
+    fn next_tick_after_failure(&mut self) -> u64 {
+        let period = self.rt.config().period_ns;
+        match self.rt.config().pacing {
+            Pacing::Lockstep { .. } => self.rt.now_ns() + period,
+            Pacing::RealTime => {
+                let (deadline, missed) =
+                    next_slot(self.epoch_ns, self.slots, period, monotonic_ns());
+                self.slots += missed;
+                self.skipped_cycles += missed;
+                let now = monotonic_ns();
+                if deadline > now {
+                    std::thread::sleep(Duration::from_nanos(deadline - now));
+                }
+                monotonic_ns()
+            }
+        }
     }
 
     /// Waits (wall clock, at most `answer_timeout`) for every drive's answer to the last

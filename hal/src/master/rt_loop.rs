@@ -19,6 +19,7 @@ use crate::can::CanFrame;
 use crate::canopen::cob_id::{self, CobKind};
 use crate::canopen::emcy::Emcy;
 use crate::canopen::heartbeat::{HeartbeatConsumer, HeartbeatEvent};
+use crate::canopen::nmt::{self, NmtCommand};
 use crate::canopen::sync;
 use crate::cia402::controlword::Controlword;
 use crate::cia402::state::State;
@@ -32,8 +33,18 @@ use crate::motion_guard::{may_start_deflected, ProbeInput};
 
 pub use super::pacing::Pacing;
 
-/// Most frames one tick sends: RPDO1 and RPDO2 of every drive, then SYNC.
-pub const MAX_TICK_FRAMES: usize = 2 * MAX_AXES + 1;
+/// Most frames one tick sends: RPDO1 and RPDO2 of every drive, a repeated NMT start
+/// while enabling, then SYNC.
+pub const MAX_TICK_FRAMES: usize = 2 * MAX_AXES + 2;
+
+/// While enabling, a drive that has not sent its TPDO1 for this long gets the NMT
+/// start again (the first may have been lost on the bus; a started node ignores it).
+const NMT_START_REPEAT_NS: u64 = 100_000_000;
+
+/// Cycles a contact may wait for the latch frames of the other drives: all drives
+/// latch on the same probe signal and answer in the same SYNC period, so a latch still
+/// missing after this was lost.
+const LATCH_WAIT_CYCLES: u8 = 2;
 
 /// The frames of one tick, in sending order (fixed capacity: no allocation).
 pub type TickFrames = heapless::Vec<CanFrame, MAX_TICK_FRAMES>;
@@ -143,6 +154,13 @@ impl DriveLink {
     }
 }
 
+/// The drive reported touch probe 1 enabled with no edge stored, since it was last
+/// enabled.
+fn is_armed(d: &DriveLink) -> bool {
+    let s = TouchProbeStatus::from_bits(d.tp_status);
+    d.tp_status_fresh && s.enabled(Probe::One) && !s.positive_edge_stored(Probe::One)
+}
+
 #[derive(Clone, Copy, Debug)]
 enum ArmStage {
     Disarm,
@@ -242,6 +260,15 @@ pub struct RtLoop<S: SampleSink> {
     /// was in contact before anything moved). See [`RtLoop::deflected_move`].
     deflected_along: Option<[f64; 3]>,
     stats: LoopStats,
+    /// Enabling: when the NMT start was last repeated; due to go out with this tick.
+    nmt_start_at_ns: u64,
+    nmt_start_due: bool,
+    /// Arming: cycles waited for the drives to report armed since the last enable.
+    arm_waits: u32,
+    /// Arming again after a wait: only the drives that did not report armed.
+    arm_retry: bool,
+    /// Probing: cycles since the first latch of a contact arrived.
+    latch_waits: u8,
 }
 
 impl<S: SampleSink> RtLoop<S> {
@@ -282,6 +309,11 @@ impl<S: SampleSink> RtLoop<S> {
             contact: None,
             deflected_along: None,
             stats: LoopStats::default(),
+            nmt_start_at_ns: now_ns,
+            nmt_start_due: false,
+            arm_waits: 0,
+            arm_retry: false,
+            latch_waits: 0,
         }
     }
 
@@ -319,8 +351,14 @@ impl<S: SampleSink> RtLoop<S> {
     }
 
     /// The driver stops waiting for this SYNC's answers: drives that did not answer
-    /// are not waited for again until they do (their heartbeat decides).
+    /// are not waited for again until they do (their heartbeat decides). When no drive
+    /// answered (the SYNC was lost, or the simulation is late), all are waited for
+    /// again: with none to wait for, a lockstep loop would run ahead of the drives'
+    /// clock and take their heartbeats for lost.
     pub fn stop_waiting_for_answers(&mut self) {
+        if !self.drives.iter().any(|d| d.answered) {
+            return;
+        }
         for d in self.drives.iter_mut() {
             if !d.answered {
                 d.silent = true;
@@ -386,6 +424,7 @@ impl<S: SampleSink> RtLoop<S> {
                 max_distance,
                 run_id,
             } => {
+                self.arm_retry = false;
                 self.activity = Activity::Arming {
                     stage: ArmStage::Disarm,
                     since_ns: self.sync_ns,
@@ -538,7 +577,18 @@ impl<S: SampleSink> RtLoop<S> {
                 }
             }
             CobKind::Heartbeat { .. } => {
-                self.heartbeat.on_frame(f, self.supervised_ns);
+                if let Some(HeartbeatEvent::BootUp { node }) =
+                    self.heartbeat.on_frame(f, self.supervised_ns)
+                {
+                    // A drive of ours booted again: its PDO mapping and cycle settings
+                    // are back to defaults and it is no longer operational. Nothing it
+                    // reports from now on can be trusted.
+                    if self.drive_index(node).is_some() {
+                        self.set_fault(
+                            RtError::new(ErrorKind::NodeLost, Detail::Restarted).node(node),
+                        );
+                    }
+                }
             }
             _ => {}
         }
@@ -723,6 +773,13 @@ impl<S: SampleSink> RtLoop<S> {
         }
     }
 
+    /// The transport failed (bus-off, overrun, socket error): frames may be lost in
+    /// both directions, so stop everything as for a drive fault; the braking setpoints
+    /// go out as soon as the transport takes frames again.
+    pub fn transport_failed(&mut self) {
+        self.set_fault(RtError::new(ErrorKind::Bus, Detail::Transport));
+    }
+
     /// Supervision: a node whose heartbeat is missing, or a drive showing the fault
     /// bit (EMCYs are handled as they arrive), faults the machine.
     pub fn supervise(&mut self) {
@@ -843,6 +900,13 @@ impl<S: SampleSink> RtLoop<S> {
                 None => all = false,
             }
         }
+        if !all
+            && self.drives.iter().any(|d| !d.seen_tpdo1)
+            && now.saturating_sub(self.nmt_start_at_ns) >= NMT_START_REPEAT_NS
+        {
+            self.nmt_start_at_ns = now;
+            self.nmt_start_due = true;
+        }
         if all {
             self.hold_all();
             self.activity = Activity::Idle;
@@ -872,26 +936,36 @@ impl<S: SampleSink> RtLoop<S> {
     fn arm(&mut self, stage: ArmStage, since_ns: u64, request: ProbeRequest, now: u64) {
         let next = match stage {
             ArmStage::Disarm => {
-                for d in self.drives.iter_mut() {
+                let retry = self.arm_retry;
+                for d in self.drives.iter_mut().filter(|d| !(retry && is_armed(d))) {
                     d.tp_function = 0;
                     d.latch_inc = None;
                 }
                 ArmStage::Enable
             }
             ArmStage::Enable => {
-                for d in self.drives.iter_mut() {
+                let retry = self.arm_retry;
+                for d in self.drives.iter_mut().filter(|d| !(retry && is_armed(d))) {
                     d.tp_function = TouchProbeFunction::probe1_first_positive_edge();
                     d.tp_status_fresh = false;
                 }
+                self.arm_waits = 0;
                 ArmStage::WaitArmed
             }
-            ArmStage::WaitArmed => ArmStage::WaitArmed,
+            ArmStage::WaitArmed => {
+                self.arm_waits += 1;
+                // The touch probe function or the drive's answer (both sent once, on
+                // change) may have been lost: disarm and enable again the drives that
+                // did not report armed, which makes them report their status anew.
+                if u64::from(self.arm_waits) * self.cfg.period_ns >= self.cfg.arm_timeout_ns / 4 {
+                    self.arm_retry = true;
+                    ArmStage::Disarm
+                } else {
+                    ArmStage::WaitArmed
+                }
+            }
         };
-        let armed = matches!(stage, ArmStage::WaitArmed)
-            && self.drives.iter().all(|d| {
-                let s = TouchProbeStatus::from_bits(d.tp_status);
-                d.tp_status_fresh && s.enabled(Probe::One) && !s.positive_edge_stored(Probe::One)
-            });
+        let armed = matches!(stage, ArmStage::WaitArmed) && self.drives.iter().all(is_armed);
         if armed {
             if let Some(d) = self
                 .drives
@@ -911,17 +985,18 @@ impl<S: SampleSink> RtLoop<S> {
             for (to, d) in to.iter_mut().zip(request.direction) {
                 *to += d * request.max_distance;
             }
+            self.latch_waits = 0;
             self.activity = Activity::Probing {
                 profile: Profile::line(from, to, request.feed, &self.limits),
                 t: 0.0,
                 request,
             };
         } else if now - since_ns > self.cfg.arm_timeout_ns {
+            let mut err = RtError::new(ErrorKind::Timeout, Detail::ArmTimeout);
+            // The first drive that did not report armed.
+            err.node = self.drives.iter().find(|d| !is_armed(d)).map(|d| d.node);
             self.disarm_all();
-            self.reply = Some(Reply::Error(RtError::new(
-                ErrorKind::Timeout,
-                Detail::ArmTimeout,
-            )));
+            self.reply = Some(Reply::Error(err));
             self.activity = Activity::Idle;
         } else {
             self.activity = Activity::Arming {
@@ -935,6 +1010,20 @@ impl<S: SampleSink> RtLoop<S> {
     /// The probing move, one period on from `t`; at the end of the path with the axes
     /// there and no contact, the move fails as not triggered.
     fn probe(&mut self, profile: Profile, t: f64, request: ProbeRequest) {
+        if let Some(missing) = self.drives.iter().find(|d| d.latch_inc.is_none()) {
+            if self.drives.iter().any(|d| d.latch_inc.is_some()) {
+                self.latch_waits += 1;
+                if self.latch_waits > LATCH_WAIT_CYCLES {
+                    // A contact with one axis's latch missing would be a wrong point:
+                    // brake and fail the probe instead.
+                    let err =
+                        RtError::new(ErrorKind::ContactLost, Detail::LatchLost).node(missing.node);
+                    self.disarm_all();
+                    self.begin_stop(profile, t, Reply::Error(err));
+                    return;
+                }
+            }
+        }
         if profile.is_done(t) && self.settled().is_none() {
             // End of the path reached and the axes are there: no contact.
             self.disarm_all();
@@ -1024,6 +1113,9 @@ impl<S: SampleSink> RtLoop<S> {
                 };
                 let _ = out.push(rpdo2.encode(d.node));
             }
+        }
+        if core::mem::take(&mut self.nmt_start_due) {
+            let _ = out.push(nmt::encode(NmtCommand::Start, 0));
         }
         let _ = out.push(sync::encode());
     }

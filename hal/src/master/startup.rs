@@ -19,6 +19,15 @@ use std::time::{Duration, Instant};
 /// How long drives get to answer the NMT reset with their boot-up message.
 pub const BOOT_TIMEOUT: Duration = Duration::from_secs(3);
 
+/// The NMT reset is sent again after this long without every boot-up: the reset or
+/// a boot-up may have been lost on the bus (a reset before configuration is harmless).
+const BOOT_REPEAT: Duration = Duration::from_secs(1);
+
+/// Tries of one SDO transfer. Start-up only reads and writes configuration values, so
+/// a transfer that timed out or broke on the protocol (a lost or duplicated frame) is
+/// safe to repeat; a drive's refusal is not repeated.
+const SDO_TRIES: u32 = 3;
+
 fn transport_error(e: crate::can::TransportError) -> MachineError {
     MachineError::new(ErrorKind::Bus, e.to_string())
 }
@@ -45,8 +54,14 @@ pub fn boot<T: CanTransport>(t: &mut T, cfg: &MachineConfig) -> Result<(), Machi
         .map_err(transport_error)?;
     let mut booted = [false; 128];
     let deadline = Instant::now() + BOOT_TIMEOUT;
+    let mut repeat_at = Instant::now() + BOOT_REPEAT;
     while cfg.axes.iter().any(|a| !booted[a.canopen_node() as usize]) {
         let now = Instant::now();
+        if now >= repeat_at && now < deadline {
+            t.transmit(&nmt::encode(NmtCommand::ResetCommunication, 0))
+                .map_err(transport_error)?;
+            repeat_at = now + BOOT_REPEAT;
+        }
         if now >= deadline {
             let missing: Vec<String> = cfg
                 .axes
@@ -63,7 +78,8 @@ pub fn boot<T: CanTransport>(t: &mut T, cfg: &MachineConfig) -> Result<(), Machi
                 ),
             ));
         }
-        if let Some(f) = t.receive(deadline - now).map_err(transport_error)? {
+        let wait = (deadline - now).min(repeat_at.saturating_duration_since(now));
+        if let Some(f) = t.receive(wait).map_err(transport_error)? {
             if let CobKind::Heartbeat { node } = cob_id::classify(f.cob_id()) {
                 if f.data() == [0] {
                     booted[node as usize] = true;
@@ -79,8 +95,9 @@ enum Request<'a> {
     Upload,
 }
 
-/// Runs one SDO transfer to completion. An abort by the drive is the outcome
-/// `Aborted`, not an error: the caller decides what it means.
+/// Runs one SDO transfer to completion, repeated (up to [`SDO_TRIES`]) when it timed
+/// out or broke on the protocol. An abort by the drive is the outcome `Aborted`, not
+/// an error: the caller decides what it means.
 fn sdo_transfer<T: CanTransport>(
     t: &mut T,
     axis: &AxisConfig,
@@ -89,8 +106,41 @@ fn sdo_transfer<T: CanTransport>(
     request: Request<'_>,
     timeout: Duration,
 ) -> Result<SdoOutcome, MachineError> {
+    let mut tries = 1;
+    loop {
+        let outcome = sdo_try(t, axis, index, sub, &request, timeout);
+        let again = match &outcome {
+            Err(e) => e.kind == ErrorKind::Timeout,
+            Ok(SdoOutcome::Aborted(code)) => is_protocol_abort(*code),
+            Ok(_) => false,
+        };
+        if !again || tries >= SDO_TRIES {
+            return outcome;
+        }
+        tries += 1;
+    }
+}
+
+/// Aborts that say a frame went missing or came twice, not that the drive refuses.
+fn is_protocol_abort(code: SdoAbortCode) -> bool {
+    [
+        SdoAbortCode::TOGGLE_BIT_NOT_ALTERNATED,
+        SdoAbortCode::TIMEOUT,
+        SdoAbortCode::COMMAND_SPECIFIER_INVALID,
+    ]
+    .contains(&code)
+}
+
+fn sdo_try<T: CanTransport>(
+    t: &mut T,
+    axis: &AxisConfig,
+    index: u16,
+    sub: u8,
+    request: &Request<'_>,
+    timeout: Duration,
+) -> Result<SdoOutcome, MachineError> {
     let mut client = SdoClient::new(axis.canopen_node());
-    let first = match request {
+    let first = match *request {
         Request::Download(data) => client.download(index, sub, data),
         Request::Upload => client.upload(index, sub),
     }

@@ -218,6 +218,18 @@ impl SdoClient {
             let code = u32::from_le_bytes([d[4], d[5], d[6], d[7]]);
             return self.done(SdoOutcome::Aborted(SdoAbortCode(code)));
         }
+        let initiating = matches!(
+            self.phase,
+            Phase::DownloadInitiate { .. } | Phase::UploadInitiate
+        );
+        if initiating
+            && matches!(scs, SCS_INITIATE_DOWNLOAD | SCS_INITIATE_UPLOAD)
+            && mux_of(d) != (self.index, self.sub)
+        {
+            // The answer to an earlier transfer (duplicated on the bus, or late after
+            // its timeout) names its own object: not ours, and ours may still come.
+            return SdoClientEvent::Ignored;
+        }
         match self.phase {
             Phase::Idle => SdoClientEvent::Ignored,
             Phase::DownloadInitiate { expedited } => {
