@@ -84,8 +84,8 @@ impl MachineParameters {
         }
         if self.tool_axes.is_empty() {
             return Some((
-                "cycles.tool_axes",
-                "must name at least one tool axis (\"X\", \"Y\" or \"Z\")",
+                "cycles.tool_axes".to_string(),
+                "must name at least one tool axis (\"X\", \"Y\" or \"Z\")".to_string(),
             ));
         }
         None
