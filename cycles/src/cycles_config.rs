@@ -72,7 +72,7 @@ impl CyclesConfig {
             }
         }
         if let Some((key, why)) = s.cycles.invalid_field() {
-            return Err(invalid(key.to_string(), why));
+            return Err(invalid(key, why));
         }
         let presets = PresetTable::load(&PresetTable::default_path(&machine), &machine)?;
         Ok(Self {

@@ -38,14 +38,46 @@ impl Default for MachineParameters {
 }
 
 impl MachineParameters {
-    /// The first value out of range, as (key, reason).
-    pub fn invalid_field(&self) -> Option<(&'static str, &'static str)> {
-        if self.max_dev_cal_ball.is_nan() || self.max_dev_cal_ball <= 0.0 {
-            return Some(("cycles.maxDevCalBall", "must be > 0"));
+    /// The first value out of range, as (key, reason). Non-finite numbers (TOML's
+    /// `inf` and `nan`) are refused here, where they enter.
+    pub fn invalid_field(&self) -> Option<(String, &'static str)> {
+        for (key, v) in [
+            ("cycles.maxDevCalBall", self.max_dev_cal_ball),
+            ("cycles.maxModification", self.max_modification),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Some((key.to_string(), "must be a number > 0"));
+            }
         }
-        if self.max_modification.is_nan() || self.max_modification <= 0.0 {
-            return Some(("cycles.maxModification", "must be > 0"));
+        self.predef
+            .iter()
+            .find(|(_, v)| !v.is_finite())
+            .map(|(q, _)| (format!("cycles.predef.{q}"), "must be a finite number"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> MachineParameters {
+        toml::from_str(text).unwrap()
+    }
+
+    /// Found by the fuzz target machine-toml: `maxDevCalBall = inf` and PREDEF values
+    /// of `inf` or `nan` were accepted.
+    #[test]
+    fn non_finite_values_are_refused_with_their_key() {
+        for (text, key) in [
+            ("maxDevCalBall = inf", "cycles.maxDevCalBall"),
+            ("maxModification = nan", "cycles.maxModification"),
+            ("maxModification = -inf", "cycles.maxModification"),
+            ("[predef]\nQ320 = inf", "cycles.predef.Q320"),
+            ("[predef]\nQ260 = 10.0\nQ320 = nan", "cycles.predef.Q320"),
+        ] {
+            let bad = parse(text).invalid_field();
+            assert_eq!(bad.as_ref().map(|(k, _)| k.as_str()), Some(key), "{text}");
         }
-        None
+        assert_eq!(parse("[predef]\nQ320 = 2.0").invalid_field(), None);
     }
 }

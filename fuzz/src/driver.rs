@@ -396,7 +396,7 @@ struct Run<'a> {
     watch: &'a Watch,
     corpus: Vec<Vec<u8>>,
     seen: HashSet<u64>,
-    /// Findings by place (panic location; "slow" once per first feature).
+    /// Findings by place (panic location and gist; "slow" once per first feature).
     places: HashMap<String, usize>,
     findings: Vec<Finding>,
     executions: u64,
@@ -437,7 +437,9 @@ impl Run<'_> {
     }
 
     fn finding(&mut self, kind: FindingKind, message: String, location: String, input: &[u8]) {
-        let place = format!("{}@{location}", kind.name());
+        // One finding per place and gist: an invariant checked in one place (a
+        // non-finite number in any field) can fail for several reasons.
+        let place = format!("{}@{location}@{}", kind.name(), gist(&message));
         if self.places.contains_key(&place) {
             // Keep the shortest input of each place: the easiest to read.
             let i = self.places[&place];
@@ -467,6 +469,22 @@ impl Run<'_> {
         let note = format!("{} at {at}: {message}", kind.name());
         save(dir, self.target.name, kind.name(), input, &note)
     }
+}
+
+/// The first line of a panic message without numbers and quoted parts (inputs).
+fn gist(message: &str) -> String {
+    let mut out = String::new();
+    let mut quoted = None;
+    for c in message.lines().next().unwrap_or("").chars() {
+        match quoted {
+            Some(q) if c == q => quoted = None,
+            Some(_) => {}
+            None if c == '"' || c == '`' => quoted = Some(c),
+            None if !c.is_ascii_digit() => out.push(c),
+            None => {}
+        }
+    }
+    out
 }
 
 /// Runs one input with the normal panic hook (a panic prints and unwinds to the

@@ -1,7 +1,7 @@
 //! The TOML files a user writes: machine (hal's part and the cycles'), scenario,
 //! preset table, active kinematics, gateway; and the candump log.
 
-use super::text;
+use super::{accepted_finite, text};
 use crate::corpus;
 use crate::driver::Target;
 use crate::sig::Sig;
@@ -187,22 +187,23 @@ fn outcome<T, E: std::fmt::Display>(r: &Result<T, E>) -> Sig {
 
 fn run_machine(data: &[u8]) -> Sig {
     let t = text(data);
-    outcome(&CyclesConfig::parse(&t, &source("machine.toml")))
+    let r = CyclesConfig::parse(&t, &source("machine.toml"));
+    accepted_finite(&r, "machine TOML");
+    outcome(&r)
 }
 
 fn run_scenario(data: &[u8]) -> Sig {
     let t = text(data);
     let machine = machine_for(&t).clone();
-    outcome(&Scenario::parse_with_machine(
-        &t,
-        &source("scenario.toml"),
-        machine,
-    ))
+    let r = Scenario::parse_with_machine(&t, &source("scenario.toml"), machine);
+    accepted_finite(&r, "scenario");
+    outcome(&r)
 }
 
 fn run_presets(data: &[u8]) -> Sig {
     let t = text(data);
     let r = PresetTable::parse(&t, &source("m.presets.toml"), machine_for(&t));
+    accepted_finite(&r, "preset table");
     if let Ok(table) = &r {
         // What was accepted is written back as the same table.
         let again =
@@ -217,16 +218,15 @@ fn run_presets(data: &[u8]) -> Sig {
 
 fn run_kinematics(data: &[u8]) -> Sig {
     let t = text(data);
-    outcome(&ActiveKinematics::parse(
-        &t,
-        &source("m.kinematics.toml"),
-        machine_for(&t),
-    ))
+    let r = ActiveKinematics::parse(&t, &source("m.kinematics.toml"), machine_for(&t));
+    accepted_finite(&r, "kinematics file");
+    outcome(&r)
 }
 
 fn run_gateway(data: &[u8]) -> Sig {
     let t = text(data);
     let r = GatewayConfig::parse(&t, &source("gateway.toml"));
+    accepted_finite(&r, "gateway configuration");
     if let Ok(cfg) = &r {
         let mut sig = Sig::default();
         sig.debug(&cfg.listen().map(|_| ()))
