@@ -166,7 +166,12 @@ fn install_hooks() {
                 .location()
                 .map(|l| format!("{}:{}:{}", l.file(), l.line(), l.column()))
                 .unwrap_or_else(|| "unknown".into());
-            let message = info.payload_as_str().unwrap_or("(non-string payload)");
+            let payload = info.payload();
+            let message = payload
+                .downcast_ref::<&str>()
+                .copied()
+                .or_else(|| payload.downcast_ref::<String>().map(String::as_str))
+                .unwrap_or("(non-string payload)");
             LAST_PANIC.with(|p| *p.borrow_mut() = Some((message.to_string(), location)));
         }));
         // SAFETY: installs a handler that only calls async-signal-safe functions
