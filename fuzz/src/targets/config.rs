@@ -189,7 +189,17 @@ fn run_machine(data: &[u8]) -> Sig {
     let t = text(data);
     let r = CyclesConfig::parse(&t, &source("machine.toml"));
     accepted_finite(&r, "machine TOML");
-    outcome(&r)
+    match &r {
+        // Keys can hold the input's own names (`cycles.predef.Q320`): the section and
+        // the reason are the outcome.
+        Err(hal::config::ConfigError::Invalid { key, message, .. }) => {
+            let section = key.split(['.', '[']).next().unwrap_or("");
+            let mut sig = Sig::default();
+            sig.text(section).message(message);
+            sig
+        }
+        _ => outcome(&r),
+    }
 }
 
 fn run_scenario(data: &[u8]) -> Sig {
