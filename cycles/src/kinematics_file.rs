@@ -124,7 +124,13 @@ impl ActiveKinematics {
         Self::parse(&text, path, cfg)
     }
 
-    fn parse(text: &str, path: &Path, cfg: &MachineConfig) -> Result<Self, KinematicsFileError> {
+    /// Parses and validates `text` as [`ActiveKinematics::load`] does; `path` names the
+    /// source in errors.
+    pub fn parse(
+        text: &str,
+        path: &Path,
+        cfg: &MachineConfig,
+    ) -> Result<Self, KinematicsFileError> {
         use KinematicsFileErrorKind as K;
         let invalid = |kind, message: String| KinematicsFileError::Invalid {
             path: path.to_path_buf(),

@@ -91,3 +91,29 @@ impl MachineParameters {
         None
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> MachineParameters {
+        toml::from_str(text).unwrap()
+    }
+
+    /// Found by the fuzz target machine-toml: `maxDevCalBall = inf` and PREDEF values
+    /// of `inf` or `nan` were accepted.
+    #[test]
+    fn non_finite_values_are_refused_with_their_key() {
+        for (text, key) in [
+            ("maxDevCalBall = inf", "cycles.maxDevCalBall"),
+            ("maxModification = nan", "cycles.maxModification"),
+            ("maxModification = -inf", "cycles.maxModification"),
+            ("[predef]\nQ320 = inf", "cycles.predef.Q320"),
+            ("[predef]\nQ260 = 10.0\nQ320 = nan", "cycles.predef.Q320"),
+        ] {
+            let bad = parse(text).invalid_field();
+            assert_eq!(bad.as_ref().map(|(k, _)| k.as_str()), Some(key), "{text}");
+        }
+        assert_eq!(parse("[predef]\nQ320 = 2.0").invalid_field(), None);
+    }
+}

@@ -549,6 +549,31 @@ max_acceleration = 1000.0
         assert_eq!(c.canopen_bus().unwrap().sync_period_us, 2000);
     }
 
+    /// Found by the fuzz target machine-toml (non-finite numbers accepted): a Hirth
+    /// grid or a pivot of `nan`/`inf` is refused with its key.
+    #[test]
+    fn non_finite_hirth_and_pivot_are_refused() {
+        let rotary = MINI.to_string()
+            + "[[axis]]\nname = \"C\"\nnode = 4\nincrements_per_unit = 1000.0\nmin = -360.0\n\
+               max = 360.0\nmax_feed = 5000.0\nmax_acceleration = 1000.0\nHIRTH\n\
+               [kinematics]\ntable = [\"C\"]\n[kinematics.pivot]\nC = PIVOT\n";
+        let ok = rotary
+            .replace("HIRTH", "hirth = 1.0")
+            .replace("PIVOT", "[0.0, 0.0, 0.0]");
+        MachineConfig::parse(&ok, Path::new("m.toml")).unwrap();
+        for (hirth, pivot, key) in [
+            ("hirth = nan", "[0.0, 0.0, 0.0]", "axis[3] (C).hirth"),
+            ("hirth = inf", "[0.0, 0.0, 0.0]", "axis[3] (C).hirth"),
+            ("hirth = 1.0", "[nan, 0.0, 0.0]", "kinematics.pivot.C"),
+            ("hirth = 1.0", "[0.0, 0.0, -inf]", "kinematics.pivot.C"),
+        ] {
+            let text = rotary.replace("HIRTH", hirth).replace("PIVOT", pivot);
+            let e = MachineConfig::parse(&text, Path::new("m.toml")).unwrap_err();
+            assert_eq!(e.kind(), ConfigErrorKind::Invalid, "{hirth} {pivot}");
+            assert!(e.to_string().contains(key), "{hirth} {pivot}: {e}");
+        }
+    }
+
     #[test]
     fn unknown_key_is_named() {
         let e = MachineConfig::parse(

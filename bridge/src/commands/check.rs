@@ -8,6 +8,7 @@ use crate::session::{cycles_config_with_presets, resolve_machine, MachineOptions
 use cycles::kinematics_file::ActiveKinematics;
 use cycles::parser::parse_program;
 use cycles::runner::{check_complete, preflight_program};
+use cycles::CyclesConfig;
 use std::path::{Path, PathBuf};
 
 /// Exit status 0 when valid, 2 with every error listed.
@@ -22,21 +23,8 @@ pub fn run(
         cycles_config_with_presets(&cfg, scenario.as_ref(), presets).map_err(|e| e.to_string())?;
     let text = cycles::parser::read_program_text(program)
         .map_err(|e| format!("cannot read {}: {e}", program.display()))?;
-    let errors: Vec<String> = match parse_program(&text, &cycles_cfg) {
-        Err(invalid) => invalid.0.iter().map(|d| d.to_string()).collect(),
-        // Valid text: now what only the machine can tell, as `run` checks it.
-        Ok(parsed) => {
-            let kinematics = kinematics.unwrap_or_else(|| ActiveKinematics::default_path(&cfg));
-            check_complete(&parsed)
-                .and_then(|()| {
-                    preflight_program(&parsed, cfg.axis_mask(), &cycles_cfg, &kinematics)
-                        .map_err(|e| e.to_string())
-                })
-                .err()
-                .into_iter()
-                .collect()
-        }
-    };
+    let kinematics = kinematics.unwrap_or_else(|| ActiveKinematics::default_path(&cfg));
+    let errors = check_text(&text, &cycles_cfg, &kinematics);
     if errors.is_empty() {
         say!("{}: ok (machine {})", program.display(), cfg.name);
         return Ok(0);
@@ -48,4 +36,23 @@ pub fn run(
         errors.len()
     );
     Ok(2)
+}
+
+/// Every error `check` reports for program `text` on a machine (`cycles_cfg`, its
+/// active kinematics file at `kinematics`): the parser's, then, for valid text, a
+/// missing BEGIN/END PGM and what `run` refuses before the first move. Empty: ok.
+/// (The fuzz target `check` runs this on mutated programs.)
+pub fn check_text(text: &str, cycles_cfg: &CyclesConfig, kinematics: &Path) -> Vec<String> {
+    match parse_program(text, cycles_cfg) {
+        Err(invalid) => invalid.0.iter().map(|d| d.to_string()).collect(),
+        // Valid text: now what only the machine can tell, as `run` checks it.
+        Ok(parsed) => check_complete(&parsed)
+            .and_then(|()| {
+                let axes = cycles_cfg.machine.axis_mask();
+                preflight_program(&parsed, axes, cycles_cfg, kinematics).map_err(|e| e.to_string())
+            })
+            .err()
+            .into_iter()
+            .collect(),
+    }
 }

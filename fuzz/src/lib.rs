@@ -1,0 +1,13 @@
+//! Fuzzing for probebridge on the stable toolchain: every parser and frame decoder
+//! as a [`driver::Target`], and a driver that mutates a corpus seeded from the
+//! project's own files within a time or iteration budget (see the README's
+//! "Fuzzing" section and `probebridge-fuzz --help`).
+
+pub mod corpus;
+pub mod driver;
+pub mod mutate;
+pub mod rng;
+pub mod sig;
+pub mod targets;
+
+pub use driver::{Budget, Finding, Report, Target};
