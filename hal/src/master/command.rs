@@ -82,16 +82,14 @@ pub enum Detail {
         state: u16,
     },
     ArmTimeout,
-    /// The probe signal stopped the axes, but a moving axis's drive never reported
-    /// its latch.
-    LatchMissing,
     Transport,
     Busy,
     Stopped,
     Aborted,
     /// The node sent a boot-up: it restarted and lost its configuration.
     Restarted,
-    /// Some drives reported the contact, this node's latch never came.
+    /// The probe signal stopped the axes, but this moving axis's latch frame never
+    /// came (lost on the bus): no contact is measured from the others alone.
     LatchLost,
 }
 
@@ -135,9 +133,6 @@ impl From<RtError> for MachineError {
                 format!("drive did not reach Operation enabled (statusword 0x{state:04X})")
             }
             Detail::ArmTimeout => "touch probe did not report armed in time; nothing moved".into(),
-            Detail::LatchMissing => {
-                "the probe signal stopped the axes, but this drive never reported its latch; no contact measured".into()
-            }
             Detail::Transport => "CAN transport failed; all axes stopped".into(),
             Detail::Busy => "a command is already running".into(),
             Detail::Stopped => "the real-time loop has stopped".into(),
@@ -147,7 +142,7 @@ impl From<RtError> for MachineError {
                 e.node.unwrap_or(0)
             ),
             Detail::LatchLost => format!(
-                "contact reported, but the latch frame of node {} did not arrive (lost on the bus); all axes braked",
+                "the probe signal stopped the axes, but the latch frame of node {} did not arrive (lost on the bus); no contact measured",
                 e.node.unwrap_or(0)
             ),
         };

@@ -41,11 +41,6 @@ pub const MAX_TICK_FRAMES: usize = 2 * MAX_AXES + 2;
 /// start again (the first may have been lost on the bus; a started node ignores it).
 const NMT_START_REPEAT_NS: u64 = 100_000_000;
 
-/// Cycles a contact may wait for the latch frames of the other drives: all drives
-/// latch on the same probe signal and answer in the same SYNC period, so a latch still
-/// missing after this was lost.
-const LATCH_WAIT_CYCLES: u8 = 2;
-
 /// The frames of one tick, in sending order (fixed capacity: no allocation).
 pub type TickFrames = heapless::Vec<CanFrame, MAX_TICK_FRAMES>;
 
@@ -255,6 +250,8 @@ pub struct RtLoop<S: SampleSink> {
     /// goes out.
     stop_pending_since: Option<(u64, u64)>,
     contact: Option<PendingContact>,
+    /// The probe signal as the drives report it together (see `on_latch`).
+    probe_signal: bool,
     /// The linear direction of the motion during which the probe signal last rose
     /// (a probing contact or a collision); `None` when it rose at rest (the stylus
     /// was in contact before anything moved). See [`RtLoop::deflected_move`].
@@ -267,8 +264,6 @@ pub struct RtLoop<S: SampleSink> {
     arm_waits: u32,
     /// Arming again after a wait: only the drives that did not report armed.
     arm_retry: bool,
-    /// Probing: cycles since the first latch of a contact arrived.
-    latch_waits: u8,
 }
 
 impl<S: SampleSink> RtLoop<S> {
@@ -307,13 +302,13 @@ impl<S: SampleSink> RtLoop<S> {
             sequence: 0,
             stop_pending_since: None,
             contact: None,
+            probe_signal: false,
             deflected_along: None,
             stats: LoopStats::default(),
             nmt_start_at_ns: now_ns,
             nmt_start_due: false,
             arm_waits: 0,
             arm_retry: false,
-            latch_waits: 0,
         }
     }
 
@@ -448,7 +443,7 @@ impl<S: SampleSink> RtLoop<S> {
     /// material), would push the stylus further in until it breaks; it is refused with
     /// the point, before anything moves.
     fn deflected_move(&self, from: &[f64; MAX_AXES], to: &[f64; MAX_AXES]) -> Option<RtError> {
-        if !self.drives.iter().any(|d| d.probe_input.is_high()) {
+        if !self.probe_signal {
             return None;
         }
         let linear = [0, 1, 2].map(|i| to[i] - from[i]);
@@ -604,16 +599,17 @@ impl<S: SampleSink> RtLoop<S> {
         d.tp_status = pd.touch_probe_status;
         d.tp_status_fresh = true;
         let st = TouchProbeStatus::from_bits(pd.touch_probe_status);
-        let rising = d.probe_input.update(st.input_level(Probe::One));
-        // Every drive reports the same probe: the first one to see it rise tells the
-        // motion that made the contact (the others may see it after the brake began).
-        let first = rising
-            && self
-                .drives
-                .iter()
-                .enumerate()
-                .all(|(j, o)| j == i || !o.probe_input.is_high());
+        let level = st.input_level(Probe::One);
+        let rising = d.probe_input.update(level);
+        // The probe is wired to every drive, so the first rise is the contact; the
+        // others may report it after the brake began, or late: a drive's on-change
+        // frame (TPDO2) can be lost, leaving its level stale until the next change.
+        // So the signal falls only when most drives report it low (a tie keeps it
+        // high, the safe side).
+        let first = rising && !self.probe_signal;
         if first {
+            self.probe_signal = true;
+            // The motion that made the contact (see `deflected_move`).
             self.deflected_along = match &self.activity {
                 Activity::Moving { profile, .. } | Activity::Probing { profile, .. } => {
                     let dir = profile.direction();
@@ -621,10 +617,17 @@ impl<S: SampleSink> RtLoop<S> {
                 }
                 _ => None,
             };
+        } else if !level && self.probe_signal {
+            let high = self
+                .drives
+                .iter()
+                .filter(|d| d.probe_input.is_high())
+                .count();
+            self.probe_signal = 2 * high >= self.drives.len();
         }
         let d = &mut self.drives[i];
         let positioning = matches!(self.activity, Activity::Moving { .. });
-        if ProbeInput::is_collision(rising, positioning) {
+        if ProbeInput::is_collision(first, positioning) {
             self.abort_motion(RtError::new(ErrorKind::ProbeCollision, Detail::Collision));
             return;
         }
@@ -661,7 +664,7 @@ impl<S: SampleSink> RtLoop<S> {
         self.stop_pending_since = Some((receive_ns, self.sync_ns));
         // The answer is set when the contact is complete (see `try_complete_contact`);
         // until then the stop does not answer (see `settle`).
-        let placeholder = Reply::Error(RtError::new(ErrorKind::Timeout, Detail::LatchMissing));
+        let placeholder = Reply::Error(RtError::new(ErrorKind::ContactLost, Detail::LatchLost));
         self.begin_stop(profile, t, placeholder);
     }
 
@@ -985,7 +988,6 @@ impl<S: SampleSink> RtLoop<S> {
             for (to, d) in to.iter_mut().zip(request.direction) {
                 *to += d * request.max_distance;
             }
-            self.latch_waits = 0;
             self.activity = Activity::Probing {
                 profile: Profile::line(from, to, request.feed, &self.limits),
                 t: 0.0,
@@ -1010,20 +1012,6 @@ impl<S: SampleSink> RtLoop<S> {
     /// The probing move, one period on from `t`; at the end of the path with the axes
     /// there and no contact, the move fails as not triggered.
     fn probe(&mut self, profile: Profile, t: f64, request: ProbeRequest) {
-        if let Some(missing) = self.drives.iter().find(|d| d.latch_inc.is_none()) {
-            if self.drives.iter().any(|d| d.latch_inc.is_some()) {
-                self.latch_waits += 1;
-                if self.latch_waits > LATCH_WAIT_CYCLES {
-                    // A contact with one axis's latch missing would be a wrong point:
-                    // brake and fail the probe instead.
-                    let err =
-                        RtError::new(ErrorKind::ContactLost, Detail::LatchLost).node(missing.node);
-                    self.disarm_all();
-                    self.begin_stop(profile, t, Reply::Error(err));
-                    return;
-                }
-            }
-        }
         if profile.is_done(t) && self.settled().is_none() {
             // End of the path reached and the axes are there: no contact.
             self.disarm_all();
@@ -1057,7 +1045,8 @@ impl<S: SampleSink> RtLoop<S> {
                     .map_or(0, |d| d.node);
                 self.contact = None;
                 self.disarm_all();
-                let err = RtError::new(ErrorKind::Timeout, Detail::LatchMissing).node(node);
+                // The contact is not used: the cycle may probe again (see ErrorKind::ContactLost).
+                let err = RtError::new(ErrorKind::ContactLost, Detail::LatchLost).node(node);
                 self.reply = Some(Reply::Error(err));
                 self.activity = Activity::Idle;
             }
@@ -1570,8 +1559,8 @@ mod tests {
         b.hold_latches_of = vec![3];
         match b.until_reply() {
             Reply::Error(e) => {
-                assert_eq!((e.kind, e.node), (ErrorKind::Timeout, Some(3)));
-                assert!(matches!(e.detail, Detail::LatchMissing));
+                assert_eq!((e.kind, e.node), (ErrorKind::ContactLost, Some(3)));
+                assert!(matches!(e.detail, Detail::LatchLost));
             }
             other => panic!("{other:?}"),
         }
