@@ -112,6 +112,11 @@ impl<T: CanTransport, S: SampleSink> PacedLoop<T, S> {
         self.rt.is_shut_down()
     }
 
+    /// The shutdown and its goodbye are sent (see [`RtLoop::is_finished`]).
+    pub fn is_finished(&self) -> bool {
+        self.rt.is_finished()
+    }
+
     /// One SYNC period: take in what the drives sent, tick, send setpoints and SYNC.
     pub fn cycle(&mut self) -> Result<(), TransportError> {
         let now = match self.rt.config().pacing {
