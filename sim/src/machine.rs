@@ -222,6 +222,14 @@ impl SimMachine {
             .map(|t| Duration::from_micros(t.saturating_sub(now)))
     }
 
+    /// Each drive's last loss of the heartbeat it consumes (0x1016), with its node.
+    pub fn heartbeat_losses(&self) -> Vec<(u8, HeartbeatLoss)> {
+        self.drives
+            .iter()
+            .filter_map(|d| d.drive.heartbeat_loss().map(|l| (d.drive.node(), l)))
+            .collect()
+    }
+
     /// Each drive's loss of the heartbeat it consumes (0x1016) not reported before,
     /// with the drive's node.
     pub fn take_heartbeat_losses(&mut self, report: &mut dyn FnMut(u8, HeartbeatLoss)) {
@@ -381,7 +389,7 @@ impl SimRunner {
                         // The drive's own log line (a closed stderr is no reason to stop).
                         let _ = writeln!(
                             std::io::stderr(),
-                            "probebridge sim: node {node}: heartbeat of node {} lost ({:.0} ms silent, consumer time {} ms): EMCY 8130, {:?} -> {:?}",
+                            "probebridge sim: node {node}: heartbeat of node {} lost ({:.1} ms silent, consumer time {} ms): EMCY 8130, {:?} -> {:?}",
                             l.node,
                             l.silent_us as f64 / 1000.0,
                             l.consumer_ms,
