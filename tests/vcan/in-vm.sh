@@ -66,7 +66,7 @@ signal_mid_451() {
         grep -q 'probebridge sim:' "$RESULTS/$name.sim.log" 2>/dev/null && break
         sleep 0.1
     done
-    "$PROBEBRIDGE_BIN" run "$ROOT/configs/programs/451-check.h" --scenario "$scenario" \
+    "$PROBEBRIDGE_BIN" run "$ROOT/tests/vcan/programs/451-check-vcan.h" --yes --scenario "$scenario" \
         --can vcan0 --json "$RESULTS/$name.json" --out "$RESULTS/$name.protocols" \
         --service "pbvcan-$name" > "$RESULTS/$name.stdout" 2> "$RESULTS/$name.stderr" < /dev/null &
     local pid=$!
