@@ -552,9 +552,15 @@ pub struct HeartbeatLoss {
     pub to: State,
 }
 
+/// Most a heartbeat consumer's clock advances between two looks, µs. A host looks at
+/// least every 50 ms (`SimRunner`), so while it runs the consumer keeps time.
+const CONSUMER_LOOK_MAX_US: u64 = 100_000;
+
 /// The heartbeat consumer of 0x1016:1. Its clock follows the drive's, but advances by
-/// at most half the consumer time between two looks: a drive whose host stalled did
-/// not watch, and cannot judge what it missed (a real drive does not stall).
+/// at most half the consumer time and at most [`CONSUMER_LOOK_MAX_US`] between two
+/// looks: a drive whose host stalled (a loaded machine, an emulated CPU) did not
+/// watch, and cannot judge what it missed (a real drive does not stall). Frames queued
+/// meanwhile, the heartbeat among them, are taken before it judges again.
 #[derive(Clone, Copy, Debug, Default)]
 struct Consumer {
     clock_us: u64,
@@ -886,7 +892,7 @@ impl SimDrive {
         let c = &mut self.consumer;
         let step = c.looked_at_us.map_or(0, |t| self.now_us.saturating_sub(t));
         c.looked_at_us = Some(self.now_us);
-        c.clock_us += step.min(u64::from(ms) * 500);
+        c.clock_us += step.min(u64::from(ms) * 500).min(CONSUMER_LOOK_MAX_US);
         let Some(seen) = c.seen_us else { return };
         let silent_us = c.clock_us - seen;
         if ms == 0 || c.lost || silent_us <= u64::from(ms) * 1000 {

@@ -449,8 +449,9 @@ fn the_consumer_ignores_its_own_hosts_stall_and_reset_communication_ends_it() {
     b.expect("601#231610012C017F00", "581#6016100100000000");
     assert!(b.poll(0).is_empty());
     assert!(b.rx("77F#05").is_empty());
-    // The drive's host stalls for 2 s and looks again: a look counts at most half the
-    // consumer time (150 ms), and the heartbeat queued meanwhile is taken.
+    // The drive's host stalls for 2 s and looks again: a look counts at most 100 ms
+    // (and at most half the consumer time), and the heartbeat queued meanwhile is
+    // taken.
     assert!(b.poll(2_000_000).is_empty());
     assert!(b.rx("77F#05").is_empty());
     assert!(b.poll(2_100_000).is_empty());

@@ -327,10 +327,10 @@ def check_fault_reset(node, mon):
 
 
 def check_heartbeat_consumer(node, network, mon):
-    """0x1016 as a master configures it: this script as node 126 with a 500 ms consumer
+    """0x1016 as a master configures it: this script as node 126 with a 1 s consumer
     time. Nothing is watched before the first heartbeat; after the last one the drive
     sends EMCY 8130 and, by 0x6007 = 3, quick-stops to Switch on disabled."""
-    me, consumer_ms = 126, 500
+    me, consumer_ms = 126, 1000
     action = u32(node, 0x6007)
     start = mon.mark()
     node.sdo.download(0x1016, 1, ((me << 16) | consumer_ms).to_bytes(4, "little"))
