@@ -148,6 +148,14 @@ pub struct CanOpenBusConfig {
     /// A node whose heartbeat is missing this long is lost, ms.
     #[serde(default = "default_heartbeat_timeout_ms")]
     pub heartbeat_timeout_ms: u16,
+    /// The master's own node ID: its heartbeat goes out on 0x700 + this ID.
+    #[serde(default = "default_master_node")]
+    pub master_node: u8,
+    /// Period of the master's heartbeat, ms (0: none). The drives consume it (0x1016)
+    /// with [`CanOpenBusConfig::MASTER_HEARTBEAT_CONSUMER_FACTOR`] times this period
+    /// and stop when it is missing that long.
+    #[serde(default = "default_master_heartbeat_ms")]
+    pub master_heartbeat_ms: u16,
     /// SDO answer timeout, ms.
     #[serde(default = "default_sdo_timeout_ms")]
     pub sdo_timeout_ms: u16,
@@ -168,6 +176,12 @@ fn default_heartbeat_ms() -> u16 {
 fn default_heartbeat_timeout_ms() -> u16 {
     CanOpenBusConfig::DEFAULT.heartbeat_timeout_ms
 }
+fn default_master_node() -> u8 {
+    CanOpenBusConfig::DEFAULT.master_node
+}
+fn default_master_heartbeat_ms() -> u16 {
+    CanOpenBusConfig::DEFAULT.master_heartbeat_ms
+}
 fn default_sdo_timeout_ms() -> u16 {
     CanOpenBusConfig::DEFAULT.sdo_timeout_ms
 }
@@ -182,9 +196,33 @@ impl CanOpenBusConfig {
         sync_period_us: 2000,
         heartbeat_producer_ms: 50,
         heartbeat_timeout_ms: 150,
+        master_node: 127,
+        master_heartbeat_ms: 100,
         sdo_timeout_ms: 200,
         max_load_percent: 70.0,
     };
+}
+
+impl CanOpenBusConfig {
+    /// The drives' heartbeat consumer time (0x1016) is this many master heartbeat
+    /// periods: two heartbeats may be late or lost before a drive stops.
+    pub const MASTER_HEARTBEAT_CONSUMER_FACTOR: u16 = 3;
+
+    /// The drives' consumer time for the master's heartbeat, ms (0: not consumed).
+    pub fn master_heartbeat_consumer_ms(&self) -> u16 {
+        self.master_heartbeat_ms
+            .saturating_mul(Self::MASTER_HEARTBEAT_CONSUMER_FACTOR)
+    }
+
+    /// The 0x1016 sub 1 entry every drive gets: master node ID in bits 16-23, the
+    /// consumer time in ms in bits 0-15 (CiA 301); 0 when the master sends no
+    /// heartbeat.
+    pub fn master_heartbeat_consumer_entry(&self) -> u32 {
+        match self.master_heartbeat_consumer_ms() {
+            0 => 0,
+            ms => (u32::from(self.master_node) << 16) | u32::from(ms),
+        }
+    }
 }
 
 impl Default for CanOpenBusConfig {
@@ -371,6 +409,38 @@ impl MachineConfig {
                     "{} is outside {lo} .. {hi} ms (a drive answers an SDO within milliseconds; 0 would give up at once)",
                     b.sdo_timeout_ms
                 ),
+            ));
+        }
+        if !(1..=127).contains(&b.master_node) {
+            return Err(self.invalid(
+                "bus.master_node",
+                format!("{} is not a CANopen node ID (1..127)", b.master_node),
+            ));
+        }
+        if seen_nodes[b.master_node as usize] {
+            return Err(self.invalid(
+                "bus.master_node",
+                format!(
+                    "node {} is an axis's drive: the master needs its own node ID",
+                    b.master_node
+                ),
+            ));
+        }
+        let most = u16::MAX / CanOpenBusConfig::MASTER_HEARTBEAT_CONSUMER_FACTOR;
+        if b.master_heartbeat_ms > most {
+            return Err(self.invalid(
+                "bus.master_heartbeat_ms",
+                format!(
+                    "{} ms: at most {most} (the drives' consumer time, {} times it, is 16 bits of ms)",
+                    b.master_heartbeat_ms,
+                    CanOpenBusConfig::MASTER_HEARTBEAT_CONSUMER_FACTOR
+                ),
+            ));
+        }
+        if b.master_heartbeat_ms > 0 && u32::from(b.master_heartbeat_ms) * 1000 < b.sync_period_us {
+            return Err(self.invalid(
+                "bus.master_heartbeat_ms",
+                "shorter than bus.sync_period_us: the master sends it with a SYNC",
             ));
         }
         if !(b.max_load_percent > 0.0 && b.max_load_percent <= 100.0) {
@@ -747,5 +817,62 @@ C = [0.0, 0.0, 0.0]
             e.contains("axis[1] (Y).node") && e.contains("node 1 used by two axes"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn the_master_heartbeat_has_defaults_and_is_validated() {
+        let c = MachineConfig::parse(MINI, Path::new("m.toml")).unwrap();
+        let b = c.canopen_bus().unwrap();
+        assert_eq!((b.master_node, b.master_heartbeat_ms), (127, 100));
+        // 0x1016:1 = node 127 << 16 | 3 x 100 ms.
+        assert_eq!(b.master_heartbeat_consumer_entry(), 0x007F_012C);
+        let off = MachineConfig::parse(
+            &format!("{MINI}[bus]\nkind = \"canopen\"\nmaster_heartbeat_ms = 0\n"),
+            Path::new("m.toml"),
+        )
+        .unwrap();
+        assert_eq!(
+            off.canopen_bus().unwrap().master_heartbeat_consumer_entry(),
+            0
+        );
+        for (bad, key, why) in [
+            (
+                "master_node = 0",
+                "bus.master_node",
+                "not a CANopen node ID",
+            ),
+            (
+                "master_node = 128",
+                "bus.master_node",
+                "not a CANopen node ID",
+            ),
+            (
+                "master_node = 2",
+                "bus.master_node",
+                "node 2 is an axis's drive",
+            ),
+            (
+                "master_heartbeat_ms = 30000",
+                "bus.master_heartbeat_ms",
+                "at most 21845",
+            ),
+            (
+                "master_heartbeat_ms = 1",
+                "bus.master_heartbeat_ms",
+                "shorter than bus.sync_period_us",
+            ),
+        ] {
+            let e = MachineConfig::parse(
+                &format!("{MINI}[bus]\nkind = \"canopen\"\n{bad}\n"),
+                Path::new("m.toml"),
+            )
+            .unwrap_err();
+            assert_eq!(e.kind(), ConfigErrorKind::Invalid);
+            let e = e.to_string();
+            assert!(
+                e.contains("m.toml") && e.contains(key) && e.contains(why),
+                "{bad}: {e}"
+            );
+        }
     }
 }

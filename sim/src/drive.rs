@@ -1,8 +1,9 @@
 //! A simulated CiA 402 servo drive on CANopen, built on the same codec as the master
 //! (`hal::canopen`, `hal::cia402`): an object dictionary behind an SDO server, NMT with
 //! a boot-up at power-on, PDOs as any master maps them (transmission types honoured),
-//! a heartbeat producer on the drive's own clock, EMCY, the drive state machine (driven
-//! by the controlword however it arrives), cyclic synchronous position with one cycle
+//! a heartbeat producer on the drive's own clock, a heartbeat consumer (0x1016) that
+//! stops the drive per 0x6007 when the master falls silent, EMCY, the drive state
+//! machine (driven by the controlword however it arrives), cyclic synchronous position with one cycle
 //! of servo lag, and touch probe 1 latching the exact position at the instant the probe
 //! signal rises.
 //!
@@ -25,7 +26,7 @@ use hal::canopen::pdo::{
     COB_ID_EXTENDED, COB_ID_INVALID,
 };
 use hal::canopen::sdo::{ObjectDictionary, SdoAbortCode, SdoServer};
-use hal::cia402::controlword::fault_reset_edge;
+use hal::cia402::controlword::{fault_reset_edge, Command};
 use hal::cia402::{Probe, State, Statusword, TouchProbeFunction, TouchProbeStatus};
 
 const PDOS: usize = 4;
@@ -52,12 +53,30 @@ const EMCY_QUEUE: usize = 4;
 
 const DEVICE_NAME: &[u8] = b"probebridge simulated CiA 402 drive";
 
+/// 0x6007 (CiA 402 abort connection option code), INTEGER16: what the drive does when
+/// the heartbeat it consumes is lost. Negative values are manufacturer-specific: this
+/// drive has none.
+pub mod abort_connection {
+    /// No action (the EMCY still goes out).
+    pub const NO_ACTION: i16 = 0;
+    /// Fault signal: the drive goes to Fault (fault reaction, then Fault).
+    pub const FAULT: i16 = 1;
+    /// Disable voltage command: the drive goes to Switch on disabled at once.
+    pub const DISABLE_VOLTAGE: i16 = 2;
+    /// Quick stop command: the drive stops (Quick stop active), then goes to Switch on
+    /// disabled (quick stop option code 2). The default.
+    pub const QUICK_STOP: i16 = 3;
+}
+
 /// The communication profile area (0x1000-0x1FFF) that a reset of communication
 /// restores.
 #[derive(Clone, Debug)]
 struct Communication {
     cycle_period_us: u32,
     heartbeat_ms: u16,
+    /// 0x1016:1: the node whose heartbeat this drive watches (bits 16-23) and the
+    /// consumer time in ms (bits 0-15); 0: none watched.
+    heartbeat_consumer: u32,
     sync_cob_id: u32,
     emcy_cob_id: u32,
     rpdo: [PdoParameters; PDOS],
@@ -80,6 +99,7 @@ impl Communication {
         Self {
             cycle_period_us: DEFAULT_CYCLE_PERIOD_US,
             heartbeat_ms: 0,
+            heartbeat_consumer: 0,
             sync_cob_id: DEFAULT_SYNC_COB_ID,
             emcy_cob_id: u32::from(cob_id::emcy_cob(node)),
             rpdo: core::array::from_fn(|i| pdo_at_power_on(PdoDirection::Rpdo, i as u8 + 1, node)),
@@ -100,6 +120,8 @@ struct Application {
     state: State,
     /// Active fault (its EMCY error code, 0x603F), until a fault reset.
     fault: Option<u16>,
+    /// 0x6007, see [`abort_connection`].
+    abort_connection: i16,
 }
 
 impl Application {
@@ -113,6 +135,7 @@ impl Application {
             tp_pos_edge: 0,
             state: State::SwitchOnDisabled,
             fault: None,
+            abort_connection: abort_connection::QUICK_STOP,
         }
     }
 }
@@ -128,6 +151,13 @@ struct Objects {
     actual: i32,
     /// An RPDO of the wrong length came in; cleared by the next good one.
     pdo_length_error: bool,
+    /// The watched heartbeat (0x1016) is lost; cleared when it comes back.
+    heartbeat_lost: bool,
+    /// 0x1016 was written: the consumer waits for a first heartbeat again.
+    consumer_restart: bool,
+    /// A quick stop for a lost connection ends in Switch on disabled at this time (on
+    /// the drive's clock); until then the controlword cannot re-enable the drive.
+    quick_stop_until_us: Option<u64>,
     /// EMCYs to send, oldest first.
     emcy: [Emcy; EMCY_QUEUE],
     emcy_len: usize,
@@ -143,6 +173,9 @@ impl Objects {
             app: Application::new(position_inc),
             actual: position_inc,
             pdo_length_error: false,
+            heartbeat_lost: false,
+            consumer_restart: true,
+            quick_stop_until_us: None,
             emcy: [Emcy {
                 error_code: 0,
                 error_register: 0,
@@ -167,7 +200,7 @@ impl Objects {
                     _ => 0,
                 };
         }
-        if self.pdo_length_error {
+        if self.pdo_length_error || self.heartbeat_lost {
             r |= error_register::GENERIC | error_register::COMMUNICATION;
         }
         r
@@ -250,6 +283,16 @@ impl Objects {
     /// back at the next step) and sends the EMCY "error reset".
     fn apply_controlword(&mut self, cw: u16) {
         let prev = self.app.controlword;
+        if self.quick_stop_until_us.is_some() {
+            // Quick stop option code 2: no way back to Operation enabled (CiA 402
+            // transition 16 needs 5..8); Disable voltage ends the stop early.
+            if Command::decode(cw) == Some(Command::DisableVoltage) {
+                self.app.state = State::SwitchOnDisabled;
+                self.quick_stop_until_us = None;
+            }
+            self.app.controlword = cw;
+            return;
+        }
         if self.app.state == State::Fault && self.app.fault.is_some() && fault_reset_edge(cw, prev)
         {
             self.app.fault = None;
@@ -380,6 +423,14 @@ impl ObjectDictionary for Objects {
             }
             obj::COB_ID_EMCY => var(sub, self.comm.emcy_cob_id as u64, 4)?,
             obj::PRODUCER_HEARTBEAT_TIME => var(sub, self.comm.heartbeat_ms as u64, 2)?,
+            obj::CONSUMER_HEARTBEAT_TIME => match sub {
+                0 => (1, 1),
+                1 => (self.comm.heartbeat_consumer as u64, 4),
+                _ => return Err(SdoAbortCode::SUB_INDEX_DOES_NOT_EXIST),
+            },
+            obj::ABORT_CONNECTION_OPTION_CODE => {
+                var(sub, self.app.abort_connection as u16 as u64, 2)?
+            }
             obj::IDENTITY => match sub {
                 0 => (4, 1),
                 1 => (VENDOR_ID as u64, 4),
@@ -417,6 +468,31 @@ impl ObjectDictionary for Objects {
                 0..=4 => Err(SdoAbortCode::READ_ONLY),
                 _ => Err(SdoAbortCode::SUB_INDEX_DOES_NOT_EXIST),
             },
+            obj::CONSUMER_HEARTBEAT_TIME => match sub {
+                0 => Err(SdoAbortCode::READ_ONLY),
+                1 => {
+                    let v = le(data, 4)? as u32;
+                    // Bits 24-31 are reserved; a node ID is 1..=127 (0 with time 0:
+                    // the entry is off).
+                    let node = (v >> 16) & 0xFF;
+                    if v >> 24 != 0 || node > 127 || (node == 0 && v & 0xFFFF != 0) {
+                        return Err(SdoAbortCode::VALUE_RANGE_EXCEEDED);
+                    }
+                    self.comm.heartbeat_consumer = v;
+                    self.consumer_restart = true;
+                    Ok(())
+                }
+                _ => Err(SdoAbortCode::SUB_INDEX_DOES_NOT_EXIST),
+            },
+            obj::ABORT_CONNECTION_OPTION_CODE => {
+                var(sub, 0, 0)?;
+                let v = le(data, 2)? as u16 as i16;
+                if !(abort_connection::NO_ACTION..=abort_connection::QUICK_STOP).contains(&v) {
+                    return Err(SdoAbortCode::VALUE_RANGE_EXCEEDED);
+                }
+                self.app.abort_connection = v;
+                Ok(())
+            }
             obj::COB_ID_SYNC => {
                 var(sub, 0, 0)?;
                 // Bit 30 would make this drive the SYNC producer: it is not one.
@@ -460,6 +536,43 @@ impl ObjectDictionary for Objects {
     }
 }
 
+/// A lost heartbeat, as the drive that consumed it recorded it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct HeartbeatLoss {
+    /// The node that fell silent (0x1016:1 bits 16-23).
+    pub node: u8,
+    /// The consumer time, ms (0x1016:1 bits 0-15).
+    pub consumer_ms: u16,
+    /// Time since its last heartbeat when the loss was noticed, µs.
+    pub silent_us: u64,
+    /// When the loss was noticed, on the drive's clock, µs.
+    pub at_us: u64,
+    /// The state the drive was in, and the one its 0x6007 reaction left it in.
+    pub from: State,
+    pub to: State,
+}
+
+/// Most a heartbeat consumer's clock advances between two looks, µs. A host looks at
+/// least every 50 ms (`SimRunner`), so while it runs the consumer keeps time.
+const CONSUMER_LOOK_MAX_US: u64 = 100_000;
+
+/// The heartbeat consumer of 0x1016:1. Its clock follows the drive's, but advances by
+/// at most half the consumer time and at most [`CONSUMER_LOOK_MAX_US`] between two
+/// looks: a drive whose host stalled (a loaded machine, an emulated CPU) did not
+/// watch, and cannot judge what it missed (a real drive does not stall). Frames queued
+/// meanwhile, the heartbeat among them, are taken before it judges again.
+#[derive(Clone, Copy, Debug, Default)]
+struct Consumer {
+    clock_us: u64,
+    /// The drive's clock at the last look.
+    looked_at_us: Option<u64>,
+    /// Consumer clock at the last heartbeat; `None`: none since the (re)start, so
+    /// nothing is watched yet (CiA 301: monitoring starts with the first heartbeat).
+    seen_us: Option<u64>,
+    /// The loss is reported, until the heartbeat comes back.
+    lost: bool,
+}
+
 /// One simulated drive.
 #[derive(Clone, Debug)]
 pub struct SimDrive {
@@ -480,6 +593,11 @@ pub struct SimDrive {
     now_us: u64,
     /// Heartbeat producer: when the last heartbeat was due; `None`: not started.
     heartbeat_at_us: Option<u64>,
+    /// Heartbeat consumer (0x1016).
+    consumer: Consumer,
+    /// The last loss of the watched heartbeat, and whether it was taken
+    /// ([`SimDrive::take_heartbeat_loss`]).
+    heartbeat_loss: Option<(HeartbeatLoss, bool)>,
     /// Event-driven TPDOs may be due: a frame was taken or a step made since the last
     /// look, or one waits out its inhibit time. (Packing them after every frame on a
     /// busy bus would cost the host for nothing.)
@@ -503,6 +621,8 @@ impl SimDrive {
             sent_at_us: [0; PDOS],
             now_us: 0,
             heartbeat_at_us: None,
+            consumer: Consumer::default(),
+            heartbeat_loss: None,
             events_pending: true,
             silent: false,
         }
@@ -514,6 +634,11 @@ impl SimDrive {
 
     pub fn state(&self) -> State {
         self.od.app.state
+    }
+
+    /// 0x6041 as it is now.
+    pub fn statusword(&self) -> u16 {
+        self.od.statusword()
     }
 
     pub fn nmt_state(&self) -> NmtState {
@@ -577,6 +702,9 @@ impl SimDrive {
                 }
                 self.events_pending = true;
             }
+            cob_id::CobKind::Heartbeat { node } if !f.is_rtr() && f.data().len() == 1 => {
+                self.on_heartbeat(node);
+            }
             _ if self.nmt == NmtState::Operational && !f.is_rtr() => {
                 let rx = &self.od.comm.rpdo;
                 if let Some(i) = rx
@@ -606,6 +734,7 @@ impl SimDrive {
             NmtCommand::ResetNode => {
                 // The application starts over too; the axis stays where it is.
                 self.od.app = Application::new(self.od.actual);
+                self.od.quick_stop_until_us = None;
                 self.od.emcy_len = 0;
                 self.reset_communication(tx);
             }
@@ -624,6 +753,9 @@ impl SimDrive {
             self.od.emcy_len = 0;
         }
         self.od.heartbeat_restart = true;
+        // 0x1016 is back to 0: nothing is watched, and a loss is gone with it.
+        self.od.consumer_restart = true;
+        self.od.heartbeat_lost = false;
         self.sdo = SdoServer::new(node);
         self.rpdo_at_sync = [None; PDOS];
         self.tpdo_syncs = [0; PDOS];
@@ -709,6 +841,8 @@ impl SimDrive {
         }
         self.now_us = now_us;
         self.produce_heartbeat(tx);
+        self.consume_heartbeat();
+        self.end_quick_stop();
         self.send_emcy(tx);
         let timers = self
             .od
@@ -718,6 +852,128 @@ impl SimDrive {
             .any(|p| p.is_enabled() && p.transmission_type() >= 254 && p.event_timer_ms() > 0);
         if self.nmt == NmtState::Operational && (self.events_pending || timers) {
             self.events_pending = self.send_tpdos(false, tx);
+        }
+    }
+
+    /// 0x1016:1 as (node, consumer time ms).
+    fn watched(&self) -> (u8, u16) {
+        let v = self.od.comm.heartbeat_consumer;
+        (((v >> 16) & 0x7F) as u8, v as u16)
+    }
+
+    /// A heartbeat (or boot-up) of `node`: if it is the watched one, it is alive; a
+    /// reported loss is over (EMCY 0000).
+    fn on_heartbeat(&mut self, node: u8) {
+        self.restart_consumer_if_written();
+        let (watched, ms) = self.watched();
+        if ms == 0 || node != watched {
+            return;
+        }
+        self.consumer.seen_us = Some(self.consumer.clock_us);
+        self.consumer.lost = false;
+        if self.od.heartbeat_lost {
+            self.od.heartbeat_lost = false;
+            // Error reset, unless a fault (0x6007 = 1) outlives the cause.
+            if self.od.app.fault.is_none() {
+                self.od.push_emcy(emcy_code::NO_ERROR);
+            }
+        }
+    }
+
+    /// 0x1016 was written (or reset): nothing is watched until the first heartbeat.
+    fn restart_consumer_if_written(&mut self) {
+        if self.od.consumer_restart {
+            self.od.consumer_restart = false;
+            self.consumer.seen_us = None;
+            self.consumer.lost = false;
+        }
+    }
+
+    /// The consumer looks at the time: the watched node silent for longer than the
+    /// consumer time is a heartbeat event (CiA 301): EMCY 0x8130, then the reaction
+    /// of 0x6007.
+    fn consume_heartbeat(&mut self) {
+        self.restart_consumer_if_written();
+        let (node, ms) = self.watched();
+        let c = &mut self.consumer;
+        let step = c.looked_at_us.map_or(0, |t| self.now_us.saturating_sub(t));
+        c.looked_at_us = Some(self.now_us);
+        c.clock_us += step.min(u64::from(ms) * 500).min(CONSUMER_LOOK_MAX_US);
+        let Some(seen) = c.seen_us else { return };
+        let silent_us = c.clock_us - seen;
+        if ms == 0 || c.lost || silent_us <= u64::from(ms) * 1000 {
+            return;
+        }
+        c.lost = true;
+        let from = self.od.app.state;
+        self.od.heartbeat_lost = true;
+        self.abort_connection();
+        self.heartbeat_loss = Some((
+            HeartbeatLoss {
+                node,
+                consumer_ms: ms,
+                silent_us,
+                at_us: self.now_us,
+                from,
+                to: self.od.app.state,
+            },
+            false,
+        ));
+    }
+
+    /// The reaction of 0x6007 to a lost connection, with its EMCY 0x8130.
+    fn abort_connection(&mut self) {
+        let app = &mut self.od.app;
+        match app.abort_connection {
+            abort_connection::FAULT => {
+                // Fault reaction: the EMCY carries the fault's own error register.
+                app.fault.get_or_insert(emcy_code::HEARTBEAT_ERROR);
+                app.state = State::Fault;
+            }
+            abort_connection::DISABLE_VOLTAGE if app.state != State::Fault => {
+                app.state = State::SwitchOnDisabled;
+            }
+            abort_connection::QUICK_STOP => match app.state {
+                // The axis stops where it is (the simulation brakes within a cycle),
+                // then the drive is disabled.
+                State::OperationEnabled | State::QuickStopActive => {
+                    app.state = State::QuickStopActive;
+                    self.od.quick_stop_until_us =
+                        Some(self.now_us + u64::from(self.od.comm.cycle_period_us));
+                }
+                State::ReadyToSwitchOn | State::SwitchedOn => app.state = State::SwitchOnDisabled,
+                _ => {}
+            },
+            _ => {}
+        }
+        self.od.push_emcy(emcy_code::HEARTBEAT_ERROR);
+    }
+
+    /// The quick stop of a lost connection is over: Switch on disabled.
+    fn end_quick_stop(&mut self) {
+        if let Some(until) = self.od.quick_stop_until_us {
+            if self.now_us >= until {
+                self.od.quick_stop_until_us = None;
+                if self.od.app.state == State::QuickStopActive {
+                    self.od.app.state = State::SwitchOnDisabled;
+                }
+            }
+        }
+    }
+
+    /// The last loss of the watched heartbeat (0x1016), if any.
+    pub fn heartbeat_loss(&self) -> Option<HeartbeatLoss> {
+        self.heartbeat_loss.map(|(l, _)| l)
+    }
+
+    /// A loss not taken before (for the host's log), once.
+    pub fn take_heartbeat_loss(&mut self) -> Option<HeartbeatLoss> {
+        match &mut self.heartbeat_loss {
+            Some((l, taken @ false)) => {
+                *taken = true;
+                Some(*l)
+            }
+            _ => None,
         }
     }
 
@@ -757,6 +1013,14 @@ impl SimDrive {
                 .filter(|_| period_us > 0)
                 .map(|t| t + period_us)
         };
+        let (_, ms) = self.watched();
+        let c = &self.consumer;
+        // When the watched heartbeat expires, on the drive's clock.
+        let expiry = c
+            .seen_us
+            .filter(|_| ms > 0 && !c.lost && !self.od.consumer_restart)
+            .map(|seen| self.now_us + (seen + u64::from(ms) * 1000 + 1).saturating_sub(c.clock_us));
+        let quick_stop = self.od.quick_stop_until_us;
         let operational = self.nmt == NmtState::Operational;
         let timers = self.od.comm.tpdo.iter().enumerate().filter_map(|(i, p)| {
             let event = p.transmission_type() >= 254 && p.event_timer_ms() > 0;
@@ -769,7 +1033,13 @@ impl SimDrive {
             (operational && self.events_pending && p.is_enabled() && event)
                 .then(|| self.sent_at_us[i] + u64::from(p.inhibit_time_100us()) * 100)
         });
-        heartbeat.into_iter().chain(timers).chain(inhibited).min()
+        heartbeat
+            .into_iter()
+            .chain(expiry)
+            .chain(quick_stop)
+            .chain(timers)
+            .chain(inhibited)
+            .min()
     }
 
     /// Starts a simulation step: remembers where the axis starts from.

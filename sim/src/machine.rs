@@ -4,17 +4,18 @@
 //! master configured (0x1006): the simulation runs on whatever clock the master runs,
 //! virtual or real.
 //!
-//! The drives' own timers (heartbeat producer, TPDO event timers) run on a
+//! The drives' own timers (heartbeat producer and consumer, TPDO event timers) run on a
 //! [`SimClock`]: the wall clock when the drives stand for hardware on a bus that runs
 //! in real time (then they produce heartbeats with no SYNC at all), or the simulated
 //! time on a virtual clock, where no time passes between SYNCs.
 
-use crate::drive::SimDrive;
+use crate::drive::{HeartbeatLoss, SimDrive};
 use crate::scenario::{FaultKind, Scenario};
 use crate::world::World;
 use hal::axis::AxisPositions;
 use hal::can::{CanFrame, CanTransport, TransportError};
 use hal::config::MachineConfig;
+use std::io::Write as _;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -230,6 +231,24 @@ impl SimMachine {
             .map(|t| Duration::from_micros(t.saturating_sub(now)))
     }
 
+    /// Each drive's last loss of the heartbeat it consumes (0x1016), with its node.
+    pub fn heartbeat_losses(&self) -> Vec<(u8, HeartbeatLoss)> {
+        self.drives
+            .iter()
+            .filter_map(|d| d.drive.heartbeat_loss().map(|l| (d.drive.node(), l)))
+            .collect()
+    }
+
+    /// Each drive's loss of the heartbeat it consumes (0x1016) not reported before,
+    /// with the drive's node.
+    pub fn take_heartbeat_losses(&mut self, report: &mut dyn FnMut(u8, HeartbeatLoss)) {
+        for d in &mut self.drives {
+            if let Some(l) = d.drive.take_heartbeat_loss() {
+                report(d.drive.node(), l);
+            }
+        }
+    }
+
     /// Records the wall-clock instant of every latch into `log` (benchmarks).
     pub fn set_latch_log(&mut self, log: Arc<LatchLog>) {
         self.latch_log = Some(log);
@@ -377,6 +396,18 @@ impl SimRunner {
                         machine.on_frame(&f, &mut |r| out.push(*r));
                     }
                     machine.poll(&mut |r| out.push(*r));
+                    machine.take_heartbeat_losses(&mut |node, l| {
+                        // The drive's own log line (a closed stderr is no reason to stop).
+                        let _ = writeln!(
+                            std::io::stderr(),
+                            "probebridge sim: node {node}: heartbeat of node {} lost ({:.1} ms silent, consumer time {} ms): EMCY 8130, {:?} -> {:?}",
+                            l.node,
+                            l.silent_us as f64 / 1000.0,
+                            l.consumer_ms,
+                            l.from,
+                            l.to
+                        );
+                    });
                     // One batch: on a bus with wire time the drives' answers
                     // arbitrate together, as separate devices' frames do.
                     transport.transmit_all(&out)?;

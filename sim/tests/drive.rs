@@ -363,3 +363,163 @@ fn event_driven_tpdo_waits_out_its_inhibit_time_and_repeats_by_its_event_timer()
     assert!(b.poll(159_999).is_empty());
     assert_eq!(b.poll(160_000), ["281#0100"], "the event timer repeats it");
 }
+
+/// Mode 8 and the controlword 06, 07, 0F by SDO: Operation enabled (0x1237).
+fn enabled(b: &mut Bench) {
+    b.expect("601#2F60600008000000", "581#6060600000000000");
+    for cw in ["06", "07", "0F"] {
+        b.expect(&format!("601#2B406000{cw}000000"), "581#6040600000000000");
+    }
+    assert_eq!(b.statusword(), "581#4B41600037120000");
+}
+
+#[test]
+fn a_lost_master_heartbeat_sends_emcy_8130_quick_stops_then_disables() {
+    let mut b = Bench::new();
+    enabled(&mut b);
+    // 0x1016: one entry; sub 1 = node 127 (0x7F) << 16 | 300 ms.
+    b.expect("601#4016100000000000", "581#4F16100001000000");
+    b.expect("601#231610012C017F00", "581#6016100100000000");
+    b.expect("601#401610012C017F00", "581#431610012C017F00");
+    // 0x6007 abort connection option code: 3, quick stop (the default).
+    b.expect("601#4007600000000000", "581#4B07600003000000");
+    // A target the axis would go to at the next step.
+    b.expect("601#237A6000E8030000", "581#607A600000000000");
+    assert_eq!(b.d.next_position_inc(), 1000);
+
+    // No heartbeat seen yet: nothing is watched (CiA 301), however long.
+    assert!(b.poll(1_000_000).is_empty());
+    assert_eq!(b.d.next_deadline_us(), None);
+    // Another node's heartbeat is not the master's.
+    assert!(b.rx("705#05").is_empty());
+    assert!(b.poll(1_100_000).is_empty());
+    assert_eq!(b.d.next_deadline_us(), None);
+    // The master's: watched from now (the drive's clock at its last look, 1.1 s).
+    assert!(b.rx("77F#05").is_empty());
+    assert_eq!(b.d.next_deadline_us(), Some(1_400_001));
+    assert!(b.poll(1_200_000).is_empty());
+    assert!(b.rx("77F#05").is_empty());
+    assert_eq!(b.d.next_deadline_us(), Some(1_500_001));
+    for t in [1_300_000, 1_400_000, 1_500_000] {
+        assert!(
+            b.poll(t).is_empty(),
+            "{t} us: 300 ms silent is not yet lost"
+        );
+    }
+    assert_eq!(b.d.statusword(), 0x1237);
+    // 300 ms and 1 us silent: EMCY 8130 (heartbeat error), error register 0x11
+    // (generic + communication), and the quick stop: statusword 0x0217.
+    assert_eq!(b.poll(1_500_001), ["081#3081110000000000"]);
+    assert_eq!(b.statusword(), "581#4B41600017020000");
+    assert_eq!(b.d.next_position_inc(), 0, "the axis stops where it is");
+    b.expect("601#4001100000000000", "581#4F01100011000000");
+    // Enable operation cannot leave the quick stop (quick stop option code 2).
+    b.expect("601#2B4060000F000000", "581#6040600000000000");
+    assert_eq!(b.statusword(), "581#4B41600017020000");
+    // A cycle period (0x1006, 2 ms) later the stop is over: Switch on disabled.
+    assert_eq!(b.d.next_deadline_us(), Some(1_502_001));
+    assert!(b.poll(1_502_001).is_empty());
+    assert_eq!(b.statusword(), "581#4B41600040020000");
+    assert!(b.poll(5_000_000).is_empty(), "one EMCY per loss");
+    let loss = b.d.take_heartbeat_loss().unwrap();
+    assert_eq!(
+        (loss.node, loss.consumer_ms, loss.silent_us),
+        (127, 300, 300_001)
+    );
+    assert_eq!(loss.at_us, 1_500_001);
+    assert_eq!(
+        (loss.from, loss.to),
+        (
+            hal::cia402::State::OperationEnabled,
+            hal::cia402::State::QuickStopActive
+        )
+    );
+    assert_eq!(b.d.take_heartbeat_loss(), None, "taken once");
+    // The master is back: EMCY 0000 (error reset), register 0; the drive stays
+    // disabled until the master enables it again.
+    assert_eq!(b.rx("77F#05"), ["081#0000000000000000"]);
+    b.expect("601#4001100000000000", "581#4F01100000000000");
+    assert_eq!(b.statusword(), "581#4B41600040020000");
+}
+
+#[test]
+fn the_consumer_ignores_its_own_hosts_stall_and_reset_communication_ends_it() {
+    let mut b = Bench::new();
+    enabled(&mut b);
+    b.expect("601#231610012C017F00", "581#6016100100000000");
+    assert!(b.poll(0).is_empty());
+    assert!(b.rx("77F#05").is_empty());
+    // The drive's host stalls for 2 s and looks again: a look counts at most 100 ms
+    // (and at most half the consumer time), and the heartbeat queued meanwhile is
+    // taken.
+    assert!(b.poll(2_000_000).is_empty());
+    assert!(b.rx("77F#05").is_empty());
+    assert!(b.poll(2_100_000).is_empty());
+    assert_eq!(b.d.statusword(), 0x1237);
+    // Reset communication: 0x1016 back to 0, nothing watched.
+    assert_eq!(b.rx("000#8201"), ["701#00"]);
+    b.expect("601#4016100100000000", "581#4316100100000000");
+    assert!(b.poll(60_000_000).is_empty());
+    assert_eq!(b.d.heartbeat_loss(), None);
+    // Node 0 with a time, reserved bits, a node beyond 127: value range (0x06090030);
+    // sub 0 is read-only.
+    b.expect("601#231610012C010000", "581#8016100130000906");
+    b.expect("601#231610012C017F01", "581#8016100130000906");
+    b.expect("601#231610012C018000", "581#8016100130000906");
+    b.expect("601#2F16100002000000", "581#8016100002000106");
+}
+
+#[test]
+fn abort_connection_option_code_0x6007_chooses_the_reaction() {
+    // (0x6007, EMCY, statusword after the loss).
+    for (code, emcy, after) in [
+        // 0: no action but the EMCY.
+        ("0000", "081#3081110000000000", "581#4B41600037120000"),
+        // 1: fault signal: Fault, 0x603F = 8130.
+        ("0100", "081#3081110000000000", "581#4B41600008020000"),
+        // 2: disable voltage: Switch on disabled at once.
+        ("0200", "081#3081110000000000", "581#4B41600040020000"),
+    ] {
+        let mut b = Bench::new();
+        enabled(&mut b);
+        b.expect(&format!("601#2B076000{code}0000"), "581#6007600000000000");
+        b.expect("601#2316100164007F00", "581#6016100100000000"); // 100 ms
+        assert!(b.poll(0).is_empty());
+        assert!(b.rx("77F#05").is_empty());
+        // Looks every 50 ms: half the consumer time, all of it counts.
+        assert!(b.poll(50_000).is_empty());
+        assert!(b.poll(100_000).is_empty());
+        assert_eq!(b.poll(100_001), [emcy], "0x6007 = {code}");
+        assert_eq!(b.statusword(), after, "0x6007 = {code}");
+        if code == "0100" {
+            b.expect("601#403F600000000000", "581#4B3F600030810000");
+            // The fault outlives the heartbeat's return: no error reset until a fault
+            // reset.
+            assert!(b.rx("77F#05").is_empty());
+        }
+    }
+    // Manufacturer-specific (negative) and undefined codes: value range exceeded.
+    let mut b = Bench::new();
+    b.expect("601#2B076000FFFF0000", "581#8007600030000906");
+    b.expect("601#2B07600004000000", "581#8007600030000906");
+    b.expect("601#4007600000000000", "581#4B07600003000000");
+}
+
+#[test]
+fn on_the_virtual_clock_syncs_without_the_masters_heartbeat_stop_the_drive() {
+    let mut b = Bench::new();
+    enabled(&mut b);
+    b.expect("601#231610012C017F00", "581#6016100100000000");
+    // Simulated time: SYNC every 2 ms; the master's heartbeat with the first only.
+    assert!(b.sync(0).is_empty());
+    assert!(b.rx("77F#05").is_empty());
+    for n in 1..=150 {
+        assert!(b.sync(n * 2_000).is_empty(), "SYNC {n}");
+    }
+    // 302 ms after it, the drive's answer to SYNC is the EMCY; then it is stopped and
+    // disabled a cycle later.
+    assert_eq!(b.sync(302_000), ["081#3081110000000000"]);
+    assert_eq!(b.statusword(), "581#4B41600017020000");
+    assert!(b.sync(304_000).is_empty());
+    assert_eq!(b.statusword(), "581#4B41600040020000");
+}

@@ -82,6 +82,9 @@ pub const CAN_IFACE_ENV: &str = "PROBEBRIDGE_TEST_CAN";
 pub const CAN_SYNC_US_ENV: &str = "PROBEBRIDGE_TEST_CAN_SYNC_US";
 /// Optional: heartbeat timeout (ms) for [`SocketCan`] instead of the machine's.
 pub const CAN_HEARTBEAT_TIMEOUT_MS_ENV: &str = "PROBEBRIDGE_TEST_CAN_HEARTBEAT_TIMEOUT_MS";
+/// Optional: the master's heartbeat period (ms) for [`SocketCan`] instead of the
+/// machine's (the drives stop when it is missing 3 periods: a stalling VM needs more).
+pub const CAN_MASTER_HEARTBEAT_MS_ENV: &str = "PROBEBRIDGE_TEST_CAN_MASTER_HEARTBEAT_MS";
 
 /// CANopen master and simulated drives on a real SocketCAN interface (`vcan0`), each on
 /// its own socket in this process (two sockets on one interface see each other's
@@ -131,6 +134,9 @@ impl Backend for SocketCan {
         }
         if let Some(ms) = env(CAN_HEARTBEAT_TIMEOUT_MS_ENV) {
             timing.heartbeat_timeout_ms = ms as u16;
+        }
+        if let Some(ms) = env(CAN_MASTER_HEARTBEAT_MS_ENV) {
+            timing.master_heartbeat_ms = ms as u16;
         }
         let mut drives = SimMachine::new(scenario);
         drives.set_clock(SimClock::Monotonic);

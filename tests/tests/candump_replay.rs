@@ -65,8 +65,11 @@ fn captured_probing_session_replays_byte_for_byte() {
     }
     let text = std::fs::read_to_string(log_path())
         .unwrap_or_else(|e| panic!("{}: {e}", log_path().display()));
-    let replay =
-        Replay::from_log(&text).unwrap_or_else(|e| panic!("{}: {e}", log_path().display()));
+    let master = machine_config(&plane())
+        .canopen_bus()
+        .map(|b| b.master_node);
+    let replay = Replay::from_log_of(&text, master)
+        .unwrap_or_else(|e| panic!("{}: {e}", log_path().display()));
     let total = replay.remaining();
     assert!(
         total > 500,

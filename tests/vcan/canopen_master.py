@@ -326,6 +326,33 @@ def check_fault_reset(node, mon):
           f"{'seen' if reset else 'missing'}, 0x603F = 0x{err:04X}")
 
 
+def check_heartbeat_consumer(node, network, mon):
+    """0x1016 as a master configures it: this script as node 126 with a 1 s consumer
+    time. Nothing is watched before the first heartbeat; after the last one the drive
+    sends EMCY 8130 and, by 0x6007 = 3, quick-stops to Switch on disabled."""
+    me, consumer_ms = 126, 1000
+    action = u32(node, 0x6007)
+    start = mon.mark()
+    node.sdo.download(0x1016, 1, ((me << 16) | consumer_ms).to_bytes(4, "little"))
+    quiet = mon.wait(lambda f: f[1] == 0x80 + NODE and f[2][:2] == b"\x30\x81", 1.5, start) is None
+    for _ in range(10):
+        network.send_message(0x700 + me, b"\x05")
+        time.sleep(0.1)
+    time.sleep(0.05)
+    beats = [f for f in mon.since(start) if f[1] == 0x700 + me]
+    last = beats[-1] if beats else None
+    emcy = mon.wait(lambda f: f[1] == 0x80 + NODE and f[2][:2] == b"\x30\x81", 10.0, start)
+    delay = 1000 * (emcy[0] - last[0]) if emcy and last else -1.0
+    sw = u32(node, 0x6041)
+    node.sdo.download(0x1016, 1, (0).to_bytes(4, "little"))
+    check("heartbeat_consumer_0x1016",
+          action == 3 and quiet and emcy is not None and consumer_ms - 100 <= delay <= consumer_ms + 1500
+          and sw & 0x6F in (0x40, 0x07),
+          f"0x6007 = {action}; no EMCY before the first heartbeat: {quiet}; EMCY "
+          f"{emcy[2].hex() if emcy else 'missing'} {delay:.1f} ms after the last heartbeat of node {me} "
+          f"(0x1016:1 = 0x{(me << 16) | consumer_ms:08X}: {consumer_ms} ms); statusword 0x{sw:04X}")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--iface", default="vcan0")
@@ -361,6 +388,7 @@ def main():
         sync.start()
         check_state_machine(node)
         check_fault_reset(nodes[FAULTY], mon)
+        check_heartbeat_consumer(node, network, mon)
     except Exception as e:  # a check that could not even run fails
         check("python_canopen_session", False, f"{type(e).__name__}: {e}")
     finally:

@@ -20,11 +20,17 @@
 //!   first SYNC, the TPDO2 latch frames (for `probe`: the latched values equal the
 //!   reported contact to one increment), and a replay: the master's recorded frames fed
 //!   into a fresh simulator of the case's scenario give exactly the drive frames that
-//!   were recorded.
+//!   were recorded;
+//! - `probebridge run` of 451 SIGKILLed mid-cycle (markers 7FF#FC/FB/FA): every drive
+//!   sends EMCY 8130 within its 0x1016 time (VM slack) after the master's last
+//!   heartbeat, logs the loss and answers a statusword out of Operation enabled;
+//!   SIGTERMed (7FF#F9/F8/F7): exit 143, "aborted" in the JSON, every drive's last
+//!   controlword Shutdown or quick stop and the NMT goodbye before the exit marker.
 //!
 //! Exit status 0 when everything holds, 1 with a list of every difference.
 
 use hal::can::candump::parse_log;
+use hal::can::record::sent_by_master;
 use hal::can::CanFrame;
 use hal::canopen::cob_id::{classify, CobKind};
 use hal::canopen::object;
@@ -81,6 +87,7 @@ const CHECKED_PROGRAMS: [(&str, &[&str]); 3] = [
             "emcy_fault_0x8611",
             "cia402_fault_state",
             "cia402_fault_reset_to_operation_enabled",
+            "heartbeat_consumer_0x1016",
         ],
     ),
     (
@@ -554,21 +561,17 @@ fn check_program(results: &Path, stem: &str, checks: &[&str], r: &mut Report) {
     }
 }
 
-fn is_master_frame(f: &CanFrame) -> bool {
-    matches!(
-        classify(f.cob_id()),
-        CobKind::Nmt | CobKind::Sync | CobKind::Rpdo { .. } | CobKind::SdoRequest { .. }
-    )
+/// Sent by the master whose node ID is `master` (its heartbeat included).
+fn is_master_frame(f: &CanFrame, master: u8) -> bool {
+    sent_by_master(f.cob_id(), Some(master))
 }
 
-fn is_drive_frame(f: &CanFrame) -> bool {
-    matches!(
-        classify(f.cob_id()),
-        CobKind::Emcy { .. }
-            | CobKind::Tpdo { .. }
-            | CobKind::SdoResponse { .. }
-            | CobKind::Heartbeat { .. }
-    )
+fn is_drive_frame(f: &CanFrame, master: u8) -> bool {
+    match classify(f.cob_id()) {
+        CobKind::Emcy { .. } | CobKind::Tpdo { .. } | CobKind::SdoResponse { .. } => true,
+        CobKind::Heartbeat { node } => node != master,
+        _ => false,
+    }
 }
 
 /// (node, index, sub) -> value of every expedited SDO download in `frames`.
@@ -614,7 +617,8 @@ fn check_segment(case: &Case, frames: &[CanFrame], results: &Path, r: &mut Repor
 }
 
 /// Start-up: NMT reset communication to all, every boot-up, the SDO configuration
-/// (cycle period, heartbeat, mode, the PDO layout), NMT start, then SYNC.
+/// (cycle period, heartbeat producer and consumer, mode, the PDO layout), NMT start,
+/// then SYNC.
 fn check_startup(
     name: &str,
     frames: &[CanFrame],
@@ -692,6 +696,13 @@ fn check_startup(
             ),
             ((object::MODES_OF_OPERATION, 0), 8),
         ];
+        // The drives consume the master's heartbeat (node << 16 | 3 x its period).
+        if bus.master_heartbeat_consumer_entry() != 0 {
+            want.push((
+                (object::CONSUMER_HEARTBEAT_TIME, 1),
+                bus.master_heartbeat_consumer_entry(),
+            ));
+        }
         for l in &process_data::LAYOUT {
             let Ok(index) = mapping_index(l.direction, l.number) else {
                 continue;
@@ -770,11 +781,12 @@ fn check_replay(name: &str, sc: &Scenario, frames: &[CanFrame], r: &mut Report) 
     // Replay: the master's frames into a fresh simulator, powered on and with its
     // timers polled after every frame as `probebridge sim` does, give the recorded
     // answers. Heartbeats (not boot-ups) run on the wall clock: left out on both sides.
+    let master = sc.machine.canopen_bus().map_or(0, |b| b.master_node);
     let mut sim = SimMachine::new(sc);
     sim.set_clock(SimClock::Monotonic);
     let mut replayed = Vec::new();
     sim.power_on(&mut |a| replayed.push(*a));
-    for f in frames.iter().filter(|f| is_master_frame(f)) {
+    for f in frames.iter().filter(|f| is_master_frame(f, master)) {
         sim.on_frame(f, &mut |a| replayed.push(*a));
         sim.poll(&mut |a| replayed.push(*a));
     }
@@ -783,7 +795,7 @@ fn check_replay(name: &str, sc: &Scenario, frames: &[CanFrame], r: &mut Report) 
     replayed.retain(|f| !timed(f));
     let recorded: Vec<CanFrame> = frames
         .iter()
-        .filter(|f| is_drive_frame(f) && !timed(f))
+        .filter(|f| is_drive_frame(f, master) && !timed(f))
         .copied()
         .collect();
     let first_diff = recorded
@@ -804,7 +816,7 @@ fn check_replay(name: &str, sc: &Scenario, frames: &[CanFrame], r: &mut Report) 
         format!(
             "candump {name}: replaying the {} recorded master frames into the simulator gives {} drive frames, \
              {} were recorded; first difference at drive frame {i}: recorded [{}], replayed [{}]",
-            frames.iter().filter(|f| is_master_frame(f)).count(),
+            frames.iter().filter(|f| is_master_frame(f, master)).count(),
             replayed.len(),
             recorded.len(),
             show(&recorded),
@@ -879,6 +891,218 @@ fn check_candump(cases: &[Case], results: &Path, r: &mut Report) {
     );
 }
 
+/// Marker bytes of the signal runs of in-vm.sh (`signal_mid_451`): started, signal
+/// sent, process exited.
+const KILL_MARKERS: [u8; 3] = [0xFC, 0xFB, 0xFA];
+const TERM_MARKERS: [u8; 3] = [0xF9, 0xF8, 0xF7];
+/// Slack on the drives' 0x1016 time in the emulated VM: the drives' host looks at the
+/// time at least every 50 ms (early by up to that), and the emulated CPUs stall (late).
+const VM_EARLY_MS: f64 = 100.0;
+const VM_LATE_MS: f64 = 1500.0;
+
+type Log = [(u64, String, CanFrame)];
+
+/// Index of the first marker frame 7FF#`byte`.
+fn marker_at(log: &Log, byte: u8) -> Option<usize> {
+    log.iter()
+        .position(|(_, _, f)| f.cob_id() == MARKER && f.data() == [byte])
+}
+
+/// The signal runs: a SIGKILLed master noticed by the drives, a SIGTERMed one
+/// disabling them before it exits.
+fn check_signals(results: &Path, configs: &Path, r: &mut Report) {
+    let sc = match Scenario::load(
+        &configs.join("configs/scenarios/demo-sphere.toml"),
+        Some(&configs.join("configs/machines")),
+    ) {
+        Ok(sc) => sc,
+        Err(e) => return r.fail(format!("signals: {e}")),
+    };
+    let Some(bus) = sc.machine.canopen_bus() else {
+        return r.fail("signals: demo-sphere's machine is not on CANopen".into());
+    };
+    let nodes: Vec<u8> = sc.machine.axes.iter().map(|a| a.canopen_node()).collect();
+    let log = match read(&results.join("candump.log"))
+        .and_then(|t| parse_log(&t).map_err(|e| format!("candump: {e}")))
+    {
+        Ok(l) => l,
+        Err(e) => return r.fail(format!("signals: {e}")),
+    };
+    check_killed(results, &log, &nodes, bus, r);
+    check_sigterm(results, &log, &nodes, r);
+}
+
+fn exit_status(results: &Path, name: &str) -> String {
+    read(&results.join(format!("{name}.exit")))
+        .map(|s| s.trim().to_string())
+        .unwrap_or_else(|e| e)
+}
+
+/// SIGKILL mid-451: the master left the drives enabled; every drive sends EMCY 8130
+/// after its 0x1016 time without the master's heartbeat, logs it, and answers a
+/// statusword out of Operation enabled.
+fn check_killed(results: &Path, log: &Log, nodes: &[u8], bus: &CanOpenBusConfig, r: &mut Report) {
+    let exit = exit_status(results, "kill");
+    r.check(exit == "137", || {
+        format!("kill: exit status {exit}, expected 137 (SIGKILL)")
+    });
+    let [start, sent, exited] = KILL_MARKERS.map(|m| marker_at(log, m));
+    let (Some(start), Some(sent), Some(exited)) = (start, sent, exited) else {
+        return r.fail("kill: no markers 7FF#FC / FB / FA in the candump log".into());
+    };
+    let end = marker_at(log, TERM_MARKERS[0]).unwrap_or(log.len());
+    let (before, after) = (&log[start..sent], &log[sent..end]);
+    let master = bus.master_node;
+    let consumer_ms = f64::from(bus.master_heartbeat_consumer_ms());
+    // (Up to the exit marker: a frame the dying process sent may follow the marker of
+    // the signal, which cansend puts on the bus after kill.)
+    let last_heartbeat = log[start..exited]
+        .iter()
+        .rev()
+        .find(|(_, _, f)| f.cob_id() == 0x700 + u16::from(master))
+        .map(|(t, _, _)| *t);
+    let Some(last_heartbeat) = last_heartbeat else {
+        return r.fail(format!(
+            "kill: no heartbeat of the master (node {master}) before the kill"
+        ));
+    };
+    let strays = log[exited..end]
+        .iter()
+        .filter(|(_, _, f)| {
+            is_master_frame(f, master)
+                && f.cob_id() != MARKER
+                && !matches!(classify(f.cob_id()), CobKind::SdoRequest { .. })
+        })
+        .count();
+    r.check(strays == 0, || {
+        format!("kill: {strays} master frame(s) after the killed process exited")
+    });
+    let sim_log = read(&results.join("kill.sim.log")).unwrap_or_default();
+    for n in nodes {
+        let tpdo1 = before.iter().rev().find_map(|(_, _, f)| {
+            (f.cob_id() == process_data::Tpdo1::cob_id(*n))
+                .then(|| process_data::Tpdo1::decode(f).ok())
+                .flatten()
+        });
+        let cw = before.iter().rev().find_map(|(_, _, f)| {
+            (f.cob_id() == process_data::Rpdo1::cob_id(*n))
+                .then(|| process_data::Rpdo1::decode(f).ok())
+                .flatten()
+        });
+        r.check(
+            tpdo1.is_some_and(|p| p.statusword & 0x6F == 0x27)
+                && cw.is_some_and(|p| p.controlword == 0x000F),
+            || format!("kill: node {n} was not in Operation enabled when the master was killed: last TPDO1 {tpdo1:?}, RPDO1 {cw:?}"),
+        );
+        let emcy = after.iter().find(|(_, _, f)| {
+            f.cob_id() == 0x80 + u16::from(*n) && f.data().get(..2) == Some(&[0x30, 0x81])
+        });
+        let Some((t, _, f)) = emcy else {
+            r.fail(format!(
+                "kill: node {n}: no EMCY 8130 after the master was killed"
+            ));
+            continue;
+        };
+        let delay_ms = t.saturating_sub(last_heartbeat) as f64 / 1e6;
+        println!(
+            "kill: node {n}: {} {delay_ms:.1} ms after the master's last heartbeat (0x1016 time {consumer_ms} ms)",
+            hal::can::candump::format_line(*t, "vcan0", f)
+        );
+        r.check(
+            delay_ms >= consumer_ms - VM_EARLY_MS && delay_ms <= consumer_ms + VM_LATE_MS,
+            || format!("kill: node {n}: EMCY 8130 {delay_ms:.1} ms after the master's last heartbeat, outside the 0x1016 time {consumer_ms} ms (-{VM_EARLY_MS}/+{VM_LATE_MS} ms in the VM)"),
+        );
+        let answer = after.iter().rev().find(|(t2, _, f)| {
+            t2 > t
+                && f.cob_id() == 0x580 + u16::from(*n)
+                && f.data().get(..4) == Some(&[0x4B, 0x41, 0x60, 0])
+        });
+        match answer {
+            Some((ta, _, f)) => {
+                let sw = u16::from_le_bytes([f.data()[4], f.data()[5]]);
+                println!(
+                    "kill: node {n}: {} statusword 0x{sw:04X}",
+                    hal::can::candump::format_line(*ta, "vcan0", f)
+                );
+                r.check([0x40, 0x07].contains(&(sw & 0x6F)), || {
+                    format!("kill: node {n}: statusword 0x{sw:04X} after the loss, expected Switch on disabled or Quick stop active")
+                });
+            }
+            None => r.fail(format!(
+                "kill: node {n}: no answer to the 0x6041 upload after the EMCY"
+            )),
+        }
+        let line = sim_log
+            .lines()
+            .find(|l| l.contains(&format!("node {n}: heartbeat of node {master} lost")));
+        match line {
+            Some(l) => println!("kill: {l}"),
+            None => r.fail(format!(
+                "kill: kill.sim.log has no loss of node {master}'s heartbeat for node {n}"
+            )),
+        }
+    }
+}
+
+/// SIGTERM mid-451: exit 143, "aborted" in the JSON, and on the bus, before the
+/// process exited, every drive's last controlword Shutdown (0x0006) or a quick stop,
+/// then the goodbye (NMT reset communication).
+fn check_sigterm(results: &Path, log: &Log, nodes: &[u8], r: &mut Report) {
+    let exit = exit_status(results, "sigterm");
+    r.check(exit == "143", || {
+        format!("sigterm: exit status {exit}, expected 143 (128 + SIGTERM)")
+    });
+    match read_json(&results.join("sigterm.json")) {
+        Ok(v) => {
+            let c451 = v["cycles"]
+                .as_array()
+                .and_then(|c| c.iter().find(|c| c["cycle"] == 451));
+            r.check(
+                v["aborted"] == true && c451.is_some_and(|c| c["status"] == "aborted"),
+                || format!("sigterm: the JSON does not say aborted: aborted = {}, cycle 451 = {c451:?}", v["aborted"]),
+            );
+        }
+        Err(e) => r.fail(format!("sigterm: {e}")),
+    }
+    let [start, _, exited] = TERM_MARKERS.map(|m| marker_at(log, m));
+    let (Some(start), Some(exited)) = (start, exited) else {
+        return r.fail("sigterm: no markers 7FF#F9 / F8 / F7 in the candump log".into());
+    };
+    let exit_t = log[exited].0;
+    for n in nodes {
+        let last = log[start..exited].iter().rev().find_map(|(t, _, f)| {
+            (f.cob_id() == process_data::Rpdo1::cob_id(*n))
+                .then(|| {
+                    process_data::Rpdo1::decode(f)
+                        .ok()
+                        .map(|p| (*t, p.controlword))
+                })
+                .flatten()
+        });
+        let Some((t, cw)) = last else {
+            r.fail(format!("sigterm: node {n}: no RPDO1 in the run"));
+            continue;
+        };
+        // Shutdown 0x0006, or quick stop (bit 1 set, bit 2 clear).
+        let disabled = cw & 0x0087 == 0x0006 || cw & 0x0086 == 0x0002;
+        println!(
+            "sigterm: node {n}: last controlword 0x{cw:04X}, {:.1} ms before the process exited",
+            exit_t.saturating_sub(t) as f64 / 1e6
+        );
+        r.check(disabled, || {
+            format!("sigterm: node {n}: the last controlword before the exit is 0x{cw:04X} (Shutdown or quick stop expected)")
+        });
+        // (The marker of the signal may reach the bus after the master's first
+        // frames of the shutdown: cansend starts after kill.)
+        let goodbye = log[start..exited]
+            .iter()
+            .any(|(_, _, f)| f.cob_id() == 0 && f.data() == [0x82, *n]);
+        r.check(goodbye, || {
+            format!("sigterm: node {n}: no NMT reset communication (the goodbye) before the exit")
+        });
+    }
+}
+
 const USAGE: &str = "usage: vcan-check --results DIR --reference DIR [--root DIR] [--configs DIR]
   --configs DIR: the folder holding configs/scenarios and configs/machines the cases ran
                  with (PROBEBRIDGE_VCAN_CONFIGS of run-cases.sh); default: the repository";
@@ -950,10 +1174,11 @@ fn main() -> ExitCode {
         check_program(&results, stem, checks, &mut r);
     }
     check_candump(&cases, &results, &mut r);
+    check_signals(&results, &configs, &mut r);
 
     if r.failures.is_empty() {
         println!(
-            "vcan-check: all {} checks passed ({} cases, conformance suite, python-canopen master, foreign device, candump replay)",
+            "vcan-check: all {} checks passed ({} cases, conformance suite, python-canopen master, foreign device, candump replay, SIGKILL and SIGTERM mid-451)",
             r.checks,
             cases.len()
         );

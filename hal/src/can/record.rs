@@ -18,12 +18,14 @@ use std::io::Write;
 use std::sync::{Arc, OnceLock};
 
 /// Whether a CANopen master (not a device) sends frames with this identifier: NMT,
-/// SYNC, RPDOs and SDO requests.
-pub fn sent_by_master(cob_id: u16) -> bool {
-    matches!(
-        classify(cob_id),
-        CobKind::Nmt | CobKind::Sync | CobKind::Rpdo { .. } | CobKind::SdoRequest { .. }
-    )
+/// SYNC, RPDOs and SDO requests, and its heartbeat when it has the node ID
+/// `master_node` (a heartbeat's identifier alone does not say who sent it).
+pub fn sent_by_master(cob_id: u16, master_node: Option<u8>) -> bool {
+    match classify(cob_id) {
+        CobKind::Nmt | CobKind::Sync | CobKind::Rpdo { .. } | CobKind::SdoRequest { .. } => true,
+        CobKind::Heartbeat { node } => Some(node) == master_node,
+        _ => false,
+    }
 }
 
 /// Whether a recording is whole: the first write error, shared with whoever opened
@@ -141,10 +143,18 @@ impl<T: CanTransport, W: Write + Send> CanTransport for Recorder<T, W> {
 pub struct Replay {
     frames: VecDeque<(usize, CanFrame)>,
     ready: VecDeque<CanFrame>,
+    master_node: Option<u8>,
 }
 
 impl Replay {
+    /// The log of a master that sends no heartbeat.
     pub fn from_log(text: &str) -> Result<Self, CandumpError> {
+        Self::from_log_of(text, None)
+    }
+
+    /// The log of a master with node ID `master_node` (its heartbeat is its own frame,
+    /// not an answer), or `None` when it sends no heartbeat.
+    pub fn from_log_of(text: &str, master_node: Option<u8>) -> Result<Self, CandumpError> {
         let frames = parse_log(text)?
             .into_iter()
             .enumerate()
@@ -153,6 +163,7 @@ impl Replay {
         let mut r = Self {
             frames,
             ready: VecDeque::new(),
+            master_node,
         };
         r.release_answers();
         Ok(r)
@@ -161,7 +172,7 @@ impl Replay {
     /// Device frames up to the next master frame become receivable.
     fn release_answers(&mut self) {
         while let Some((_, f)) = self.frames.front() {
-            if sent_by_master(f.cob_id()) {
+            if sent_by_master(f.cob_id(), self.master_node) {
                 break;
             }
             self.ready.push_back(*f);

@@ -30,6 +30,9 @@ pub mod pdo_comm_sub {
 }
 
 // CiA 402 drive profile area.
+/// CiA 402 abort connection option code: what the drive does when its connection to
+/// the master is lost (heartbeat consumer expired).
+pub const ABORT_CONNECTION_OPTION_CODE: u16 = 0x6007;
 pub const ERROR_CODE: u16 = 0x603F;
 pub const CONTROLWORD: u16 = 0x6040;
 pub const STATUSWORD: u16 = 0x6041;

@@ -355,10 +355,13 @@ fn run_thread<T: CanTransport, S: SampleSink>(
         if let Ok(mut s) = stats.try_lock() {
             *s = rt.stats();
         }
-        if rt.is_shut_down() || !running.load(Ordering::Acquire) {
-            // A few cycles so the drives see the shutdown controlword.
+        if rt.is_finished() {
+            return;
+        }
+        if !running.load(Ordering::Acquire) {
+            // Shutdown was submitted above; a loop that does not finish it is left.
             shutdown_cycles += 1;
-            if shutdown_cycles > 3 {
+            if shutdown_cycles > 2 * rt_loop::SHUTDOWN_TICKS + 2 {
                 return;
             }
         }

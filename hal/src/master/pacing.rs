@@ -118,6 +118,11 @@ impl<T: CanTransport, S: SampleSink> PacedLoop<T, S> {
         self.rt.is_shut_down()
     }
 
+    /// The shutdown and its goodbye are sent (see [`RtLoop::is_finished`]).
+    pub fn is_finished(&self) -> bool {
+        self.rt.is_finished()
+    }
+
     /// One SYNC period: take in what the drives sent, tick, send setpoints and SYNC.
     ///
     /// A transport error does not end the period: the core is told (it faults and

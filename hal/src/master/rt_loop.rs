@@ -9,8 +9,10 @@
 //! [`RtLoop::interpolate`] (enabling, moves, arming, probing, braking, settling), the
 //! latch handling of `on_latch` (the first latch frame starts the stop of every axis,
 //! since the probe signal is wired to all drives; the contact is published once every
-//! moving axis's latch is in), the stop (`begin_stop`, `set_fault`) and
-//! [`RtLoop::sync_frames`] (setpoints and SYNC).
+//! moving axis's latch is in), the stop (`begin_stop`, `set_fault`),
+//! [`RtLoop::sync_frames`] (setpoints, the master's heartbeat and SYNC) and the goodbye
+//! after a shutdown (NMT reset communication, which also ends the drives' watch on the
+//! master's heartbeat).
 
 use super::command::{Command, Detail, Reply, RtError};
 use super::process_data::{ProcessData, Rpdo1, Rpdo2, Tpdo1, Tpdo2};
@@ -18,8 +20,8 @@ use crate::axis::{Axis, MAX_AXES};
 use crate::can::CanFrame;
 use crate::canopen::cob_id::{self, CobKind};
 use crate::canopen::emcy::Emcy;
-use crate::canopen::heartbeat::{HeartbeatConsumer, HeartbeatEvent};
-use crate::canopen::nmt::{self, NmtCommand};
+use crate::canopen::heartbeat::{self, HeartbeatConsumer, HeartbeatEvent};
+use crate::canopen::nmt::{self, NmtCommand, NmtState};
 use crate::canopen::sync;
 use crate::cia402::controlword::Controlword;
 use crate::cia402::state::State;
@@ -34,12 +36,16 @@ use crate::motion_guard::{may_start_deflected, ProbeInput};
 pub use super::pacing::Pacing;
 
 /// Most frames one tick sends: RPDO1 and RPDO2 of every drive, a repeated NMT start
-/// while enabling, then SYNC.
-pub const MAX_TICK_FRAMES: usize = 2 * MAX_AXES + 2;
+/// while enabling, the master's heartbeat, then SYNC.
+pub const MAX_TICK_FRAMES: usize = 2 * MAX_AXES + 3;
 
 /// While enabling, a drive that has not sent its TPDO1 for this long gets the NMT
 /// start again (the first may have been lost on the bus; a started node ignores it).
 const NMT_START_REPEAT_NS: u64 = 100_000_000;
+
+/// Ticks after a shutdown that still send the Shutdown controlword (and SYNC, so
+/// synchronous RPDOs take effect) before the goodbye.
+pub const SHUTDOWN_TICKS: u32 = 3;
 
 /// The frames of one tick, in sending order (fixed capacity: no allocation).
 pub type TickFrames = heapless::Vec<CanFrame, MAX_TICK_FRAMES>;
@@ -55,6 +61,10 @@ pub struct LoopConfig {
     pub enable_timeout_ns: u64,
     pub arm_timeout_ns: u64,
     pub heartbeat_timeout_ns: u64,
+    /// The master's node ID (its heartbeat goes out on 0x700 + this).
+    pub master_node: u8,
+    /// Period of the master's heartbeat, ns (0: none).
+    pub master_heartbeat_ns: u64,
 }
 
 impl LoopConfig {
@@ -70,6 +80,8 @@ impl LoopConfig {
             enable_timeout_ns: 2_000_000_000,
             arm_timeout_ns: 200_000_000,
             heartbeat_timeout_ns: bus.heartbeat_timeout_ms as u64 * 1_000_000,
+            master_node: bus.master_node,
+            master_heartbeat_ns: bus.master_heartbeat_ms as u64 * 1_000_000,
         }
     }
 }
@@ -264,6 +276,10 @@ pub struct RtLoop<S: SampleSink> {
     arm_waits: u32,
     /// Arming again after a wait: only the drives that did not report armed.
     arm_retry: bool,
+    /// When the master's next heartbeat is due (`None`: the first tick sends one).
+    heartbeat_due_ns: Option<u64>,
+    /// Ticks since the shutdown; after [`SHUTDOWN_TICKS`] the goodbye goes out.
+    shutdown_ticks: u32,
 }
 
 impl<S: SampleSink> RtLoop<S> {
@@ -309,6 +325,8 @@ impl<S: SampleSink> RtLoop<S> {
             nmt_start_due: false,
             arm_waits: 0,
             arm_retry: false,
+            heartbeat_due_ns: None,
+            shutdown_ticks: 0,
         }
     }
 
@@ -327,6 +345,13 @@ impl<S: SampleSink> RtLoop<S> {
 
     pub fn is_shut_down(&self) -> bool {
         matches!(self.activity, Activity::Shutdown)
+    }
+
+    /// The shutdown is complete: the drives got the Shutdown controlword for
+    /// [`SHUTDOWN_TICKS`] ticks, then the goodbye (NMT reset communication). Nothing
+    /// is left to send.
+    pub fn is_finished(&self) -> bool {
+        self.is_shut_down() && self.shutdown_ticks > SHUTDOWN_TICKS
     }
 
     /// The answer to the last command, once it is finished.
@@ -514,10 +539,52 @@ impl<S: SampleSink> RtLoop<S> {
         let elapsed = now_ns.saturating_sub(self.sync_ns);
         self.supervised_ns += elapsed.min(2 * self.cfg.period_ns);
         self.sync_ns = now_ns;
+        if self.is_shut_down() {
+            self.shutdown_ticks = self.shutdown_ticks.saturating_add(1);
+            if self.shutdown_ticks > SHUTDOWN_TICKS {
+                self.goodbye_frames(out);
+                return;
+            }
+        }
         self.supervise();
         self.interpolate();
         self.sync_frames(out);
         self.stats.cycles += 1;
+    }
+
+    /// The end of an orderly shutdown: NMT reset communication to every drive, once.
+    /// It returns their communication objects to power-on values, 0x1016 included, so
+    /// the drives stop watching the master's heartbeat: an orderly exit is not a lost
+    /// master. (A killed master sends nothing; the drives notice and stop.)
+    fn goodbye_frames(&mut self, out: &mut TickFrames) {
+        out.clear();
+        if self.shutdown_ticks != SHUTDOWN_TICKS + 1 {
+            return;
+        }
+        for d in &self.drives {
+            let _ = out.push(nmt::encode(NmtCommand::ResetCommunication, d.node));
+        }
+    }
+
+    /// The master's heartbeat (state operational) into `out` when it is due at the
+    /// tick time: every `master_heartbeat_ns` on the SYNC grid; after a stall, one, not
+    /// a burst.
+    fn heartbeat_frame(&mut self, out: &mut TickFrames) {
+        let period = self.cfg.master_heartbeat_ns;
+        if period == 0 {
+            return;
+        }
+        let now = self.sync_ns;
+        let due = self.heartbeat_due_ns.unwrap_or(now);
+        if now < due {
+            return;
+        }
+        let next = due + period;
+        self.heartbeat_due_ns = Some(if now >= next { now + period } else { next });
+        let _ = out.push(heartbeat::encode(
+            self.cfg.master_node,
+            NmtState::Operational,
+        ));
     }
 
     /// The driver sent the frames of the last tick at `sent_ns`: the stop latency of a
@@ -1076,7 +1143,8 @@ impl<S: SampleSink> RtLoop<S> {
     }
 
     /// SYNC: every drive's RPDO1 (controlword, setpoint), its RPDO2 when the touch
-    /// probe function changed, then the SYNC itself, into `out`.
+    /// probe function changed, the master's heartbeat when due, then the SYNC itself,
+    /// into `out`.
     pub fn sync_frames(&mut self, out: &mut TickFrames) {
         out.clear();
         let enabled = !matches!(self.activity, Activity::Enabling { .. });
@@ -1106,6 +1174,7 @@ impl<S: SampleSink> RtLoop<S> {
         if core::mem::take(&mut self.nmt_start_due) {
             let _ = out.push(nmt::encode(NmtCommand::Start, 0));
         }
+        self.heartbeat_frame(out);
         let _ = out.push(sync::encode());
     }
 }
@@ -1367,11 +1436,12 @@ mod tests {
     }
 
     #[test]
-    fn sync_sends_every_drives_rpdo1_then_sync_and_rpdo2_only_on_change() {
+    fn sync_sends_every_drives_rpdo1_the_heartbeat_then_sync_and_rpdo2_only_on_change() {
         let mut b = Bench::new();
         b.rt.tick(PERIOD, &mut b.sent);
         let frame = |id, d: &[u8]| CanFrame::new(id, d).unwrap();
-        // Shutdown (0x0006) at target 0, the touch probe function 0, then SYNC.
+        // Shutdown (0x0006) at target 0, the touch probe function 0, the master's
+        // first heartbeat (node 127, operational), then SYNC.
         assert_eq!(
             b.sent.as_slice(),
             &[
@@ -1381,6 +1451,7 @@ mod tests {
                 frame(0x302, &[0, 0]),
                 frame(0x203, &[0x06, 0, 0, 0, 0, 0]),
                 frame(0x303, &[0, 0]),
+                frame(0x77F, &[0x05]),
                 frame(0x080, &[]),
             ]
         );
@@ -1630,5 +1701,49 @@ mod tests {
             other => panic!("{other:?}"),
         }
         assert!(b.drives[0].actual < 50_000, "stopped before the target");
+    }
+
+    #[test]
+    fn the_master_sends_its_heartbeat_on_the_sync_grid_and_a_goodbye_after_shutdown() {
+        let mut b = Bench::enabled();
+        let hb = heartbeat::encode(127, NmtState::Operational);
+        let start = b.now;
+        let mut at = Vec::new();
+        for _ in 0..150 {
+            b.tick();
+            if let Some(i) = b.sent.iter().position(|f| *f == hb) {
+                // Before the SYNC, which stays the last frame of a tick.
+                assert_eq!(i, b.sent.len() - 2);
+                at.push((b.now - start) / PERIOD);
+            }
+        }
+        // Every 100 ms (50 periods of 2 ms), from the loop's first tick.
+        assert_eq!(at.len(), 3, "{at:?}");
+        assert_eq!(at[1] - at[0], 50);
+        assert_eq!(at[2] - at[1], 50);
+        // A stall of the loop: one heartbeat when it resumes, not a burst.
+        b.now += 500 * PERIOD;
+        b.tick();
+        assert_eq!(b.sent.iter().filter(|f| **f == hb).count(), 1);
+        b.tick();
+        assert_eq!(b.sent.iter().filter(|f| **f == hb).count(), 0);
+
+        b.rt.submit(Command::Shutdown);
+        for _ in 0..SHUTDOWN_TICKS {
+            b.tick();
+            assert!(!b.rt.is_finished());
+            for n in 1..=3 {
+                assert_eq!(b.rpdo1(n).controlword, Controlword::SHUTDOWN);
+            }
+        }
+        // The goodbye: reset communication to each drive (its 0x1016 back to 0), once.
+        b.tick();
+        let goodbye: Vec<CanFrame> = (1..=3)
+            .map(|n| nmt::encode(NmtCommand::ResetCommunication, n))
+            .collect();
+        assert_eq!(b.sent.as_slice(), goodbye.as_slice());
+        assert!(b.rt.is_finished());
+        b.tick();
+        assert!(b.sent.is_empty());
     }
 }

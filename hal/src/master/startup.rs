@@ -1,6 +1,7 @@
 //! Bringing the drives up before the real-time loop runs: NMT reset, boot-up of every
-//! configured node, the configuration written over SDO (cycle period, heartbeat,
-//! cyclic synchronous position mode, the PDO layout of [`super::process_data`]), then
+//! configured node, the configuration written over SDO (cycle period, heartbeat
+//! producer 0x1017, the consumer of the master's heartbeat 0x1016:1, cyclic synchronous
+//! position mode, the PDO layout of [`super::process_data`]), then
 //! NMT start. Blocking, with a timeout on every answer; any refusal is an error naming
 //! the node, the object and the drive's SDO abort code.
 
@@ -289,6 +290,19 @@ pub fn configure<T: CanTransport>(
             &bus.heartbeat_producer_ms.to_le_bytes(),
             timeout,
         )?;
+        // The drive watches the master's heartbeat (see `RtLoop`), and stops when it
+        // is missing; a master without one configures no consumer.
+        let consumer = bus.master_heartbeat_consumer_entry();
+        if consumer != 0 {
+            sdo_download(
+                t,
+                axis,
+                object::CONSUMER_HEARTBEAT_TIME,
+                1,
+                &consumer.to_le_bytes(),
+                timeout,
+            )?;
+        }
         sdo_download(
             t,
             axis,
