@@ -47,17 +47,18 @@ fn probe(name: &str, start: &str, modbus: bool) -> (Option<i32>, String) {
 
 #[test]
 fn a_positioning_move_from_inside_material_is_refused_with_the_point() {
-    for modbus in [false, true] {
-        let (code, err) = probe(&format!("deeper-{modbus}"), "0,0,340", modbus);
-        assert_eq!(code, Some(1), "{err}");
-        assert!(
-            err.contains("already triggered at the start of the positioning move at X+0.0000 Y+0.0000 Z+350.0000")
-                && err.contains("nothing moved")
-                && !err.contains("0xFF01")
-                && !err.contains("fault"),
-            "modbus {modbus}: {err}"
-        );
-    }
+    // CANopen only: over Modbus a contact from before the bridge started is left to
+    // the PLC (its direction is unknown to the bridge).
+    let (code, err) = probe("deeper", "0,0,340", false);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains(
+            "already triggered at the start of the positioning move at X+0.0000 Y+0.0000 Z+350.0000"
+        ) && err.contains("nothing moved")
+            && !err.contains("0xFF01")
+            && !err.contains("fault"),
+        "{err}"
+    );
 }
 
 #[test]

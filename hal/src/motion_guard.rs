@@ -229,17 +229,17 @@ impl MotionGuard {
 }
 
 /// May a positioning move start while the stylus is in contact (the probe signal
-/// already high, so no rising edge will tell a collision)? Only straight out of the
-/// contact: against `along`, the linear direction of the motion that made it (a
+/// already high, so no rising edge will tell a collision)? Only out of the contact:
+/// its linear part against `along`, the linear direction of the motion that made it (a
 /// probing contact or a collision; `None` when it was there before anything moved, a
-/// start inside material), with no rotary axis turning. `linear` is the move's X/Y/Z
-/// displacement; a move that goes nowhere may start.
+/// start inside material). `linear` is the move's X/Y/Z displacement; rotary axes may
+/// turn while the linear axes lead the stylus out (cycle 451's retraction); a move that
+/// goes nowhere may start.
 pub fn may_start_deflected(along: Option<[f64; 3]>, linear: [f64; 3], rotary: bool) -> bool {
     if !rotary && linear.iter().all(|v| *v == 0.0) {
         return true;
     }
-    let away = along.is_some_and(|d| linear.iter().zip(d).map(|(m, d)| m * d).sum::<f64>() < 0.0);
-    away && !rotary
+    along.is_some_and(|d| linear.iter().zip(d).map(|(m, d)| m * d).sum::<f64>() < 0.0)
 }
 
 /// The refusal of a positioning move that would push a stylus in contact further in

@@ -66,15 +66,25 @@ impl ServiceLock {
         };
         loop {
             // O_NOFOLLOW: a symlink planted at the path is not followed.
-            let mut file = OpenOptions::new()
-                .read(true)
-                .write(true)
-                .create(true)
-                .truncate(false)
-                .mode(0o644)
-                .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
-                .open(&path)
-                .map_err(io)?;
+            let open = |write: bool| {
+                OpenOptions::new()
+                    .read(true)
+                    .write(write)
+                    .create(write)
+                    .truncate(false)
+                    .mode(0o644)
+                    .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
+                    .open(&path)
+            };
+            // A file another user left (a killed bridge of the gateway's user) can
+            // still be locked read-only; only the pid is not written then.
+            let (mut file, writable) = match open(true) {
+                Ok(f) => (f, true),
+                Err(e) if e.kind() == std::io::ErrorKind::PermissionDenied => {
+                    (open(false).map_err(io)?, false)
+                }
+                Err(e) => return Err(io(e)),
+            };
             // SAFETY: flock on a descriptor this function owns.
             if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
                 let e = std::io::Error::last_os_error();
@@ -99,9 +109,11 @@ impl ServiceLock {
                 Ok(now) if now.dev() == ours.dev() && now.ino() == ours.ino() => {}
                 _ => continue,
             }
-            file.set_len(0).map_err(io)?;
-            file.seek(SeekFrom::Start(0)).map_err(io)?;
-            write!(file, "pid {}", std::process::id()).map_err(io)?;
+            if writable {
+                file.set_len(0).map_err(io)?;
+                file.seek(SeekFrom::Start(0)).map_err(io)?;
+                write!(file, "pid {}", std::process::id()).map_err(io)?;
+            }
             return Ok(Self { path, file });
         }
     }

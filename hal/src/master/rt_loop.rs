@@ -461,9 +461,9 @@ impl<S: SampleSink> RtLoop<S> {
     }
 
     /// A positioning move from `from` to `to` while the probe signal is already high
-    /// (no rising edge will tell a collision): allowed only straight out of the
-    /// contact, against the motion that made it (the retraction after a probing
-    /// contact or a collision), with no rotary axis turning. Anything else, and any
+    /// (no rising edge will tell a collision): allowed only out of the contact,
+    /// against the motion that made it (the retraction after a probing contact or a
+    /// collision), see [`may_start_deflected`]. Anything else, and any
     /// move when the stylus was deflected before the last motion (a start inside
     /// material), would push the stylus further in until it breaks; it is refused with
     /// the point, before anything moves.

@@ -533,9 +533,12 @@ impl Machine for ModbusMachine {
                 _ => rotary |= d != 0.0,
             }
         }
-        // A stylus already in contact gives no rising edge: the PLC would not see a
-        // collision, only the broken stylus.
+        // A stylus already in contact from this bridge's last contact or collision
+        // gives no rising edge: the PLC would not see a collision, only the broken
+        // stylus. (A contact from before this bridge started, whose direction is
+        // unknown, is left to the PLC.)
         if self.status.has(bits::DEFLECTED)
+            && self.contact_along.is_some()
             && !may_start_deflected(self.contact_along, linear, rotary)
         {
             return Err(MachineError::new(
