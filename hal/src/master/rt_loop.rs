@@ -78,7 +78,9 @@ impl LoopConfig {
             in_position_window: 0.001,
             settle_timeout_ns: 2_000_000_000,
             enable_timeout_ns: 2_000_000_000,
-            arm_timeout_ns: 200_000_000,
+            // Arming is a round trip per drive (RPDO2 out, TPDO2 back): a bus whose
+            // drives may be silent for longer (a slow or emulated host) gets as long.
+            arm_timeout_ns: (bus.heartbeat_timeout_ms as u64 * 1_000_000).max(200_000_000),
             heartbeat_timeout_ns: bus.heartbeat_timeout_ms as u64 * 1_000_000,
             master_node: bus.master_node,
             master_heartbeat_ns: bus.master_heartbeat_ms as u64 * 1_000_000,
