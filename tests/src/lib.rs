@@ -22,6 +22,58 @@ pub fn scenario(text: &str) -> Scenario {
         .unwrap_or_else(|e| panic!("test scenario invalid: {e}"))
 }
 
+/// `table-ac` over a flat face at height `z` (normal +Z), with `extra` TOML appended
+/// (faults, say): the scenario of most single-probe tests.
+pub fn plane_scenario(z: f64, extra: &str) -> Scenario {
+    scenario(&format!(
+        r#"
+machine = "table-ac"
+[probe]
+ball_radius = 3.0
+[[plane]]
+point = [0.0, 0.0, {z:?}]
+normal = [0.0, 0.0, 1.0]
+{extra}
+"#
+    ))
+}
+
+/// Runs the shipped program `configs/programs/<program>` on `m` through the cycles
+/// runner, confirming every prompt, with its protocols and kinematics in a temporary
+/// folder of its own (`tag` keeps tests running in parallel apart).
+pub fn run_shipped_program(
+    m: &mut impl hal::Machine<Error = hal::MachineError>,
+    program: &str,
+    sc: &Scenario,
+    tag: &str,
+) -> cycles::results::ProgramReport {
+    let cfg = cycles_config(sc);
+    let path = configs_dir().join("programs").join(program);
+    let text = std::fs::read_to_string(&path).unwrap();
+    let program = cycles::program::Program::parse(&text, &cfg).unwrap_or_else(|e| panic!("{e}"));
+    static RUNS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let n = RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let out: PathBuf = std::env::temp_dir().join(format!(
+        "pb-program-{tag}-{}-{}-{n}",
+        path.file_stem().unwrap().to_string_lossy(),
+        std::process::id()
+    ));
+    let _ = std::fs::remove_dir_all(&out);
+    std::fs::create_dir_all(&out).unwrap();
+    let mut confirm = |_: &str| true;
+    let mut progress = |_| {};
+    let mut opts = cycles::runner::RunOptions {
+        out_dir: out.clone(),
+        confirm: &mut confirm,
+        progress: &mut progress,
+        kinematics: Some(out.join("kinematics.toml")),
+        estimator: None,
+    };
+    let report = cycles::runner::run_program(&program, m, &cfg, &mut opts);
+    let _ = std::fs::remove_dir_all(&out);
+    report
+}
+
 /// The machine configuration of a scenario.
 pub fn machine_config(sc: &Scenario) -> hal::config::MachineConfig {
     sc.machine.clone()

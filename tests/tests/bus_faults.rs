@@ -4,18 +4,15 @@
 //! cycle either completes with the results of the fault-free run or fails with a
 //! clear error; it never returns a wrong result.
 
-use cycles::program::Program;
 use cycles::results::{ProgramReport, Status};
-use cycles::runner::{run_program, RunOptions};
 use hal::can::fault_injection::{BusFaults, FaultControl, FaultRates, FaultyTransport};
 use hal::can::inproc::InprocBus;
 use hal::can::TransportErrorKind;
 use hal::master::{CanMachine, MasterOptions, Pacing};
 use hal::{Axis, AxisPositions, ContactSample, ErrorKind, Machine, SampleSink, SinkError};
 use probebridge_tests::conformance::Held;
-use probebridge_tests::{configs_dir, cycles_config, machine_config, scenario};
+use probebridge_tests::{configs_dir, machine_config, plane_scenario, run_shipped_program};
 use sim::machine::{SimMachine, SimRunner};
-use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -80,37 +77,6 @@ fn load(scenario: &str) -> sim::Scenario {
         Some(&configs_dir().join("machines")),
     )
     .unwrap()
-}
-
-fn run_on(
-    m: &mut impl Machine<Error = hal::MachineError>,
-    program: &str,
-    sc: &sim::Scenario,
-    tag: &str,
-) -> ProgramReport {
-    let cfg = cycles_config(sc);
-    let path = configs_dir().join("programs").join(program);
-    let text = std::fs::read_to_string(&path).unwrap();
-    let program = Program::parse(&text, &cfg).unwrap_or_else(|e| panic!("{e}"));
-    let out: PathBuf = std::env::temp_dir().join(format!(
-        "pb-bus-faults-{tag}-{}-{}",
-        path.file_stem().unwrap().to_string_lossy(),
-        std::process::id()
-    ));
-    let _ = std::fs::remove_dir_all(&out);
-    std::fs::create_dir_all(&out).unwrap();
-    let mut confirm = |_: &str| true;
-    let mut progress = |_| {};
-    let mut opts = RunOptions {
-        out_dir: out.clone(),
-        confirm: &mut confirm,
-        progress: &mut progress,
-        kinematics: Some(out.join("kinematics.toml")),
-        estimator: None,
-    };
-    let report = run_program(&program, m, &cfg, &mut opts);
-    let _ = std::fs::remove_dir_all(&out);
-    report
 }
 
 /// How a run under faults ended.
@@ -201,7 +167,7 @@ fn under_faults(
 ) -> Vec<(u64, Outcome)> {
     let sc = load(scenario);
     let mut clean = open_with(&sc, BusFaults::new(0), heartbeat_timeout_ms).unwrap();
-    let reference = run_on(&mut clean.machine, program, &sc, "clean");
+    let reference = run_shipped_program(&mut clean.machine, program, &sc, "clean");
     assert!(
         reference.completed(),
         "fault-free {program}: {}",
@@ -213,7 +179,7 @@ fn under_faults(
         let what = format!("{program} on {scenario}, seed {seed}");
         let outcome = match open_with(&sc, BusFaults::both(seed, rates), heartbeat_timeout_ms) {
             Ok(mut f) => {
-                let report = run_on(&mut f.machine, program, &sc, &format!("s{seed}"));
+                let report = run_shipped_program(&mut f.machine, program, &sc, &format!("s{seed}"));
                 let o = judge(&reference, &report, &what);
                 let counts = f.control.counts();
                 println!("{what}: {o:?}; {counts:?}");
@@ -300,7 +266,7 @@ fn cycle_451_with_one_percent_frame_loss_and_lenient_heartbeats_completes_exactl
 fn duplicated_latch_frames_give_exactly_one_contact_each() {
     let sc = load("tilted-plane.toml");
     let mut clean = open(&sc, BusFaults::new(0)).unwrap();
-    let reference = run_on(&mut clean.machine, "431-plane.h", &sc, "dup-clean");
+    let reference = run_shipped_program(&mut clean.machine, "431-plane.h", &sc, "dup-clean");
     let want = clean.contacts.0.lock().unwrap().clone();
     drop(clean);
     // Every latch frame (TPDO2, 0x281..) the master receives comes twice.
@@ -308,7 +274,7 @@ fn duplicated_latch_frames_give_exactly_one_contact_each() {
     faults.receive.duplicate = 1.0;
     faults.cob_ids = 0x281..=0x2FF;
     let mut f = open(&sc, faults).unwrap();
-    let report = run_on(&mut f.machine, "431-plane.h", &sc, "dup");
+    let report = run_shipped_program(&mut f.machine, "431-plane.h", &sc, "dup");
     assert_eq!(
         judge(&reference, &report, "duplicated latches"),
         Outcome::Identical
@@ -321,20 +287,6 @@ fn duplicated_latch_frames_give_exactly_one_contact_each() {
 }
 
 const LONG_MOVE: [f64; 3] = [300.0, 200.0, 100.0];
-
-fn plane_with_fault(fault: &str) -> sim::Scenario {
-    scenario(&format!(
-        r#"
-machine = "table-ac"
-[probe]
-ball_radius = 3.0
-[[plane]]
-point = [0.0, 0.0, -150.0]
-normal = [0.0, 0.0, 1.0]
-{fault}
-"#
-    ))
-}
 
 /// The move was cut short on every axis (the other axes braked too).
 fn assert_stopped_short(p: &AxisPositions) {
@@ -349,7 +301,10 @@ fn assert_stopped_short(p: &AxisPositions) {
 
 #[test]
 fn a_node_that_restarts_mid_move_stops_everything() {
-    let sc = plane_with_fault("[[fault]]\nnode = 3\nkind = \"reboot\"\nafter_ms = 1500.0");
+    let sc = plane_scenario(
+        -150.0,
+        "[[fault]]\nnode = 3\nkind = \"reboot\"\nafter_ms = 1500.0",
+    );
     let mut f = open(&sc, BusFaults::new(0)).unwrap();
     let e = f
         .machine
@@ -378,7 +333,7 @@ fn a_node_that_restarts_during_cycle_431_fails_the_cycle() {
         code: None,
     });
     let mut f = open(&sc, BusFaults::new(0)).unwrap();
-    let report = run_on(&mut f.machine, "431-plane.h", &sc, "reboot");
+    let report = run_shipped_program(&mut f.machine, "431-plane.h", &sc, "reboot");
     assert!(!report.completed());
     let failed = report
         .cycles
@@ -391,7 +346,7 @@ fn a_node_that_restarts_during_cycle_431_fails_the_cycle() {
 
 #[test]
 fn a_transport_failure_mid_move_brakes_every_axis() {
-    let sc = plane_with_fault("");
+    let sc = plane_scenario(-150.0, "");
     let mut f = open(&sc, BusFaults::new(0)).unwrap();
     // About 1.5 s of virtual time into the move (a period sends 6 frames: 5 RPDO1 and
     // SYNC), the transport fails for 20 calls, then recovers: a bus-off and its
@@ -432,7 +387,7 @@ fn a_transport_failure_mid_move_brakes_every_axis() {
 
 #[test]
 fn a_transport_that_stays_down_mid_move_ends_the_move_with_a_bus_error() {
-    let sc = plane_with_fault("");
+    let sc = plane_scenario(-150.0, "");
     let mut f = open(&sc, BusFaults::new(0)).unwrap();
     let at = f.control.counts().transmitted + 6 * 750;
     f.control
@@ -462,7 +417,7 @@ fn lost_latch_frames_are_probed_again() {
     rates.cob_ids = 0x281..=0x2FF;
     let sc = load("tilted-plane.toml");
     let mut clean = open(&sc, BusFaults::new(0)).unwrap();
-    let reference = run_on(&mut clean.machine, "431-plane.h", &sc, "latch-clean");
+    let reference = run_shipped_program(&mut clean.machine, "431-plane.h", &sc, "latch-clean");
     drop(clean);
     let (mut completed, mut retried) = (0, 0);
     for seed in 1..=6 {
@@ -473,7 +428,7 @@ fn lost_latch_frames_are_probed_again() {
             inner: f.machine,
             lost: 0,
         };
-        let report = run_on(&mut m, "431-plane.h", &sc, &format!("latch{seed}"));
+        let report = run_shipped_program(&mut m, "431-plane.h", &sc, &format!("latch{seed}"));
         let o = judge(&reference, &report, &format!("lost latches, seed {seed}"));
         let n = f.control.counts();
         println!(

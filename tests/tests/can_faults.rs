@@ -6,25 +6,10 @@ use hal::can::CanTransport;
 use hal::master::{CanMachine, MasterOptions, Pacing};
 use hal::{Axis, AxisPositions, ErrorKind, Machine, NullSink};
 use probebridge_tests::conformance::{Backend, CanInproc};
-use probebridge_tests::{machine_config, scenario};
+use probebridge_tests::{machine_config, plane_scenario};
 use std::time::Duration;
 
 const LONG_MOVE: [f64; 3] = [300.0, 200.0, 100.0];
-
-fn with_fault(fault: &str) -> sim::Scenario {
-    scenario(&format!(
-        r#"
-machine = "table-ac"
-[probe]
-ball_radius = 3.0
-[[plane]]
-point = [0.0, 0.0, -150.0]
-normal = [0.0, 0.0, 1.0]
-[[fault]]
-{fault}
-"#
-    ))
-}
 
 /// The move was cut short on every axis, and the machine stays where it stopped.
 fn assert_stopped_short(m: &mut impl Machine<Error = hal::MachineError>) {
@@ -49,7 +34,11 @@ fn assert_stopped_short(m: &mut impl Machine<Error = hal::MachineError>) {
 
 #[test]
 fn emcy_mid_move_aborts_with_all_axes_stopped() {
-    let sc = with_fault("node = 1\nkind = \"emcy\"\nafter_ms = 1500.0\ncode = 0x2310");
+    let sc = plane_scenario(
+        -150.0,
+        "[[fault]]
+node = 1\nkind = \"emcy\"\nafter_ms = 1500.0\ncode = 0x2310",
+    );
     let mut m = CanInproc::open(&sc);
     let e = m
         .move_to(&AxisPositions::linear(LONG_MOVE), 6000.0)
@@ -62,7 +51,11 @@ fn emcy_mid_move_aborts_with_all_axes_stopped() {
 
 #[test]
 fn heartbeat_loss_is_detected_within_the_timeout() {
-    let sc = with_fault("node = 2\nkind = \"silent\"\nafter_ms = 1000.0");
+    let sc = plane_scenario(
+        -150.0,
+        "[[fault]]
+node = 2\nkind = \"silent\"\nafter_ms = 1000.0",
+    );
     let bus = sc.machine.canopen_bus().expect("a CANopen machine");
     let timeout_ms = bus.heartbeat_timeout_ms as f64;
     let producer_ms = bus.heartbeat_producer_ms as f64;
@@ -93,7 +86,11 @@ fn heartbeat_loss_is_detected_within_the_timeout() {
 
 #[test]
 fn overloaded_bus_configuration_is_refused_before_anything_is_sent() {
-    let sc = with_fault("node = 1\nkind = \"silent\"\nafter_ms = 1.0e9");
+    let sc = plane_scenario(
+        -150.0,
+        "[[fault]]
+node = 1\nkind = \"silent\"\nafter_ms = 1.0e9",
+    );
     let mut cfg = machine_config(&sc);
     cfg.canopen_bus_mut()
         .expect("a CANopen machine")

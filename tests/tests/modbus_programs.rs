@@ -3,46 +3,9 @@
 //! simulated CiA 402 drives on the in-process bus): every Q result to 1e-6. The pairs
 //! of program and scenario are those of the vcan cases (tests/vcan/cases).
 
-use cycles::program::Program;
-use cycles::results::ProgramReport;
-use cycles::runner::{run_program, RunOptions};
-use hal::{Machine, MachineError};
 use probebridge_tests::conformance::{Backend, CanInproc};
 use probebridge_tests::conformance_modbus::ModbusTcp;
-use probebridge_tests::{configs_dir, cycles_config};
-use std::path::PathBuf;
-
-fn run_on(
-    m: &mut impl Machine<Error = MachineError>,
-    program: &str,
-    sc: &sim::Scenario,
-    tag: &str,
-) -> ProgramReport {
-    let cfg = cycles_config(sc);
-    let path = configs_dir().join("programs").join(program);
-    let text = std::fs::read_to_string(&path).unwrap();
-    let program = Program::parse(&text, &cfg).unwrap_or_else(|e| panic!("{e}"));
-    // One folder per program and backend: the tests run in parallel threads.
-    let out: PathBuf = std::env::temp_dir().join(format!(
-        "pb-modbus-programs-{tag}-{}-{}",
-        path.file_stem().unwrap().to_string_lossy(),
-        std::process::id()
-    ));
-    let _ = std::fs::remove_dir_all(&out);
-    std::fs::create_dir_all(&out).unwrap();
-    let mut confirm = |_: &str| true;
-    let mut progress = |_| {};
-    let mut opts = RunOptions {
-        out_dir: out.clone(),
-        confirm: &mut confirm,
-        progress: &mut progress,
-        kinematics: Some(out.join("kinematics.toml")),
-        estimator: None,
-    };
-    let report = run_program(&program, m, &cfg, &mut opts);
-    let _ = std::fs::remove_dir_all(&out);
-    report
-}
+use probebridge_tests::{configs_dir, run_shipped_program};
 
 fn same_results(program: &str, scenario: &str) {
     let sc = sim::Scenario::load(
@@ -50,8 +13,8 @@ fn same_results(program: &str, scenario: &str) {
         Some(&configs_dir().join("machines")),
     )
     .unwrap();
-    let can = run_on(&mut CanInproc::open(&sc), program, &sc, "can");
-    let modbus = run_on(&mut ModbusTcp::open(&sc), program, &sc, "modbus");
+    let can = run_shipped_program(&mut CanInproc::open(&sc), program, &sc, "can");
+    let modbus = run_shipped_program(&mut ModbusTcp::open(&sc), program, &sc, "modbus");
     assert!(can.completed(), "{program} on CANopen: {}", can.to_json());
     assert!(
         modbus.completed(),
