@@ -11,7 +11,7 @@ mod common;
 
 use common::*;
 use spec451::*;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 fn machine(name: &str) -> hal::config::MachineConfig {
     hal::config::MachineConfig::load(&configs().join(format!("machines/{name}.toml"))).unwrap()
@@ -68,12 +68,10 @@ const PROGRAM: &str = "0 BEGIN PGM K MM
 6 END PGM K MM
 ";
 
-/// Must show: on a scenario written by hand (noise 0), `probebridge run` recovers every
-/// injected error, and Q141..Q146 / QS144..QS146 match spec.md's formulas computed
-/// independently; the estimator process did the fitting and the identification.
-#[test]
-fn run_451_recovers_hand_written_errors_in_the_estimator_process() {
-    let dir = tmpdir("mode2");
+/// A folder `tag` with the hand-written scenario (on table-ac) and the program:
+/// (folder, scenario, program).
+fn hand_written_case(tag: &str) -> (PathBuf, PathBuf, PathBuf) {
+    let dir = tmpdir(tag);
     let scenario = dir.join("scenario.toml");
     std::fs::write(
         &scenario,
@@ -85,6 +83,15 @@ fn run_451_recovers_hand_written_errors_in_the_estimator_process() {
     .unwrap();
     let program = dir.join("k.h");
     std::fs::write(&program, PROGRAM).unwrap();
+    (dir, scenario, program)
+}
+
+/// Must show: on a scenario written by hand (noise 0), `probebridge run` recovers every
+/// injected error, and Q141..Q146 / QS144..QS146 match spec.md's formulas computed
+/// independently; the estimator process did the fitting and the identification.
+#[test]
+fn run_451_recovers_hand_written_errors_in_the_estimator_process() {
+    let (dir, scenario, program) = hand_written_case("mode2");
     let kin = dir.join("table-ac.kinematics.toml");
     let (out, v) = run_program(
         &program,
@@ -236,18 +243,7 @@ fn check_refuses_what_run_would_refuse_before_moving() {
 fn run_451_restarts_a_killed_estimator_and_gives_the_same_results() {
     use std::io::{BufRead, BufReader};
     use std::process::Stdio;
-    let dir = tmpdir("restart451");
-    let scenario = dir.join("scenario.toml");
-    std::fs::write(
-        &scenario,
-        format!(
-            "machine = \"{}\"\n{SCENARIO}",
-            configs().join("machines/table-ac.toml").display()
-        ),
-    )
-    .unwrap();
-    let program = dir.join("k.h");
-    std::fs::write(&program, PROGRAM).unwrap();
+    let (dir, scenario, program) = hand_written_case("restart451");
 
     let clean = dir.join("clean");
     std::fs::create_dir_all(&clean).unwrap();

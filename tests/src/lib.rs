@@ -24,7 +24,7 @@ pub fn scenario(text: &str) -> Scenario {
 
 /// `table-ac` over a flat face at height `z` (normal +Z), with `extra` TOML appended
 /// (faults, say): the scenario of most single-probe tests.
-pub fn plane_scenario(z: f64, extra: &str) -> Scenario {
+pub fn table_ac_plane(z: f64, extra: &str) -> Scenario {
     scenario(&format!(
         r#"
 machine = "table-ac"

@@ -3,7 +3,7 @@
 //! at Z 10 probed from just above, so one trigger is a few hundred cycles.
 
 use crate::loopback::Loopback;
-use crate::{machine_config, plane_scenario};
+use crate::{machine_config, table_ac_plane};
 use hal::master::command::{Command, Reply};
 use hal::master::{startup, LoopConfig, PacedLoop, Pacing};
 use hal::{ContactSample, SampleSink};
@@ -16,7 +16,7 @@ pub const CONTACT_Z: f64 = 13.0;
 /// Boots and configures the drives, starts the loop with `sink` and waits until every
 /// drive is in Operation enabled.
 pub fn start<S: SampleSink>(sink: S) -> PacedLoop<Loopback, S> {
-    let sc = plane_scenario(10.0, "");
+    let sc = table_ac_plane(10.0, "");
     let cfg = machine_config(&sc);
     let mut bus = Loopback::new(SimMachine::new(&sc));
     startup::boot(&mut bus, &cfg).unwrap();

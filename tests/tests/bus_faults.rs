@@ -11,7 +11,7 @@ use hal::can::TransportErrorKind;
 use hal::master::{CanMachine, MasterOptions, Pacing};
 use hal::{Axis, AxisPositions, ContactSample, ErrorKind, Machine, SampleSink, SinkError};
 use probebridge_tests::conformance::Held;
-use probebridge_tests::{configs_dir, machine_config, plane_scenario, run_shipped_program};
+use probebridge_tests::{configs_dir, machine_config, run_shipped_program, table_ac_plane};
 use sim::machine::{SimMachine, SimRunner};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -301,7 +301,7 @@ fn assert_stopped_short(p: &AxisPositions) {
 
 #[test]
 fn a_node_that_restarts_mid_move_stops_everything() {
-    let sc = plane_scenario(
+    let sc = table_ac_plane(
         -150.0,
         "[[fault]]\nnode = 3\nkind = \"reboot\"\nafter_ms = 1500.0",
     );
@@ -346,7 +346,7 @@ fn a_node_that_restarts_during_cycle_431_fails_the_cycle() {
 
 #[test]
 fn a_transport_failure_mid_move_brakes_every_axis() {
-    let sc = plane_scenario(-150.0, "");
+    let sc = table_ac_plane(-150.0, "");
     let mut f = open(&sc, BusFaults::new(0)).unwrap();
     // About 1.5 s of virtual time into the move (a period sends 6 frames: 5 RPDO1 and
     // SYNC), the transport fails for 20 calls, then recovers: a bus-off and its
@@ -387,7 +387,7 @@ fn a_transport_failure_mid_move_brakes_every_axis() {
 
 #[test]
 fn a_transport_that_stays_down_mid_move_ends_the_move_with_a_bus_error() {
-    let sc = plane_scenario(-150.0, "");
+    let sc = table_ac_plane(-150.0, "");
     let mut f = open(&sc, BusFaults::new(0)).unwrap();
     let at = f.control.counts().transmitted + 6 * 750;
     f.control

@@ -6,7 +6,7 @@ use hal::can::CanTransport;
 use hal::master::{CanMachine, MasterOptions, Pacing};
 use hal::{Axis, AxisPositions, ErrorKind, Machine, NullSink};
 use probebridge_tests::conformance::{Backend, CanInproc};
-use probebridge_tests::{machine_config, plane_scenario};
+use probebridge_tests::{machine_config, table_ac_plane};
 use std::time::Duration;
 
 const LONG_MOVE: [f64; 3] = [300.0, 200.0, 100.0];
@@ -34,7 +34,7 @@ fn assert_stopped_short(m: &mut impl Machine<Error = hal::MachineError>) {
 
 #[test]
 fn emcy_mid_move_aborts_with_all_axes_stopped() {
-    let sc = plane_scenario(
+    let sc = table_ac_plane(
         -150.0,
         "[[fault]]
 node = 1\nkind = \"emcy\"\nafter_ms = 1500.0\ncode = 0x2310",
@@ -51,7 +51,7 @@ node = 1\nkind = \"emcy\"\nafter_ms = 1500.0\ncode = 0x2310",
 
 #[test]
 fn heartbeat_loss_is_detected_within_the_timeout() {
-    let sc = plane_scenario(
+    let sc = table_ac_plane(
         -150.0,
         "[[fault]]
 node = 2\nkind = \"silent\"\nafter_ms = 1000.0",
@@ -86,7 +86,7 @@ node = 2\nkind = \"silent\"\nafter_ms = 1000.0",
 
 #[test]
 fn overloaded_bus_configuration_is_refused_before_anything_is_sent() {
-    let sc = plane_scenario(
+    let sc = table_ac_plane(
         -150.0,
         "[[fault]]
 node = 1\nkind = \"silent\"\nafter_ms = 1.0e9",

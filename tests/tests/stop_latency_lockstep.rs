@@ -6,11 +6,11 @@
 
 use hal::{AxisPositions, Machine, ProbeMove};
 use probebridge_tests::conformance::{Backend, CanInproc};
-use probebridge_tests::plane_scenario;
+use probebridge_tests::table_ac_plane;
 
 #[test]
 fn the_stop_goes_out_in_the_cycle_after_the_first_latch_frame_p99_le_1() {
-    let sc = plane_scenario(10.0, "");
+    let sc = table_ac_plane(10.0, "");
     let mut m = CanInproc::open(&sc);
     let above = AxisPositions::linear([10.0, 10.0, 13.4]);
     let probe = ProbeMove {
