@@ -125,9 +125,14 @@ fn sigint_exits_130_with_the_result_written() {
 }
 
 /// A second signal while the first is being handled (the axes braking, the results
-/// being written) exits at once, with the second signal's status.
+/// being written) exits at once, with the second signal's status, and writes nothing.
+/// Both signals go out back to back: when both are pending before the child runs, the
+/// kernel runs their handlers in either order, so "second" is whichever handler ran
+/// second; what is certain is that the orderly end (the JSON) never happened.
 #[test]
 fn a_second_signal_exits_at_once() {
-    let (code, said, _, _) = run_451_and_signal("twice", &[libc::SIGTERM, libc::SIGINT]);
-    assert_eq!(code, Some(130), "{said}");
+    let (code, said, json, _) = run_451_and_signal("twice", &[libc::SIGTERM, libc::SIGINT]);
+    assert!(matches!(code, Some(130 | 143)), "{code:?}: {said}");
+    assert!(json.is_empty(), "the orderly end ran:\n{json}\n{said}");
+    assert!(!said.contains("aborted"), "{said}");
 }
