@@ -285,7 +285,7 @@ impl GatewayConfig {
             realtime: self.machine.realtime,
             service: self.machine.service.clone(),
             candump: None,
-            // serve aborts through its own gate between moves (serve::abortable).
+            // The machine thread sets the gateway's own (re-armable) stop request.
             abort: None,
         }
     }

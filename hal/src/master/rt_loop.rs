@@ -82,6 +82,9 @@ pub struct LoopStats {
     pub last_stop_latency_ns: u64,
     /// The same in whole cycles (the stop goes out with the next SYNC).
     pub last_stop_latency_cycles: u64,
+    /// The fault that stopped the machine (heartbeat lost, EMCY, fault bit), if any:
+    /// the loop refuses motion from then on.
+    pub fault: Option<RtError>,
 }
 
 /// What the master knows of one drive.
@@ -261,7 +264,10 @@ impl<S: SampleSink> RtLoop<S> {
     }
 
     pub fn stats(&self) -> LoopStats {
-        self.stats
+        LoopStats {
+            fault: self.fault,
+            ..self.stats
+        }
     }
 
     /// Time of the SYNC most recently sent (the `now_ns` of the last tick).
