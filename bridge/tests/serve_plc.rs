@@ -288,6 +288,11 @@ fn programs_started_by_number_give_the_results_of_run() {
         assert_eq!(r["status"], "done");
         assert_eq!(r["program_number"], number);
         assert_eq!(r["request_seq"], 1);
+        // The request's parameters 1..8 as the PLC wrote them (plc.py's PARAMS).
+        assert_eq!(
+            r["parameters"],
+            serde_json::json!([1.5, -2.25, 0.0, 0.0, 0.0, 0.0, 0.0, 1000.125])
+        );
         assert!(!r["protocols"].as_array().unwrap().is_empty(), "{r}");
         let results = r["results"].as_array().unwrap();
         for (q, v) in want["q"].as_object().unwrap() {

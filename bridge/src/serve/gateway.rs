@@ -18,6 +18,8 @@ pub struct Job {
     pub number: u16,
     pub program: Program,
     pub confirm: bool,
+    /// The request's parameters 1..8, recorded with the run.
+    pub params: [f32; super::register_map::REQ_PARAM_COUNT],
 }
 
 pub enum ToMachine {
@@ -137,6 +139,7 @@ impl Core {
                     number: req.program,
                     program,
                     confirm,
+                    params: req.params,
                 };
                 if self.jobs.send(ToMachine::Run(Box::new(job))).is_err() {
                     self.hs.finish(

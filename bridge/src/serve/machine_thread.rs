@@ -6,7 +6,7 @@ use super::config::GatewayConfig;
 use super::gateway::{lock, Job, Shared, ToMachine};
 use super::handshake::{machine_error_kind, Outcome, ERROR_KIND_CYCLE};
 use super::machine_link::MachineLink;
-use crate::history::{History, RunStart};
+use crate::history::{History, HistoryTarget, RunStart};
 use crate::ipc::{EstimatorChild, IpcEstimator};
 use crate::session::Session;
 use cycles::progress::ProgressEvent;
@@ -41,7 +41,11 @@ pub fn run(
             return;
         }
     };
-    let mut history = match cfg.history().map(open_history).transpose() {
+    let history = cfg
+        .history()
+        .map(|t| open_history(&t, &cycles.machine.name))
+        .transpose();
+    let mut history = match history {
         Ok(h) => h,
         Err(e) => {
             let _ = ready.send(Err(e));
@@ -87,17 +91,18 @@ pub fn run(
     tracing::info!("machine thread: closing the machine");
 }
 
-/// Opens the history; runs a killed gateway left "running" become "interrupted".
-fn open_history(path: &std::path::Path) -> Result<History, String> {
-    let h = History::open(path).map_err(|e| e.to_string())?;
-    let n = h.close_interrupted().map_err(|e| e.to_string())?;
+/// Opens the history; runs of this machine a killed gateway left "running" become
+/// "interrupted".
+fn open_history(target: &HistoryTarget, machine: &str) -> Result<History, String> {
+    let mut h = History::open(target).map_err(|e| e.to_string())?;
+    let n = h.close_interrupted(machine).map_err(|e| e.to_string())?;
     if n > 0 {
         tracing::warn!(
             runs = n,
             "history: runs interrupted by an earlier stop of the gateway"
         );
     }
-    tracing::info!(path = %path.display(), "history");
+    tracing::info!(at = %target.display(), "history");
     Ok(h)
 }
 
@@ -148,10 +153,10 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
         cfg,
         cycles,
         shared,
-        history,
+        mut history,
     } = ctx;
     let program_path = job.program.path.clone().unwrap_or_default();
-    let record = history.as_deref().and_then(|h| {
+    let record = history.as_deref_mut().and_then(|h| {
         h.begin(&RunStart {
             machine: &cycles.machine.name,
             source: "serve",
@@ -159,6 +164,7 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
             program_number: Some(job.number),
             program: &program_path,
             max_modification: Some(cycles.parameters.max_modification),
+            parameters: &job.params.map(f64::from),
         })
         .map_err(|e| tracing::error!("{e}"))
         .ok()

@@ -48,10 +48,13 @@ class Plc:
         r = self.c.write_register(HEARTBEAT, self.hb)
         check(not r.isError(), f"heartbeat write: {r}")
 
-    def request(self, code, program=0, flags=0):
+    def request(self, code, program=0, flags=0, params=()):
         self.seq = self.seq % 65535 + 1
         self.hb = (self.hb + 1) & 0xFFFF
-        block = [code, self.seq, program, flags] + [0] * 16 + [self.hb]
+        words = []
+        for p in list(params) + [0.0] * (8 - len(params)):
+            words += struct.unpack(">HH", struct.pack(">f", p))
+        block = [code, self.seq, program, flags] + words + [self.hb]
         r = self.c.write_registers(REQ, block)
         check(not r.isError(), f"request write: {r}")
         st = self.read(ACK_SEQ, 9)
@@ -88,8 +91,12 @@ class Plc:
         return real, dint
 
 
+# Parameters 1..8 of every start of `run`: recorded with the run in the history.
+PARAMS = (1.5, -2.25, 0.0, 0.0, 0.0, 0.0, 0.0, 1000.125)
+
+
 def run(plc, program):
-    st = plc.request(START, program, flags=1)
+    st = plc.request(START, program, flags=1, params=PARAMS)
     check(st[1] == START, f"start accepted: {st}")
     seq = plc.seq
     st = plc.wait(lambda s: s[3] != BUSY)
