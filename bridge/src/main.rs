@@ -123,8 +123,9 @@ enum Cmd {
         /// <machine>.kinematics.toml beside the machine configuration.
         #[arg(long)]
         kinematics: Option<PathBuf>,
-        /// Record the run in this history file (SQLite, as `serve` keeps it).
-        #[arg(long, value_name = "FILE")]
+        /// Record the run in this history: an SQLite file (as `serve` keeps it) or a
+        /// PostgreSQL server's `postgres://` URL.
+        #[arg(long, value_name = "FILE|URL")]
         history: Option<PathBuf>,
         /// Preset table of the machine (cycles 247, 451); default:
         /// <machine>.presets.toml beside the machine configuration.
@@ -186,8 +187,9 @@ enum Cmd {
     },
     /// The recorded measurements of a gateway (its history file).
     History {
-        /// The history file; default: `history.sqlite` of the gateway configuration.
-        #[arg(long)]
+        /// The history file, or a PostgreSQL server's `postgres://` URL; default: the
+        /// history of the gateway configuration.
+        #[arg(long, value_name = "FILE|URL")]
         db: Option<PathBuf>,
         /// Gateway configuration naming the history file.
         #[arg(long, default_value = probebridge::serve::config::DEFAULT_PATH)]

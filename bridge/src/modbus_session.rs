@@ -87,6 +87,7 @@ pub fn open(
     config.bus = BusConfig::Modbus(bus);
     let options = ModbusOptions {
         run_id,
+        abort: opts.abort,
         ..ModbusOptions::default()
     };
     let machine = ModbusMachine::start(config, sink, options).map_err(|e: MachineError| e)?;

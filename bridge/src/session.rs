@@ -164,16 +164,8 @@ impl Session {
         if crate::modbus_session::wanted(opts, &config) {
             let (machine, plc, notes) =
                 crate::modbus_session::open(opts, &mut config, scenario.as_ref(), sink, run_id)?;
-            // The PLC finishes the move under way; after the stop nothing more moves.
-            let machine: DynMachine = match opts.abort {
-                Some(flag) => Box::new(hal::abort::AbortGate {
-                    inner: machine,
-                    flag,
-                }),
-                None => Box::new(machine),
-            };
             return Ok(Self {
-                machine,
+                machine: Box::new(machine),
                 config,
                 scenario,
                 startup: None,

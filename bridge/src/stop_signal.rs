@@ -6,9 +6,10 @@
 //! The handler does only async-signal-safe things: atomic stores and `_exit`.
 
 use hal::AbortFlag;
-use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
+use std::sync::atomic::{AtomicI32, AtomicU64, Ordering};
 
-static STOP: AtomicBool = AtomicBool::new(false);
+/// The state of [`hal::AbortFlag`] (raised bit and generation).
+static STOP: AtomicU64 = AtomicU64::new(0);
 static SIGNAL: AtomicI32 = AtomicI32::new(0);
 
 /// The signals that stop the machine.
@@ -22,7 +23,7 @@ extern "C" fn on_signal(sig: libc::c_int) {
         // The second signal: the operator insists. SAFETY: _exit is async-signal-safe.
         unsafe { libc::_exit(128 + sig) };
     }
-    STOP.store(true, Ordering::Release);
+    flag().raise();
 }
 
 /// The flag the handler raises, for the master's options.

@@ -53,6 +53,17 @@ impl Serve {
         Self::start_in(dir, name, scenario, programs, plc, None)
     }
 
+    /// As [`Serve::start`], with `machine` added to the `[machine]` section.
+    fn start_with_machine(
+        name: &str,
+        scenario: &str,
+        programs: &[(u16, &str)],
+        machine: &str,
+    ) -> Self {
+        let dir = tmpdir(&format!("serve-{name}"));
+        Self::start_at(dir, name, scenario, programs, (machine, ""), None)
+    }
+
     /// Starts in `dir` (again, after a restart: same configuration and history).
     fn start_in(
         dir: PathBuf,
@@ -62,6 +73,19 @@ impl Serve {
         plc: &str,
         notify_socket: Option<&Path>,
     ) -> Self {
+        Self::start_at(dir, name, scenario, programs, ("", plc), notify_socket)
+    }
+
+    /// `extra`: keys added to the `[machine]` and the `[plc]` section.
+    fn start_at(
+        dir: PathBuf,
+        name: &str,
+        scenario: &str,
+        programs: &[(u16, &str)],
+        extra: (&str, &str),
+        notify_socket: Option<&Path>,
+    ) -> Self {
+        let (machine, plc) = extra;
         let folder = dir.join("programs");
         std::fs::create_dir_all(&folder).unwrap();
         for (n, p) in programs {
@@ -76,7 +100,7 @@ impl Serve {
         std::fs::write(
             &config,
             format!(
-                "[machine]\nscenario = {:?}\nservice = \"pbserve-{name}-{}\"\nkinematics = {:?}\n\
+                "[machine]\nscenario = {:?}\nservice = \"pbserve-{name}-{}\"\nkinematics = {:?}\n{machine}\
                  [programs]\nfolder = \"programs\"\n[history]\nsqlite = {:?}\n\
                  [plc]\nlisten = \"127.0.0.1:0\"\n{plc}",
                 scenario.to_str().unwrap(),
@@ -264,6 +288,11 @@ fn programs_started_by_number_give_the_results_of_run() {
         assert_eq!(r["status"], "done");
         assert_eq!(r["program_number"], number);
         assert_eq!(r["request_seq"], 1);
+        // The request's parameters 1..8 as the PLC wrote them (plc.py's PARAMS).
+        assert_eq!(
+            r["parameters"],
+            serde_json::json!([1.5, -2.25, 0.0, 0.0, 0.0, 0.0, 0.0, 1000.125])
+        );
         assert!(!r["protocols"].as_array().unwrap().is_empty(), "{r}");
         let results = r["results"].as_array().unwrap();
         for (q, v) in want["q"].as_object().unwrap() {
@@ -295,12 +324,17 @@ fn start_while_busy_is_refused_and_abort_stops_mid_cycle() {
         &[(451, "451-check.h"), (431, "431-plane.h")],
         "",
     );
-    let out = serve.plc(&py, &["busy_abort", "451", "431"]);
+    let out = serve.plc(&py, &["busy_abort", "451", "431", "451"]);
     assert!(out["aborted_at_point"].as_u64().unwrap() < 42, "{out}");
     assert!(serve.log().contains("Aborted(Request)"), "{}", serve.log());
+    // After the abort the same machine measures again: 451 done with its results.
+    assert_eq!(out["after"]["cycle"], 451, "{out}");
+    assert!(out["after"]["real"]["after.EY0C"].is_number(), "{out}");
     let h = serve.history();
-    assert_eq!(h.len(), 1);
-    assert_eq!(h[0]["status"], "aborted");
+    assert_eq!(h.len(), 2, "{h:?}");
+    let mut statuses: Vec<&str> = h.iter().map(|r| r["status"].as_str().unwrap()).collect();
+    statuses.sort_unstable();
+    assert_eq!(statuses, ["aborted", "done"], "{h:?}");
 }
 
 #[test]
@@ -380,6 +414,69 @@ fn kill_9_mid_451_leaves_the_run_interrupted_and_restarts_idle() {
     assert_eq!(h.len(), 1);
     assert_eq!(h[0]["status"], "interrupted");
     assert!(h[0]["results"].as_array().unwrap().is_empty());
+}
+
+/// `probebridge sim --modbus ADDR`: the machine's PLC in a process of its own; the
+/// address it serves on.
+fn sim_plc(addr: &str, scenario: &str) -> (Child, String) {
+    let mut child = bin()
+        .args(["sim", "--modbus", addr, "--scenario"])
+        .arg(configs().join("scenarios").join(scenario))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let Some(at) = line.trim().strip_prefix("modbus tcp ") else {
+        let _ = child.kill();
+        panic!("simulated PLC did not come up: {line:?}");
+    };
+    (child, at.to_string())
+}
+
+#[test]
+fn a_lost_plc_clears_machine_ok_and_the_gateway_opens_it_again() {
+    let Some(py) = python() else { return };
+    let scenario = "plane-z10.toml";
+    let (mut plc, addr) = sim_plc("127.0.0.1:0", scenario);
+    let serve = Serve::start_with_machine(
+        "reconnect",
+        scenario,
+        &[(431, "431-plane.h")],
+        &format!("modbus = {addr:?}\n"),
+    );
+    let first = serve.plc(&py, &["run", "431"]);
+    assert_eq!(first["cycle"], 431, "{first}");
+    // The PLC dies: the bit drops and starts are refused, "machine not ok".
+    plc.kill().unwrap();
+    plc.wait().unwrap();
+    serve.plc(&py, &["machine_lost", "431"]);
+    // The gateway keeps trying (and says so) while the PLC is away.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while !serve.log().contains("cannot open the machine: ") {
+        assert!(std::time::Instant::now() < deadline, "{}", serve.log());
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    // It comes back on the same address: the gateway connects again by itself.
+    let (mut plc, again) = sim_plc(&addr, scenario);
+    assert_eq!(again, addr);
+    let after = serve.plc(&py, &["machine_back", "431"]);
+    for q in ["Q158", "Q159"] {
+        let (a, b) = (after["real"][q].as_f64(), first["real"][q].as_f64());
+        assert!(
+            a.zip(b).is_some_and(|(a, b)| (a - b).abs() < 1e-4),
+            "{q}: {after} vs {first}"
+        );
+    }
+    let log = serve.log();
+    assert!(log.contains("machine not ok"), "{log}");
+    assert!(log.contains("opening the machine again"), "{log}");
+    assert!(log.contains("machine ok again"), "{log}");
+    let _ = plc.kill();
+    let _ = plc.wait();
 }
 
 #[test]

@@ -173,6 +173,15 @@ pub trait Machine {
     /// can tell one measurement from the next). No default: a wrapper that forgot to
     /// forward it would silently drop the tag.
     fn set_run(&mut self, run_id: u64);
+
+    /// Is the machine able to move, without moving it: `Err` when its bus or a drive
+    /// has failed (heartbeat lost, emergency, fault, transport or connection lost) and
+    /// the backend must be opened again before it can measure. Cheap enough to ask
+    /// every few hundred milliseconds between commands. The default reads the
+    /// positions.
+    fn health(&mut self) -> Result<(), Self::Error> {
+        self.positions().map(|_| ())
+    }
 }
 
 /// Forwards every method to the machine behind a pointer (`**self`).
@@ -194,6 +203,9 @@ macro_rules! forward_machine {
             }
             fn set_run(&mut self, run_id: u64) {
                 (**self).set_run(run_id)
+            }
+            fn health(&mut self) -> Result<(), Self::Error> {
+                (**self).health()
             }
         }
     )*};

@@ -51,6 +51,11 @@ pub enum SimClock {
     Monotonic,
 }
 
+/// Called by the simulation with the axes' actual positions after every step of
+/// motion: a test sees the axes move from the machine's side (and may, say, raise the
+/// operator's stop when they pass a point).
+pub type MotionWatch = Arc<dyn Fn(&AxisPositions) + Send + Sync>;
+
 /// All drives of one machine plus its physics.
 pub struct SimMachine {
     drives: Vec<AxisDrive>,
@@ -61,6 +66,7 @@ pub struct SimMachine {
     faults: Vec<PlannedFault>,
     syncs: u64,
     latch_log: Option<Arc<LatchLog>>,
+    motion_watch: Option<MotionWatch>,
 }
 
 /// Latches the ring of a [`LatchLog`] remembers.
@@ -177,6 +183,7 @@ impl SimMachine {
             faults,
             syncs: 0,
             latch_log: None,
+            motion_watch: None,
         }
     }
 
@@ -252,6 +259,11 @@ impl SimMachine {
     /// Records the wall-clock instant of every latch into `log` (benchmarks).
     pub fn set_latch_log(&mut self, log: Arc<LatchLog>) {
         self.latch_log = Some(log);
+    }
+
+    /// Calls `watch` with the actual positions after every SYNC step.
+    pub fn set_motion_watch(&mut self, watch: MotionWatch) {
+        self.motion_watch = Some(watch);
     }
 
     /// Simulated time since the first SYNC, µs.
@@ -337,6 +349,9 @@ impl SimMachine {
             if collision {
                 d.drive.raise_fault(EMCY_PROBE_COLLISION);
             }
+        }
+        if let Some(watch) = &self.motion_watch {
+            watch(&self.positions());
         }
         if latched {
             if let Some(log) = &self.latch_log {

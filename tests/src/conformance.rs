@@ -4,8 +4,10 @@
 
 use hal::can::inproc::{InprocBus, WireClock};
 use hal::master::{CanMachine, MasterOptions, Pacing};
-use hal::{Axis, AxisPositions, Contact, ErrorKind, Machine, MachineError, NullSink, ProbeMove};
-use sim::machine::{SimClock, SimMachine, SimRunner};
+use hal::{
+    AbortFlag, Axis, AxisPositions, Contact, ErrorKind, Machine, MachineError, NullSink, ProbeMove,
+};
+use sim::machine::{MotionWatch, SimClock, SimMachine, SimRunner};
 use sim::Scenario;
 use std::time::Duration;
 
@@ -13,6 +15,10 @@ use std::time::Duration;
 pub trait Backend {
     type M: Machine<Error = MachineError>;
     fn open(scenario: &Scenario) -> Self::M;
+    /// As `open`, with the operator's stop `abort` in the backend's options and `watch`
+    /// called by the simulator with the axes' positions as they move; paced so that a
+    /// stop raised from `watch` reaches the backend while the move is under way.
+    fn open_abortable(scenario: &Scenario, abort: AbortFlag, watch: MotionWatch) -> Self::M;
     /// `Err(why)` when this backend cannot run here (the suite's tests then pass with a
     /// "skipped" message instead of failing): e.g. no CAN interface on this kernel.
     fn available() -> Result<(), String> {
@@ -43,24 +49,35 @@ impl<T> Machine for Held<T> {
     fn set_run(&mut self, run_id: u64) {
         self.machine.set_run(run_id)
     }
+    fn health(&mut self) -> Result<(), MachineError> {
+        self.machine.health()
+    }
 }
 
 /// CANopen master and simulated drives on the in-process bus with the machine's bit
 /// rate (wire time on the virtual clock).
 pub struct CanInproc;
 
-impl Backend for CanInproc {
-    type M = Held<SimRunner>;
-    fn open(scenario: &Scenario) -> Self::M {
+impl CanInproc {
+    fn open_with(
+        scenario: &Scenario,
+        abort: Option<AbortFlag>,
+        watch: Option<MotionWatch>,
+    ) -> Held<SimRunner> {
         let bitrate = crate::machine_config(scenario)
             .canopen_bus()
             .map_or(1_000_000, |b| b.bitrate);
         let bus = InprocBus::with_wire_time(bitrate, WireClock::Virtual);
-        let sim = SimRunner::spawn(SimMachine::new(scenario), bus.endpoint_for_devices());
+        let mut drives = SimMachine::new(scenario);
+        if let Some(w) = watch {
+            drives.set_motion_watch(w);
+        }
+        let sim = SimRunner::spawn(drives, bus.endpoint_for_devices());
         let options = MasterOptions {
             pacing: Pacing::Lockstep {
                 answer_timeout: Duration::from_millis(500),
             },
+            abort,
             ..MasterOptions::default()
         };
         let (machine, _) = CanMachine::start(
@@ -71,6 +88,18 @@ impl Backend for CanInproc {
         )
         .unwrap_or_else(|e| panic!("CAN machine did not start: {e}"));
         Held { machine, keep: sim }
+    }
+}
+
+impl Backend for CanInproc {
+    type M = Held<SimRunner>;
+    fn open(scenario: &Scenario) -> Self::M {
+        Self::open_with(scenario, None, None)
+    }
+    /// On the virtual clock too: the master polls the stop every 5 ms of wall time,
+    /// and a move long enough on the simulated clock is still under way by then.
+    fn open_abortable(scenario: &Scenario, abort: AbortFlag, watch: MotionWatch) -> Self::M {
+        Self::open_with(scenario, Some(abort), Some(watch))
     }
 }
 
@@ -117,6 +146,19 @@ impl Backend for SocketCan {
     }
 
     fn open(scenario: &Scenario) -> Self::M {
+        Self::open_with(scenario, None, None)
+    }
+    fn open_abortable(scenario: &Scenario, abort: AbortFlag, watch: MotionWatch) -> Self::M {
+        Self::open_with(scenario, Some(abort), Some(watch))
+    }
+}
+
+impl SocketCan {
+    fn open_with(
+        scenario: &Scenario,
+        abort: Option<AbortFlag>,
+        watch: Option<MotionWatch>,
+    ) -> Held<(SimRunner, std::sync::MutexGuard<'static, ()>)> {
         use hal::can::socketcan::SocketCanTransport;
         let iface = Self::iface().expect("SocketCan::available() was checked");
         let bus = SOCKETCAN_BUS.lock().unwrap_or_else(|e| e.into_inner());
@@ -140,9 +182,13 @@ impl Backend for SocketCan {
         }
         let mut drives = SimMachine::new(scenario);
         drives.set_clock(SimClock::Monotonic);
+        if let Some(w) = watch {
+            drives.set_motion_watch(w);
+        }
         let sim = SimRunner::spawn(drives, open("simulated drives"));
         let options = MasterOptions {
             pacing: Pacing::RealTime,
+            abort,
             ..MasterOptions::default()
         };
         let (machine, _) = CanMachine::start(&cfg, open("master"), NullSink, options)
@@ -394,6 +440,55 @@ pub fn contact_latches_rotary_axes<B: Backend>() {
     assert_near("Z", c.positions.get(Axis::Z).unwrap(), 13.0, 1e-6);
 }
 
+/// The operator's stop brakes a move under way: the move fails as aborted with the
+/// axes at rest past the point where the stop came and short of the target; while the
+/// stop is raised no motion starts; once re-armed the same machine moves again.
+pub fn abort_brakes_a_move_and_rearm_moves_again<B: Backend>() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::Arc;
+    const STOP_PAST_X: f64 = -95.0;
+    let abort = AbortFlag::fresh();
+    let armed = Arc::new(AtomicBool::new(false));
+    let watch: MotionWatch = {
+        let armed = armed.clone();
+        Arc::new(move |p: &AxisPositions| {
+            if p.get(Axis::X).is_some_and(|x| x > STOP_PAST_X)
+                && armed.swap(false, Ordering::AcqRel)
+            {
+                abort.raise();
+            }
+        })
+    };
+    let mut m = B::open_abortable(&plane_scenario(30.0, 3.0), abort, watch);
+    let start = AxisPositions::linear([-100.0, 0.0, 50.0]);
+    let target = AxisPositions::linear([250.0, 0.0, 50.0]);
+    m.move_to(&start, 5000.0).unwrap();
+    armed.store(true, Ordering::Release);
+    let e = m.move_to(&target, 3000.0).unwrap_err();
+    assert_eq!(e.kind, ErrorKind::Aborted, "{e}");
+    assert!(abort.is_raised());
+    let braked = m.positions().unwrap();
+    let x = braked.get(Axis::X).unwrap();
+    assert!(x > STOP_PAST_X && x < 240.0, "braked at X {x}");
+    // At rest: asked again, the same place.
+    assert_eq!(m.positions().unwrap(), braked);
+    // No motion while the stop is raised.
+    let e = m.move_to(&start, 5000.0).unwrap_err();
+    assert_eq!(e.kind, ErrorKind::Aborted, "{e}");
+    assert_eq!(m.positions().unwrap(), braked);
+    // Re-armed: the next moves run to their end, and probing works.
+    abort.rearm();
+    m.move_to(&start, 5000.0).unwrap();
+    assert_near(
+        "X",
+        m.positions().unwrap().get(Axis::X).unwrap(),
+        -100.0,
+        1e-6,
+    );
+    let c = probe_down(&mut m, [-100.0, 0.0, 40.0], 10.0).unwrap();
+    assert_near("Z", c.positions.get(Axis::Z).unwrap(), 33.0, 1e-6);
+}
+
 /// True (after saying why on stderr) when `B` cannot run here.
 pub fn skipped<B: Backend>(test: &str) -> bool {
     match B::available() {
@@ -419,6 +514,7 @@ macro_rules! machine_conformance {
             software_limits_refuse_before_moving,
             move_arrives_on_all_axes,
             contact_latches_rotary_axes,
+            abort_brakes_a_move_and_rearm_moves_again,
         );
     };
     (@tests $backend:ty: $($name:ident),* $(,)?) => {

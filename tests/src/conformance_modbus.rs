@@ -5,7 +5,10 @@
 use crate::conformance::Backend;
 use hal::config::{BusConfig, MachineConfig};
 use hal::modbus::{ModbusBusConfig, ModbusMachine, ModbusOptions};
-use hal::{AxisPositions, Contact, Machine, MachineError, NullSink, ProbeMove, SampleSink};
+use hal::{
+    AbortFlag, AxisPositions, Contact, Machine, MachineError, NullSink, ProbeMove, SampleSink,
+};
+use sim::machine::MotionWatch;
 use sim::plc::{PlcPacing, PlcProgram, SimPlc};
 use sim::Scenario;
 use std::path::PathBuf;
@@ -35,6 +38,9 @@ impl Machine for PlcHeld {
     }
     fn set_run(&mut self, run_id: u64) {
         self.machine.set_run(run_id)
+    }
+    fn health(&mut self) -> Result<(), MachineError> {
+        self.machine.health()
     }
 }
 
@@ -67,25 +73,60 @@ pub fn open_tcp_with(
     tune: impl FnOnce(&mut ModbusBusConfig),
     sink: impl SampleSink + 'static,
 ) -> PlcHeld {
+    open_tcp_abortable(scenario, tune, sink, None, None)
+}
+
+/// As [`open_tcp_with`]; with an operator's stop, the PLC runs in real time (on its
+/// virtual clock a move would end before the bridge's next poll could stop it).
+fn open_tcp_abortable(
+    scenario: &Scenario,
+    tune: impl FnOnce(&mut ModbusBusConfig),
+    sink: impl SampleSink + 'static,
+    abort: Option<AbortFlag>,
+    watch: Option<MotionWatch>,
+) -> PlcHeld {
     let mut bus = modbus_bus(scenario);
     tune(&mut bus);
-    let program = PlcProgram::new(scenario, &bus);
+    let (program, pacing) = plc_program(scenario, &bus, abort.is_some(), watch);
     let plc = SimPlc::serve_tcp(
         program,
         bus.unit,
         "127.0.0.1:0".parse().expect("loopback address"),
-        PlcPacing::Virtual,
+        pacing,
     )
     .unwrap_or_else(|e| panic!("simulated PLC did not start: {e}"));
     let addr = plc.local_addr().expect("a TCP server has an address");
     bus.address = Some(addr.to_string());
-    let machine = ModbusMachine::start(&with_bus(scenario, bus), sink, ModbusOptions::default())
+    let options = ModbusOptions {
+        abort,
+        ..ModbusOptions::default()
+    };
+    let machine = ModbusMachine::start(&with_bus(scenario, bus), sink, options)
         .unwrap_or_else(|e| panic!("Modbus machine did not start: {e}"));
     PlcHeld {
         machine,
         plc,
         socat: None,
     }
+}
+
+/// The simulated PLC's program for `bus`, paced in real time when `realtime`.
+fn plc_program(
+    scenario: &Scenario,
+    bus: &ModbusBusConfig,
+    realtime: bool,
+    watch: Option<MotionWatch>,
+) -> (PlcProgram, PlcPacing) {
+    let mut program = PlcProgram::new(scenario, bus);
+    if let Some(w) = watch {
+        program.set_motion_watch(w);
+    }
+    let pacing = if realtime {
+        PlcPacing::RealTime
+    } else {
+        PlcPacing::Virtual
+    };
+    (program, pacing)
 }
 
 /// ModbusMachine and the simulated PLC over Modbus TCP on loopback.
@@ -95,6 +136,9 @@ impl Backend for ModbusTcp {
     type M = PlcHeld;
     fn open(scenario: &Scenario) -> Self::M {
         open_tcp(scenario, |_| {})
+    }
+    fn open_abortable(scenario: &Scenario, abort: AbortFlag, watch: MotionWatch) -> Self::M {
+        open_tcp_abortable(scenario, |_| {}, NullSink, Some(abort), Some(watch))
     }
 }
 
@@ -156,6 +200,15 @@ pub struct ModbusRtu;
 
 impl ModbusRtu {
     pub fn open_with(scenario: &Scenario, tune: impl FnOnce(&mut ModbusBusConfig)) -> PlcHeld {
+        Self::open_abortable_with(scenario, tune, None, None)
+    }
+
+    fn open_abortable_with(
+        scenario: &Scenario,
+        tune: impl FnOnce(&mut ModbusBusConfig),
+        abort: Option<AbortFlag>,
+        watch: Option<MotionWatch>,
+    ) -> PlcHeld {
         let pair = SocatPair::open().unwrap_or_else(|e| panic!("{e}"));
         let [plc_end, bridge_end] = pair.ends.clone();
         let mut bus = modbus_bus(scenario);
@@ -164,18 +217,21 @@ impl ModbusRtu {
         bus.device = Some(bridge_end.display().to_string());
         bus.baud = 115_200;
         tune(&mut bus);
-        let program = PlcProgram::new(scenario, &bus);
+        let (program, pacing) = plc_program(scenario, &bus, abort.is_some(), watch);
         let plc = SimPlc::serve_rtu(
             program,
             bus.unit,
             &plc_end.display().to_string(),
             bus.baud,
-            PlcPacing::Virtual,
+            pacing,
         )
         .unwrap_or_else(|e| panic!("simulated PLC did not start on {}: {e}", plc_end.display()));
-        let machine =
-            ModbusMachine::start(&with_bus(scenario, bus), NullSink, ModbusOptions::default())
-                .unwrap_or_else(|e| panic!("Modbus RTU machine did not start: {e}"));
+        let options = ModbusOptions {
+            abort,
+            ..ModbusOptions::default()
+        };
+        let machine = ModbusMachine::start(&with_bus(scenario, bus), NullSink, options)
+            .unwrap_or_else(|e| panic!("Modbus RTU machine did not start: {e}"));
         PlcHeld {
             machine,
             plc,
@@ -200,5 +256,8 @@ impl Backend for ModbusRtu {
     }
     fn open(scenario: &Scenario) -> Self::M {
         Self::open_with(scenario, |_| {})
+    }
+    fn open_abortable(scenario: &Scenario, abort: AbortFlag, watch: MotionWatch) -> Self::M {
+        Self::open_abortable_with(scenario, |_| {}, Some(abort), Some(watch))
     }
 }

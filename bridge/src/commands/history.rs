@@ -1,12 +1,13 @@
 //! `probebridge history`: the recorded runs of a gateway, as lines or JSON.
 
-use crate::history::{time::parse_since, to_text, Filter, History};
+use crate::history::{time::parse_since, to_text, Filter, History, HistoryTarget};
 use crate::serve::config::GatewayConfig;
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 pub struct HistoryArgs {
-    /// The SQLite file; default: the gateway configuration's `history.sqlite`.
+    /// The SQLite file or a `postgres://` URL; default: the gateway configuration's
+    /// history.
     pub db: Option<PathBuf>,
     pub config: PathBuf,
     pub machine: Option<String>,
@@ -18,11 +19,11 @@ pub struct HistoryArgs {
 
 pub fn run(args: &HistoryArgs) -> Result<(), String> {
     let since = args.since.as_deref().map(parse_since).transpose()?;
-    let db = match &args.db {
-        Some(p) => p.clone(),
+    let target = match &args.db {
+        Some(p) => HistoryTarget::from_arg(p),
         None => {
             let cfg = GatewayConfig::load(&args.config).map_err(|e| e.to_string())?;
-            cfg.history().map(Path::to_path_buf).ok_or_else(|| {
+            cfg.history().ok_or_else(|| {
                 format!(
                     "{}: history.enabled is false: no history",
                     args.config.display()
@@ -30,10 +31,12 @@ pub fn run(args: &HistoryArgs) -> Result<(), String> {
             })?
         }
     };
-    if !db.is_file() {
-        return Err(format!("{}: no history recorded there", db.display()));
+    if let HistoryTarget::Sqlite(db) = &target {
+        if !db.is_file() {
+            return Err(format!("{}: no history recorded there", db.display()));
+        }
     }
-    let h = History::open(&db).map_err(|e| e.to_string())?;
+    let mut h = History::open(&target).map_err(|e| e.to_string())?;
     let runs = h
         .list(&Filter {
             machine: args.machine.clone(),

@@ -1,62 +1,149 @@
 //! Calibration history: every measurement (who asked, the program, how it ended, every
 //! Q result, cycle 451's errors before and after by ISO name, the measuring logs) in
-//! an SQLite file, one per gateway. A run is recorded as "running" before the first
-//! move and completed in one transaction at its end, so a gateway killed mid-run
-//! leaves the run visible as "running", never half-written results.
+//! an SQLite file, one per gateway ([`sqlite`]), or on a central PostgreSQL server that
+//! many gateways report into ([`postgres`]): the same tables in both. A run is recorded
+//! as "running" before the first move and completed in one transaction at its end, so
+//! a gateway killed mid-run leaves the run visible as "running", never half-written
+//! results.
 
+pub mod postgres;
+pub mod sqlite;
 pub mod time;
 pub mod trend;
 
 use cycles::results::ProgramReport;
-use rusqlite::{params, Connection, OptionalExtension};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
-const SCHEMA: &str = "
-CREATE TABLE IF NOT EXISTS runs (
-    id INTEGER PRIMARY KEY,
-    started TEXT NOT NULL,
-    finished TEXT,
-    machine TEXT NOT NULL,
-    source TEXT NOT NULL,
-    request_seq INTEGER,
-    program_number INTEGER,
-    program TEXT NOT NULL,
-    status TEXT NOT NULL,
-    message TEXT,
-    protocols TEXT NOT NULL DEFAULT '[]',
-    max_modification REAL
-);
-CREATE INDEX IF NOT EXISTS runs_machine_started ON runs (machine, started);
-CREATE TABLE IF NOT EXISTS results (
-    run_id INTEGER NOT NULL REFERENCES runs (id),
-    position INTEGER NOT NULL,
-    block INTEGER NOT NULL,
-    cycle INTEGER NOT NULL,
-    name TEXT NOT NULL,
-    value REAL NOT NULL
-);
-CREATE TABLE IF NOT EXISTS iso_errors (
-    run_id INTEGER NOT NULL REFERENCES runs (id),
-    block INTEGER NOT NULL,
-    name TEXT NOT NULL,
-    before REAL NOT NULL,
-    after REAL NOT NULL
-);
-CREATE TABLE IF NOT EXISTS axis_dispersion (
-    run_id INTEGER NOT NULL REFERENCES runs (id),
-    block INTEGER NOT NULL,
-    axis TEXT NOT NULL,
-    before REAL NOT NULL,
-    after REAL NOT NULL
-);
-";
-
 #[derive(Debug, thiserror::Error)]
-#[error("history {path}: {message}")]
+#[error("history {target}: {message}")]
 pub struct HistoryError {
-    pub path: PathBuf,
+    /// The file, or the server's URL without its password.
+    pub target: String,
     pub message: String,
+}
+
+/// Where the history is kept: an SQLite file, or a PostgreSQL server named by a
+/// `postgres://` (or `postgresql://`) URL.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum HistoryTarget {
+    Sqlite(PathBuf),
+    Postgres(String),
+}
+
+impl HistoryTarget {
+    /// A URL starting `postgres://` or `postgresql://`, else a file path.
+    pub fn parse(s: &str) -> Self {
+        if s.starts_with("postgres://") || s.starts_with("postgresql://") {
+            HistoryTarget::Postgres(s.to_string())
+        } else {
+            HistoryTarget::Sqlite(PathBuf::from(s))
+        }
+    }
+
+    /// A command-line argument: a path, or a URL.
+    pub fn from_arg(p: &Path) -> Self {
+        match p.to_str() {
+            Some(s) => Self::parse(s),
+            None => HistoryTarget::Sqlite(p.to_path_buf()),
+        }
+    }
+
+    /// For messages and logs: the URL's password is left out.
+    pub fn display(&self) -> String {
+        match self {
+            HistoryTarget::Sqlite(p) => p.display().to_string(),
+            HistoryTarget::Postgres(url) => redact(url),
+        }
+    }
+}
+
+/// `postgres://user:secret@host/db` -> `postgres://user:***@host/db`.
+fn redact(url: &str) -> String {
+    let Some((scheme, rest)) = url.split_once("://") else {
+        return url.to_string();
+    };
+    let (auth, host) = match rest.rsplit_once('@') {
+        Some(x) => x,
+        None => return url.to_string(),
+    };
+    match auth.split_once(':') {
+        Some((user, _)) => format!("{scheme}://{user}:***@{host}"),
+        None => url.to_string(),
+    }
+}
+
+/// What a backend keeps: the same operations on SQLite and PostgreSQL.
+trait Store: Send {
+    fn begin(&mut self, run: &RunStart, now: &str) -> Result<i64, String>;
+    fn finish(&mut self, id: i64, rows: &Rows) -> Result<(), String>;
+    fn list(&mut self, filter: &Filter) -> Result<Vec<RunRow>, String>;
+    fn close_interrupted(&mut self, machine: &str) -> Result<usize, String>;
+    fn count(&mut self) -> Result<i64, String>;
+}
+
+/// The end of a run as rows, the same for every backend.
+struct Rows {
+    finished: String,
+    status: String,
+    message: Option<String>,
+    /// JSON list of the measuring logs.
+    protocols: String,
+    /// (position of the cycle in the program, result).
+    results: Vec<(i64, ResultRow)>,
+    iso_errors: Vec<IsoErrorRow>,
+    dispersion: Vec<DispersionRow>,
+}
+
+impl Rows {
+    fn of(status: &str, report: &ProgramReport) -> Self {
+        let protocols: Vec<String> = report
+            .protocols
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect();
+        let mut rows = Rows {
+            finished: time::now_utc(),
+            status: status.to_string(),
+            message: report.stopped.clone(),
+            protocols: serde_json::to_string(&protocols).expect("strings serialise"),
+            results: Vec::new(),
+            iso_errors: Vec::new(),
+            dispersion: Vec::new(),
+        };
+        for (position, c) in report.cycles.iter().enumerate() {
+            for (name, value) in &c.q {
+                rows.results.push((
+                    position as i64,
+                    ResultRow {
+                        block: c.block,
+                        cycle: c.cycle,
+                        name: name.clone(),
+                        value: *value,
+                    },
+                ));
+            }
+            if let Some(k) = &c.kinematics {
+                for (name, before) in &k.errors_before {
+                    rows.iso_errors.push(IsoErrorRow {
+                        block: c.block,
+                        name: name.clone(),
+                        before: *before,
+                        after: k.errors_after.get(name).copied().unwrap_or(*before),
+                    });
+                }
+                for a in &k.axes {
+                    rows.dispersion.push(DispersionRow {
+                        block: c.block,
+                        axis: a.axis.clone(),
+                        before: a.dispersion_before,
+                        after: a.dispersion_after,
+                    });
+                }
+            }
+        }
+        rows
+    }
 }
 
 /// Who started a run.
@@ -70,6 +157,8 @@ pub struct RunStart<'a> {
     pub program: &'a Path,
     /// The machine's maxModification (the trend page's band).
     pub max_modification: Option<f64>,
+    /// The request's parameters 1..8 (a start from the PLC), in order; empty for `run`.
+    pub parameters: &'a [f64],
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -113,6 +202,8 @@ pub struct RunRow {
     pub iso_errors: Vec<IsoErrorRow>,
     pub max_modification: Option<f64>,
     pub dispersion: Vec<DispersionRow>,
+    /// The request's parameters 1..8 (empty: not started by the PLC).
+    pub parameters: Vec<f64>,
 }
 
 /// Which runs to list.
@@ -124,55 +215,47 @@ pub struct Filter {
 }
 
 pub struct History {
-    conn: Connection,
-    path: PathBuf,
+    store: Box<dyn Store>,
+    target: HistoryTarget,
 }
 
 impl History {
-    pub fn open(path: &Path) -> Result<Self, HistoryError> {
-        let err = |e: rusqlite::Error| HistoryError {
-            path: path.to_path_buf(),
-            message: e.to_string(),
+    /// Opens (and creates the tables of) the history at `target`.
+    pub fn open(target: &HistoryTarget) -> Result<Self, HistoryError> {
+        let store: Result<Box<dyn Store>, String> = match target {
+            HistoryTarget::Sqlite(path) => {
+                sqlite::SqliteStore::open(path).map(|s| Box::new(s) as Box<dyn Store>)
+            }
+            HistoryTarget::Postgres(url) => {
+                postgres::PgStore::open(url).map(|s| Box::new(s) as Box<dyn Store>)
+            }
         };
-        let conn = Connection::open(path).map_err(err)?;
-        conn.busy_timeout(std::time::Duration::from_secs(5))
-            .map_err(err)?;
-        // WAL: a reader (`probebridge history`) never blocks the gateway's writes, and
-        // a crash leaves the last committed transaction.
-        conn.pragma_update(None, "journal_mode", "WAL")
-            .map_err(err)?;
-        conn.execute_batch(SCHEMA).map_err(err)?;
+        let store = store.map_err(|message| HistoryError {
+            target: target.display(),
+            message,
+        })?;
         Ok(Self {
-            conn,
-            path: path.to_path_buf(),
+            store,
+            target: target.clone(),
         })
     }
 
-    fn err(&self, e: rusqlite::Error) -> HistoryError {
+    pub fn target(&self) -> &HistoryTarget {
+        &self.target
+    }
+
+    fn err(&self, message: String) -> HistoryError {
         HistoryError {
-            path: self.path.clone(),
-            message: e.to_string(),
+            target: self.target.display(),
+            message,
         }
     }
 
     /// Records a run as "running" before it moves; its id.
-    pub fn begin(&self, run: &RunStart) -> Result<i64, HistoryError> {
-        self.conn
-            .execute(
-                "INSERT INTO runs (started, machine, source, request_seq, program_number, program, status, max_modification)
-                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, 'running', ?7)",
-                params![
-                    time::now_utc(),
-                    run.machine,
-                    run.source,
-                    run.request_seq,
-                    run.program_number,
-                    run.program.display().to_string(),
-                    run.max_modification,
-                ],
-            )
-            .map_err(|e| self.err(e))?;
-        Ok(self.conn.last_insert_rowid())
+    pub fn begin(&mut self, run: &RunStart) -> Result<i64, HistoryError> {
+        self.store
+            .begin(run, &time::now_utc())
+            .map_err(|e| self.err(e))
     }
 
     /// Completes run `id`: status ("done", "error", "aborted"), every result, in one
@@ -183,181 +266,36 @@ impl History {
         status: &str,
         report: &ProgramReport,
     ) -> Result<(), HistoryError> {
-        let path = self.path.clone();
-        let err = |e: rusqlite::Error| HistoryError {
-            path: path.clone(),
-            message: e.to_string(),
-        };
-        let tx = self.conn.transaction().map_err(err)?;
-        let protocols: Vec<String> = report
-            .protocols
-            .iter()
-            .map(|p| p.display().to_string())
-            .collect();
-        let protocols = serde_json::to_string(&protocols).expect("strings serialise");
-        tx.execute(
-            "UPDATE runs SET finished = ?1, status = ?2, message = ?3, protocols = ?4 WHERE id = ?5",
-            params![time::now_utc(), status, report.stopped, protocols, id],
-        )
-        .map_err(err)?;
-        for (position, c) in report.cycles.iter().enumerate() {
-            for (name, value) in &c.q {
-                tx.execute(
-                    "INSERT INTO results (run_id, position, block, cycle, name, value) VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
-                    params![id, position as i64, c.block, c.cycle, name, value],
-                )
-                .map_err(err)?;
-            }
-            if let Some(k) = &c.kinematics {
-                for (name, before) in &k.errors_before {
-                    let after = k.errors_after.get(name).copied().unwrap_or(*before);
-                    tx.execute(
-                        "INSERT INTO iso_errors (run_id, block, name, before, after) VALUES (?1, ?2, ?3, ?4, ?5)",
-                        params![id, c.block, name, before, after],
-                    )
-                    .map_err(err)?;
-                }
-                for a in &k.axes {
-                    tx.execute(
-                        "INSERT INTO axis_dispersion (run_id, block, axis, before, after) VALUES (?1, ?2, ?3, ?4, ?5)",
-                        params![id, c.block, a.axis, a.dispersion_before, a.dispersion_after],
-                    )
-                    .map_err(err)?;
-                }
-            }
-        }
-        tx.commit().map_err(err)
+        let rows = Rows::of(status, report);
+        self.store.finish(id, &rows).map_err(|e| self.err(e))
     }
 
-    pub fn list(&self, filter: &Filter) -> Result<Vec<RunRow>, HistoryError> {
-        let mut stmt = self
-            .conn
-            .prepare(
-                "SELECT id, started, finished, machine, source, request_seq, program_number, program, status, message, protocols, max_modification
-                 FROM runs WHERE (?1 IS NULL OR machine = ?1) AND (?2 IS NULL OR started >= ?2) ORDER BY started, id",
-            )
-            .map_err(|e| self.err(e))?;
-        let rows = stmt
-            .query_map(params![filter.machine, filter.since], |r| {
-                let protocols: String = r.get(10)?;
-                Ok(RunRow {
-                    id: r.get(0)?,
-                    started: r.get(1)?,
-                    finished: r.get(2)?,
-                    machine: r.get(3)?,
-                    source: r.get(4)?,
-                    request_seq: r.get(5)?,
-                    program_number: r.get(6)?,
-                    program: r.get(7)?,
-                    status: r.get(8)?,
-                    message: r.get(9)?,
-                    protocols: serde_json::from_str(&protocols).unwrap_or_default(),
-                    results: Vec::new(),
-                    iso_errors: Vec::new(),
-                    max_modification: r.get(11)?,
-                    dispersion: Vec::new(),
-                })
-            })
-            .map_err(|e| self.err(e))?;
-        let mut runs = Vec::new();
-        for row in rows {
-            let mut run = row.map_err(|e| self.err(e))?;
-            run.results = self.results(run.id)?;
-            run.iso_errors = self.iso_errors(run.id)?;
-            run.dispersion = self.dispersion(run.id)?;
-            runs.push(run);
-        }
-        Ok(runs)
+    pub fn list(&mut self, filter: &Filter) -> Result<Vec<RunRow>, HistoryError> {
+        self.store.list(filter).map_err(|e| self.err(e))
     }
 
-    fn results(&self, id: i64) -> Result<Vec<ResultRow>, HistoryError> {
-        let mut stmt = self
-            .conn
-            .prepare_cached(
-                "SELECT block, cycle, name, value FROM results WHERE run_id = ?1 ORDER BY position, name",
-            )
-            .map_err(|e| self.err(e))?;
-        let rows = stmt
-            .query_map([id], |r| {
-                Ok(ResultRow {
-                    block: r.get(0)?,
-                    cycle: r.get(1)?,
-                    name: r.get(2)?,
-                    value: r.get(3)?,
-                })
-            })
-            .map_err(|e| self.err(e))?;
-        rows.collect::<Result<_, _>>().map_err(|e| self.err(e))
-    }
-
-    fn iso_errors(&self, id: i64) -> Result<Vec<IsoErrorRow>, HistoryError> {
-        let mut stmt = self
-            .conn
-            .prepare_cached(
-                "SELECT block, name, before, after FROM iso_errors WHERE run_id = ?1 ORDER BY block, name",
-            )
-            .map_err(|e| self.err(e))?;
-        let rows = stmt
-            .query_map([id], |r| {
-                Ok(IsoErrorRow {
-                    block: r.get(0)?,
-                    name: r.get(1)?,
-                    before: r.get(2)?,
-                    after: r.get(3)?,
-                })
-            })
-            .map_err(|e| self.err(e))?;
-        rows.collect::<Result<_, _>>().map_err(|e| self.err(e))
-    }
-
-    fn dispersion(&self, id: i64) -> Result<Vec<DispersionRow>, HistoryError> {
-        let mut stmt = self
-            .conn
-            .prepare_cached(
-                "SELECT block, axis, before, after FROM axis_dispersion WHERE run_id = ?1 ORDER BY block, axis",
-            )
-            .map_err(|e| self.err(e))?;
-        let rows = stmt
-            .query_map([id], |r| {
-                Ok(DispersionRow {
-                    block: r.get(0)?,
-                    axis: r.get(1)?,
-                    before: r.get(2)?,
-                    after: r.get(3)?,
-                })
-            })
-            .map_err(|e| self.err(e))?;
-        rows.collect::<Result<_, _>>().map_err(|e| self.err(e))
-    }
-
-    /// Runs still "running" (the gateway died during them) become "interrupted".
-    pub fn close_interrupted(&self) -> Result<usize, HistoryError> {
-        self.conn
-            .execute(
-                "UPDATE runs SET status = 'interrupted' WHERE status = 'running'",
-                [],
-            )
+    /// Runs of `machine` still "running" (its gateway died during them) become
+    /// "interrupted"; other machines' runs on a shared server are left alone.
+    pub fn close_interrupted(&mut self, machine: &str) -> Result<usize, HistoryError> {
+        self.store
+            .close_interrupted(machine)
             .map_err(|e| self.err(e))
     }
 
     /// The number of runs (tests, logs).
-    pub fn count(&self) -> Result<i64, HistoryError> {
-        self.conn
-            .query_row("SELECT COUNT(*) FROM runs", [], |r| r.get(0))
-            .optional()
-            .map(|n| n.unwrap_or(0))
-            .map_err(|e| self.err(e))
+    pub fn count(&mut self) -> Result<i64, HistoryError> {
+        self.store.count().map_err(|e| self.err(e))
     }
 }
 
-/// `probebridge run --history FILE`: the run recorded as started, before it moves.
+/// `probebridge run --history FILE|URL`: the run recorded as started, before it moves.
 pub fn record_run_start(
     path: Option<&Path>,
     cfg: &cycles::CyclesConfig,
     program: &cycles::program::Program,
 ) -> Result<Option<(History, i64)>, String> {
     let Some(path) = path else { return Ok(None) };
-    let h = History::open(path).map_err(|e| e.to_string())?;
+    let mut h = History::open(&HistoryTarget::from_arg(path)).map_err(|e| e.to_string())?;
     let program_path = program.path.clone().unwrap_or_default();
     let id = h
         .begin(&RunStart {
@@ -367,6 +305,7 @@ pub fn record_run_start(
             program_number: None,
             program: &program_path,
             max_modification: Some(cfg.parameters.max_modification),
+            parameters: &[],
         })
         .map_err(|e| e.to_string())?;
     Ok(Some((h, id)))
@@ -425,7 +364,7 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("pb-history-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        let mut h = History::open(&dir.join("h.sqlite")).unwrap();
+        let mut h = History::open(&HistoryTarget::Sqlite(dir.join("h.sqlite"))).unwrap();
         let start = RunStart {
             machine: "table-ac",
             source: "serve",
@@ -433,6 +372,7 @@ mod tests {
             program_number: Some(431),
             program: Path::new("/p/431.h"),
             max_modification: Some(0.05),
+            parameters: &[1.5, -2.25, 0.0, 0.0, 0.0, 0.0, 0.0, 7.0],
         };
         let id = h.begin(&start).unwrap();
         assert_eq!(h.list(&Filter::default()).unwrap()[0].status, "running");
@@ -443,7 +383,7 @@ mod tests {
                 ..start.clone()
             })
             .unwrap();
-        assert_eq!(h.close_interrupted().unwrap(), 1);
+        assert_eq!(h.close_interrupted("other").unwrap(), 1);
         let runs = h
             .list(&Filter {
                 machine: Some("table-ac".into()),
@@ -455,6 +395,7 @@ mod tests {
         assert_eq!((r.status.as_str(), r.request_seq), ("done", Some(3)));
         assert_eq!(r.results.len(), 2);
         assert_eq!(r.results[0].name, "Q158");
+        assert_eq!(r.parameters, [1.5, -2.25, 0.0, 0.0, 0.0, 0.0, 0.0, 7.0]);
         assert_eq!(r.protocols, vec!["/tmp/TCHPR431.TXT".to_string()]);
         assert!(h
             .list(&Filter {

@@ -173,6 +173,7 @@ mod tests {
                     })
                     .collect(),
                 max_modification: Some(0.03),
+                parameters: vec![],
                 dispersion: vec![DispersionRow {
                     block: 11,
                     axis: "C".into(),

@@ -32,6 +32,10 @@ pub struct HistorySection {
     /// The SQLite file of this gateway.
     #[serde(default = "default_sqlite")]
     pub sqlite: PathBuf,
+    /// A central PostgreSQL server instead (`postgres://user:password@host:port/db`):
+    /// the same tables, shared by many gateways.
+    #[serde(default)]
+    pub postgres: Option<String>,
 }
 
 impl Default for HistorySection {
@@ -39,6 +43,7 @@ impl Default for HistorySection {
         Self {
             enabled: true,
             sqlite: default_sqlite(),
+            postgres: None,
         }
     }
 }
@@ -219,7 +224,17 @@ impl GatewayConfig {
                 format!("{} is not a folder", self.programs.folder.display()),
             ));
         }
-        if self.history.enabled {
+        if let Some(url) = &self.history.postgres {
+            if !matches!(
+                crate::history::HistoryTarget::parse(url),
+                crate::history::HistoryTarget::Postgres(_)
+            ) {
+                return Err(self.invalid(
+                    "history.postgres",
+                    "expected a URL postgres://user:password@host:port/database",
+                ));
+            }
+        } else if self.history.enabled {
             let folder = self.history.sqlite.parent().unwrap_or(Path::new("."));
             if !folder.is_dir() {
                 return Err(self.invalid(
@@ -263,11 +278,14 @@ impl GatewayConfig {
         }
     }
 
-    /// The history file, when history is on.
-    pub fn history(&self) -> Option<&Path> {
-        self.history
-            .enabled
-            .then_some(self.history.sqlite.as_path())
+    /// Where the history goes, when history is on: the PostgreSQL server if named,
+    /// else the SQLite file.
+    pub fn history(&self) -> Option<crate::history::HistoryTarget> {
+        use crate::history::HistoryTarget;
+        self.history.enabled.then(|| match &self.history.postgres {
+            Some(url) => HistoryTarget::Postgres(url.clone()),
+            None => HistoryTarget::Sqlite(self.history.sqlite.clone()),
+        })
     }
 
     pub fn heartbeat_timeout(&self) -> Option<Duration> {
@@ -286,7 +304,7 @@ impl GatewayConfig {
             service: self.machine.service.clone(),
             candump: None,
             bus_faults: None,
-            // serve aborts through its own gate between moves (serve::abortable).
+            // The machine thread sets the gateway's own (re-armable) stop request.
             abort: None,
         }
     }
@@ -305,7 +323,10 @@ mod tests {
     #[test]
     fn minimal_config_takes_the_defaults() {
         let c = parse("[machine]\nscenario = \"s.toml\"\n[programs]\nfolder = \".\"\n").unwrap();
-        assert!(c.history().unwrap().starts_with(std::env::temp_dir()));
+        assert!(matches!(
+            c.history(),
+            Some(crate::history::HistoryTarget::Sqlite(p)) if p.starts_with(std::env::temp_dir())
+        ));
         let e = GatewayConfig::parse(
             "[machine]\nscenario = \"s\"\n[programs]\nfolder = \".\"\n[history]\nsqlite = \"/nonexistent/h.sqlite\"\n",
             &std::env::temp_dir().join("gateway.toml"),
@@ -316,6 +337,27 @@ mod tests {
         assert_eq!(c.plc.listen, "127.0.0.1:502");
         assert_eq!(c.heartbeat_timeout(), Some(Duration::from_secs(2)));
         assert!(c.machine.scenario.unwrap().is_absolute());
+    }
+
+    #[test]
+    fn a_postgres_url_takes_the_place_of_the_sqlite_file() {
+        use crate::history::HistoryTarget;
+        let base = "[machine]\nscenario = \"s\"\n[programs]\nfolder = \".\"\n[history]\n";
+        let dir = std::env::temp_dir().join("gateway.toml");
+        let url = "postgres://gw:pw@db.factory:5432/history";
+        let c = GatewayConfig::parse(&format!("{base}postgres = {url:?}\n"), &dir).unwrap();
+        assert_eq!(c.history(), Some(HistoryTarget::Postgres(url.into())));
+        let e = GatewayConfig::parse(&format!("{base}postgres = \"db.factory\"\n"), &dir)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("history.postgres") && e.contains("postgres://"),
+            "{e}"
+        );
+        assert_eq!(
+            HistoryTarget::Postgres(url.into()).display(),
+            "postgres://gw:***@db.factory:5432/history"
+        );
     }
 
     #[test]

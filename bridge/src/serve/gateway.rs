@@ -5,9 +5,9 @@ use super::handshake::{AbortReason, Action, Handshake, Outcome, Refusal, State};
 use super::register_map::{MapException, RegisterMap};
 use cycles::program::{Program, ProgramError};
 use cycles::CyclesConfig;
+use hal::AbortFlag;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicU8, Ordering};
 use std::sync::mpsc::Sender;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
@@ -18,6 +18,8 @@ pub struct Job {
     pub number: u16,
     pub program: Program,
     pub confirm: bool,
+    /// The request's parameters 1..8, recorded with the run.
+    pub params: [f32; super::register_map::REQ_PARAM_COUNT],
 }
 
 pub enum ToMachine {
@@ -39,7 +41,14 @@ pub struct Core {
     programs: PathBuf,
     cycles: CyclesConfig,
     jobs: Sender<ToMachine>,
-    pub abort: Arc<AtomicU8>,
+    /// The machine's stop request (hal's, which brakes a move under way); re-armed when
+    /// the measurement it cut short has ended.
+    abort: AbortFlag,
+    /// Why the running measurement was aborted (the first reason wins).
+    abort_reason: Option<AbortReason>,
+    /// The flag's generation of the running measurement: a late abort of a finished
+    /// one does not hit the next.
+    job_generation: u64,
     owner: Option<u64>,
     heartbeat: u16,
 }
@@ -64,7 +73,9 @@ impl Core {
             programs,
             cycles,
             jobs,
-            abort: Arc::new(AtomicU8::new(0)),
+            abort: AbortFlag::fresh(),
+            abort_reason: None,
+            job_generation: 0,
             owner: None,
             heartbeat: 0,
         };
@@ -114,7 +125,7 @@ impl Core {
                 program,
                 confirm,
             }) => {
-                self.abort.store(0, Ordering::Release);
+                self.job_generation = self.abort.generation();
                 // The old results stop matching any request before the run starts.
                 self.map.set_results(seq.wrapping_sub(1), &BTreeMap::new());
                 tracing::info!(
@@ -128,6 +139,7 @@ impl Core {
                     number: req.program,
                     program,
                     confirm,
+                    params: req.params,
                 };
                 if self.jobs.send(ToMachine::Run(Box::new(job))).is_err() {
                     self.hs.finish(
@@ -148,18 +160,38 @@ impl Core {
         self.publish();
     }
 
-    /// Aborts the running measurement (the first reason wins).
-    pub fn request_abort(&self, reason: AbortReason) {
-        let _ = self
-            .abort
-            .compare_exchange(0, reason as u8, Ordering::AcqRel, Ordering::Acquire);
+    /// Aborts the running measurement (the first reason wins). A shutdown also stops
+    /// whatever would start after it.
+    pub fn request_abort(&mut self, reason: AbortReason) {
+        let raised = match reason {
+            AbortReason::Shutdown => {
+                self.abort.raise();
+                true
+            }
+            AbortReason::Request | AbortReason::PlcHeartbeat => {
+                self.abort.raise_in(self.job_generation)
+            }
+        };
+        if raised && self.abort_reason.is_none() {
+            self.abort_reason = Some(reason);
+        }
+    }
+
+    /// The stop request the machine is opened with.
+    pub fn abort_flag(&self) -> AbortFlag {
+        self.abort
+    }
+
+    /// Why the running measurement was aborted, if it was.
+    pub fn abort_reason(&self) -> Option<AbortReason> {
+        self.abort_reason
     }
 
     /// The periodic tick: gateway heartbeat, PLC heartbeat supervision.
     pub fn tick(&mut self, now: Instant) {
         self.heartbeat = self.heartbeat.wrapping_add(1);
         self.map.set_gateway_heartbeat(self.heartbeat);
-        if self.hs.heartbeat_lost(now) && self.abort.load(Ordering::Acquire) == 0 {
+        if self.hs.heartbeat_lost(now) && self.abort_reason.is_none() {
             tracing::warn!("PLC heartbeat stale while busy: aborting the motion");
             self.request_abort(AbortReason::PlcHeartbeat);
         }
@@ -170,7 +202,13 @@ impl Core {
         self.publish();
     }
 
+    /// The measurement ended (the machine is at rest): its outcome, and the stop
+    /// request re-armed for the next one (not after a shutdown).
     pub fn finish(&mut self, outcome: Outcome, cycle: u16, values: &BTreeMap<String, f64>) {
+        if self.abort_reason != Some(AbortReason::Shutdown) {
+            self.abort.rearm();
+            self.abort_reason = None;
+        }
         let seq = self.hs.finish(outcome, cycle);
         let empty = BTreeMap::new();
         let values = if outcome == Outcome::Done {
@@ -189,6 +227,10 @@ impl Core {
 
     pub fn state(&self) -> State {
         self.hs.state()
+    }
+
+    pub fn machine_ok(&self) -> bool {
+        self.hs.machine_ok()
     }
 }
 

@@ -174,6 +174,10 @@ impl Handshake {
         &self.view
     }
 
+    pub fn machine_ok(&self) -> bool {
+        self.machine_ok
+    }
+
     pub fn set_machine_ok(&mut self, ok: bool) {
         self.machine_ok = ok;
         self.refresh_bits();

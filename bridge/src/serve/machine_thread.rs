@@ -2,23 +2,25 @@
 //! (restarting it when it dies), and runs one measurement at a time through the same
 //! `cycles::runner::run_program` as `probebridge run`.
 
-use super::abortable::Abortable;
 use super::config::GatewayConfig;
 use super::gateway::{lock, Job, Shared, ToMachine};
-use super::handshake::{machine_error_kind, AbortReason, Outcome, ERROR_KIND_CYCLE};
-use crate::history::{History, RunStart};
+use super::handshake::{machine_error_kind, Outcome, ERROR_KIND_CYCLE};
+use super::machine_link::MachineLink;
+use crate::history::{History, HistoryTarget, RunStart};
 use crate::ipc::{EstimatorChild, IpcEstimator};
 use crate::session::Session;
 use cycles::progress::ProgressEvent;
 use cycles::results::{CycleResult, ProgramReport, Status};
 use cycles::runner::{run_program, RunOptions};
 use cycles::CyclesConfig;
+use hal::{AxisPositions, Contact, Machine, MachineError, ProbeMove};
 use std::collections::BTreeMap;
-use std::sync::atomic::Ordering;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
 use std::time::Duration;
 
 const ESTIMATOR_TIMEOUT: Duration = Duration::from_secs(10);
+/// How often the machine's health is asked between measurements.
+const HEALTH_PERIOD: Duration = Duration::from_millis(500);
 
 /// Runs on its own thread until `Quit` (or the sender goes away). Says on `ready`
 /// whether the machine came up.
@@ -29,15 +31,21 @@ pub fn run(
     jobs: &Receiver<ToMachine>,
     ready: &Sender<Result<Vec<String>, String>>,
 ) {
-    let opts = cfg.machine_options();
-    let mut session = match Session::open(&opts) {
+    let mut opts = cfg.machine_options();
+    // A move under way brakes on the PLC's abort, a stale heartbeat or SIGTERM.
+    opts.abort = Some(lock(shared).abort_flag());
+    let session = match Session::open(&opts) {
         Ok(s) => s,
         Err(e) => {
             let _ = ready.send(Err(format!("cannot open the machine: {e}")));
             return;
         }
     };
-    let mut history = match cfg.history().map(open_history).transpose() {
+    let history = cfg
+        .history()
+        .map(|t| open_history(&t, &cycles.machine.name))
+        .transpose();
+    let mut history = match history {
         Ok(h) => h,
         Err(e) => {
             let _ = ready.send(Err(e));
@@ -46,36 +54,55 @@ pub fn run(
     };
     let mut estimator = spawn_estimator(&opts.service);
     let _ = ready.send(Ok(session.notes.clone()));
+    let mut link = MachineLink::Up(Box::new(session));
     loop {
-        match jobs.recv_timeout(Duration::from_millis(500)) {
+        match jobs.recv_timeout(HEALTH_PERIOD) {
             Ok(ToMachine::Run(job)) => {
                 supervise(&mut estimator, &opts.service);
-                let ctx = Measure {
-                    cfg,
-                    cycles,
-                    shared,
-                    history: history.as_mut(),
-                };
-                measure(ctx, &mut session, estimator.as_ref(), &job);
+                match link.session() {
+                    Some(session) => {
+                        let ctx = Measure {
+                            cfg,
+                            cycles,
+                            shared,
+                            history: history.as_mut(),
+                        };
+                        measure(ctx, session, estimator.as_ref(), &job);
+                    }
+                    // Lost between the start and here: the run ends at once.
+                    None => lock(shared).finish(
+                        Outcome::Error {
+                            kind: machine_error_kind(hal::ErrorKind::Bus),
+                            code: 0,
+                        },
+                        0,
+                        &BTreeMap::new(),
+                    ),
+                }
+                link.supervise(shared, &opts);
             }
             Ok(ToMachine::Quit) | Err(RecvTimeoutError::Disconnected) => break,
-            Err(RecvTimeoutError::Timeout) => supervise(&mut estimator, &opts.service),
+            Err(RecvTimeoutError::Timeout) => {
+                supervise(&mut estimator, &opts.service);
+                link.supervise(shared, &opts);
+            }
         }
     }
     tracing::info!("machine thread: closing the machine");
 }
 
-/// Opens the history; runs a killed gateway left "running" become "interrupted".
-fn open_history(path: &std::path::Path) -> Result<History, String> {
-    let h = History::open(path).map_err(|e| e.to_string())?;
-    let n = h.close_interrupted().map_err(|e| e.to_string())?;
+/// Opens the history; runs of this machine a killed gateway left "running" become
+/// "interrupted".
+fn open_history(target: &HistoryTarget, machine: &str) -> Result<History, String> {
+    let mut h = History::open(target).map_err(|e| e.to_string())?;
+    let n = h.close_interrupted(machine).map_err(|e| e.to_string())?;
     if n > 0 {
         tracing::warn!(
             runs = n,
             "history: runs interrupted by an earlier stop of the gateway"
         );
     }
-    tracing::info!(path = %path.display(), "history");
+    tracing::info!(at = %target.display(), "history");
     Ok(h)
 }
 
@@ -126,10 +153,10 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
         cfg,
         cycles,
         shared,
-        history,
+        mut history,
     } = ctx;
     let program_path = job.program.path.clone().unwrap_or_default();
-    let record = history.as_deref().and_then(|h| {
+    let record = history.as_deref_mut().and_then(|h| {
         h.begin(&RunStart {
             machine: &cycles.machine.name,
             source: "serve",
@@ -137,6 +164,7 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
             program_number: Some(job.number),
             program: &program_path,
             max_modification: Some(cycles.parameters.max_modification),
+            parameters: &job.params.map(f64::from),
         })
         .map_err(|e| tracing::error!("{e}"))
         .ok()
@@ -179,14 +207,13 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
     if let Some(e) = ipc.as_mut() {
         opts.estimator = Some(e);
     }
-    let abort = lock(shared).abort.clone();
-    let mut machine = Abortable {
+    let mut machine = ErrorNote {
         inner: &mut *session.machine,
-        abort: abort.clone(),
         last_error: None,
     };
     let report = run_program(&job.program, &mut machine, cycles, &mut opts);
-    let outcome = match AbortReason::from_u8(abort.load(Ordering::Acquire)) {
+    let reason = lock(shared).abort_reason();
+    let outcome = match reason {
         Some(r) => Outcome::Aborted(r),
         None if report.completed() => Outcome::Done,
         None => match machine.last_error {
@@ -241,4 +268,45 @@ pub fn result_values(c: &CycleResult) -> BTreeMap<String, f64> {
         }
     }
     v
+}
+
+/// The machine as the cycles drive it, remembering the last error a motion returned
+/// (kind, device code) for the PLC's error registers.
+struct ErrorNote<'a, M: ?Sized> {
+    inner: &'a mut M,
+    last_error: Option<(hal::ErrorKind, Option<u16>)>,
+}
+
+impl<M: Machine<Error = MachineError> + ?Sized> ErrorNote<'_, M> {
+    fn note<T>(&mut self, r: Result<T, MachineError>) -> Result<T, MachineError> {
+        if let Err(e) = &r {
+            self.last_error = Some((e.kind, e.code));
+        }
+        r
+    }
+}
+
+impl<M: Machine<Error = MachineError> + ?Sized> Machine for ErrorNote<'_, M> {
+    type Error = MachineError;
+    fn axes(&self) -> u8 {
+        self.inner.axes()
+    }
+    fn positions(&mut self) -> Result<AxisPositions, MachineError> {
+        let r = self.inner.positions();
+        self.note(r)
+    }
+    fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), MachineError> {
+        let r = self.inner.move_to(target, feed);
+        self.note(r)
+    }
+    fn probe(&mut self, mv: &ProbeMove) -> Result<Contact, MachineError> {
+        let r = self.inner.probe(mv);
+        self.note(r)
+    }
+    fn set_run(&mut self, run_id: u64) {
+        self.inner.set_run(run_id);
+    }
+    fn health(&mut self) -> Result<(), MachineError> {
+        self.inner.health()
+    }
 }

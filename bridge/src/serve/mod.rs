@@ -3,10 +3,10 @@
 //! Modbus TCP face, one at a time. SIGTERM/SIGINT abort a running measurement (the
 //! axes stop, the run ends "aborted") and the service exits 0.
 
-pub mod abortable;
 pub mod config;
 pub mod gateway;
 pub mod handshake;
+pub mod machine_link;
 pub mod machine_thread;
 pub mod modbus_face;
 pub mod register_map;
@@ -131,21 +131,26 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
 fn supervise(shared: &gateway::Shared, notifier: &sd_notify::Notifier) -> i32 {
     let watchdog = sd_notify::Notifier::watchdog_interval();
     let mut last_watchdog = Instant::now();
-    let mut last_state = State::Idle;
+    let mut last = (State::Idle, true);
     loop {
         let sig = STOP_SIGNAL.load(Ordering::Acquire);
         if sig != 0 {
             return sig;
         }
         let now = Instant::now();
-        let state = {
+        let (state, machine_ok) = {
             let mut core = lock(shared);
             core.tick(now);
-            core.state()
+            (core.state(), core.machine_ok())
         };
-        if state != last_state {
-            notifier.notify(&format!("STATUS={}", state.name()));
-            last_state = state;
+        if (state, machine_ok) != last {
+            let machine = if machine_ok {
+                ""
+            } else {
+                ", machine not ok: opening it again"
+            };
+            notifier.notify(&format!("STATUS={}{machine}", state.name()));
+            last = (state, machine_ok);
         }
         if let Some(w) = watchdog {
             if now.duration_since(last_watchdog) >= w {

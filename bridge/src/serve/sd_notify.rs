@@ -19,7 +19,11 @@ impl Notifier {
             } else {
                 SocketAddr::from_pathname(&p).ok()?
             };
-            Some((UnixDatagram::unbound().ok()?, addr))
+            let sock = UnixDatagram::unbound().ok()?;
+            // A receiver that stops reading must not block the service: with its queue
+            // full the datagram is dropped (and logged) instead.
+            sock.set_nonblocking(true).ok()?;
+            Some((sock, addr))
         });
         Self { target }
     }

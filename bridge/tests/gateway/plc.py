@@ -34,7 +34,8 @@ class Plc:
     def __init__(self, host, port):
         self.c = ModbusTcpClient(host, port=port)
         check(self.c.connect(), "connect")
-        self.seq = 0
+        # Go on from the sequence the gateway acknowledged last (a PLC that restarted).
+        self.seq = self.read(ACK_SEQ, 1)[0]
         self.hb = 0
 
     def read(self, addr, count):
@@ -47,10 +48,13 @@ class Plc:
         r = self.c.write_register(HEARTBEAT, self.hb)
         check(not r.isError(), f"heartbeat write: {r}")
 
-    def request(self, code, program=0, flags=0):
+    def request(self, code, program=0, flags=0, params=()):
         self.seq = self.seq % 65535 + 1
         self.hb = (self.hb + 1) & 0xFFFF
-        block = [code, self.seq, program, flags] + [0] * 16 + [self.hb]
+        words = []
+        for p in list(params) + [0.0] * (8 - len(params)):
+            words += struct.unpack(">HH", struct.pack(">f", p))
+        block = [code, self.seq, program, flags] + words + [self.hb]
         r = self.c.write_registers(REQ, block)
         check(not r.isError(), f"request write: {r}")
         st = self.read(ACK_SEQ, 9)
@@ -87,8 +91,12 @@ class Plc:
         return real, dint
 
 
+# Parameters 1..8 of every start of `run`: recorded with the run in the history.
+PARAMS = (1.5, -2.25, 0.0, 0.0, 0.0, 0.0, 0.0, 1000.125)
+
+
 def run(plc, program):
-    st = plc.request(START, program, flags=1)
+    st = plc.request(START, program, flags=1, params=PARAMS)
     check(st[1] == START, f"start accepted: {st}")
     seq = plc.seq
     st = plc.wait(lambda s: s[3] != BUSY)
@@ -99,7 +107,7 @@ def run(plc, program):
     return {"cycle": cycle, "real": real, "dint": dint}
 
 
-def busy_abort(plc, program, other):
+def busy_abort(plc, program, other, again):
     st = plc.request(START, program, flags=1)
     check(st[1] == START, f"start accepted: {st}")
     start_seq = plc.seq
@@ -113,7 +121,11 @@ def busy_abort(plc, program, other):
     check(st[4] & 0b100100 == 0, f"neither done nor results valid: {st[4]:#x}")
     head, tail = plc.read(RES_HEAD, 1)[0], plc.read(RES_TAIL, 1)[0]
     check(head == tail == start_seq, "result sequence of the aborted run")
-    return {"aborted_at_point": st[8]}
+    aborted_at = st[8]
+    # The abort is re-armed once the run has ended: the next measurement runs.
+    check(st[4] & 0b10001 == 0b10001, f"ready and machine ok after the abort: {st[4]:#x}")
+    after = run(plc, again)
+    return {"aborted_at_point": aborted_at, "after": after}
 
 
 def ack_error(plc, failing, good):
@@ -180,6 +192,22 @@ def start_busy(plc, program):
     return {}
 
 
+def machine_lost(plc, program):
+    """The gateway lost its machine: "machine ok" and "ready" drop, a start is refused
+    with the reason "machine not ok" (8)."""
+    st = plc.wait(lambda s: not s[4] & 0b10000)
+    check(not st[4] & 0b1, f"not ready without the machine: {st[4]:#x}")
+    st = plc.request(START, program, flags=1)
+    check(st[1] == START | 0x8000 and st[2] == 8, f"start refused, machine not ok: {st}")
+    return {"bits": st[4]}
+
+
+def machine_back(plc, program):
+    """The gateway has its machine again: "machine ok" comes back and a run is done."""
+    st = plc.wait(lambda s: s[4] & 0b10001 == 0b10001)
+    return run(plc, program)
+
+
 def main():
     host, port, scenario = sys.argv[1], int(sys.argv[2]), sys.argv[3]
     args = [int(a) for a in sys.argv[4:]]
@@ -187,7 +215,7 @@ def main():
     if scenario == "run":
         out = run(plc, args[0])
     elif scenario == "busy_abort":
-        out = busy_abort(plc, args[0], args[1])
+        out = busy_abort(plc, args[0], args[1], args[2])
     elif scenario == "ack_error":
         out = ack_error(plc, args[0], args[1])
     elif scenario == "second_connection":
@@ -197,6 +225,10 @@ def main():
         out = {"state": st[3], "bits": st[4]}
     elif scenario == "start_busy":
         out = start_busy(plc, args[0])
+    elif scenario == "machine_lost":
+        out = machine_lost(plc, args[0])
+    elif scenario == "machine_back":
+        out = machine_back(plc, args[0])
     elif scenario == "heartbeat_loss":
         out = heartbeat_loss(plc, args[0])
     else:

@@ -51,7 +51,8 @@ pub struct MasterOptions {
     /// Longest wall-clock wait for one command (beyond the loop's own timeouts).
     pub command_timeout: Duration,
     /// The operator's stop request: once raised, a move under way is braked and
-    /// answered as [`ErrorKind::Aborted`], and no further command is sent.
+    /// answered as [`ErrorKind::Aborted`] (the drives stay enabled), and no further
+    /// command is sent until the flag is re-armed ([`AbortFlag::rearm`]).
     pub abort: Option<AbortFlag>,
 }
 
@@ -79,6 +80,8 @@ pub struct CanMachine {
     options: MasterOptions,
     run_id: u64,
     position: AxisPositions,
+    /// `position` is not where the axes are (a move ended in an error).
+    position_stale: bool,
 }
 
 /// SCHED_FIFO at `priority` for the calling thread (0: do not ask) and locked memory;
@@ -192,6 +195,7 @@ impl CanMachine {
             options,
             run_id: options.run_id,
             position: AxisPositions::new(),
+            position_stale: false,
         };
         match m.wait_reply(Duration::from_secs(10))? {
             Reply::Ready { positions } => m.position = m.to_positions(&positions),
@@ -267,7 +271,9 @@ impl CanMachine {
     }
 
     fn command(&mut self, cmd: Command) -> Result<Reply, MachineError> {
-        if self.options.abort.is_some_and(|a| a.is_raised()) {
+        // Reading positions moves nothing: allowed while the stop is raised.
+        let motion = !matches!(cmd, Command::Positions);
+        if motion && self.options.abort.is_some_and(|a| a.is_raised()) {
             return Err(RtError::new(ErrorKind::Aborted, Detail::Aborted).into());
         }
         self.commands
@@ -375,6 +381,18 @@ impl Machine for CanMachine {
         self.set_run_id(run_id);
     }
 
+    /// The loop's own supervision (heartbeats, EMCY, statusword fault) and whether the
+    /// loop still runs (a transport failure ends it); sends nothing.
+    fn health(&mut self) -> Result<(), MachineError> {
+        if self.thread.as_ref().is_none_or(JoinHandle::is_finished) {
+            return Err(RtError::new(ErrorKind::Bus, Detail::Stopped).into());
+        }
+        match self.stats().fault {
+            Some(f) => Err(f.into()),
+            None => Ok(()),
+        }
+    }
+
     fn axes(&self) -> u8 {
         self.config.axis_mask()
     }
@@ -390,12 +408,20 @@ impl Machine for CanMachine {
     }
 
     fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), MachineError> {
+        if self.position_stale {
+            // The last motion ended early (braked): check the duration from where the
+            // axes came to rest.
+            self.position = self.positions()?;
+            self.position_stale = false;
+        }
         self.guard.check_move_from(&self.position, target, feed)?;
-        match self.command(Command::MoveTo {
+        let reply = self.command(Command::MoveTo {
             target: target.raw(),
             mask: target.mask(),
             feed,
-        })? {
+        });
+        self.position_stale = reply.is_err();
+        match reply? {
             Reply::Done { positions } => {
                 self.position = self.to_positions(&positions);
                 Ok(())
@@ -412,12 +438,14 @@ impl Machine for CanMachine {
         self.guard.check_probe_request(mv)?;
         let here = self.positions()?;
         let dir = self.guard.check_probe(&here, mv)?.direction;
-        match self.command(Command::Probe {
+        let reply = self.command(Command::Probe {
             direction: dir,
             feed: mv.feed,
             max_distance: mv.max_distance,
             run_id: self.run_id,
-        })? {
+        });
+        self.position_stale = reply.is_err();
+        match reply? {
             Reply::Contact(s) => Ok(Contact {
                 // Where the axes are is close to the latch (the stop runs on by the
                 // braking distance): good enough for the next move's duration check.

@@ -104,6 +104,9 @@ pub struct LoopStats {
     /// The cycle whose SYNC carried the stop, counted from the cycle in which the
     /// first latch frame arrived (1: the very next SYNC).
     pub last_stop_latency_cycles: u64,
+    /// The fault that stopped the machine (heartbeat lost, EMCY, fault bit), if any:
+    /// the loop refuses motion from then on.
+    pub fault: Option<RtError>,
 }
 
 /// What the master knows of one drive.
@@ -337,7 +340,10 @@ impl<S: SampleSink> RtLoop<S> {
     }
 
     pub fn stats(&self) -> LoopStats {
-        self.stats
+        LoopStats {
+            fault: self.fault,
+            ..self.stats
+        }
     }
 
     /// Time of the SYNC most recently sent (the `now_ns` of the last tick).

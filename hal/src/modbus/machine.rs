@@ -15,6 +15,7 @@ use super::latch_ring::{LatchTracker, RingEvent};
 use super::mailbox::{
     bits, CommandBlock, CommandCode, LatchSlot, Layout, ResultCode, Scale, StatusBlock, STATUS_LEN,
 };
+use crate::abort::{aborted_error, AbortFlag};
 use crate::axis::{Axis, AxisPositions, MAX_AXES};
 use crate::clock::monotonic_ns;
 use crate::config::MachineConfig;
@@ -36,6 +37,11 @@ pub struct ModbusOptions {
     pub command_timeout: Duration,
     /// Longest the PLC may take to acknowledge a command.
     pub ack_timeout: Duration,
+    /// The operator's stop request: once raised, the command under way is stopped
+    /// (a stop command, and the PLC's answer that the axes are at rest) and answered as
+    /// [`ErrorKind::Aborted`], and no further command is written until the flag is
+    /// re-armed.
+    pub abort: Option<AbortFlag>,
 }
 
 impl Default for ModbusOptions {
@@ -44,6 +50,7 @@ impl Default for ModbusOptions {
             run_id: 1,
             command_timeout: Duration::from_secs(600),
             ack_timeout: Duration::from_secs(2),
+            abort: None,
         }
     }
 }
@@ -338,6 +345,9 @@ impl ModbusMachine {
                 )
             })?;
         }
+        if self.abort_raised() {
+            return Err(aborted_error("stop requested; nothing moved"));
+        }
         let sequence = self.next_sequence();
         self.heartbeat = self.heartbeat.wrapping_add(1);
         let block = CommandBlock {
@@ -364,6 +374,10 @@ impl ModbusMachine {
             if s.done == sequence {
                 return Ok((s, latch));
             }
+            if self.abort_raised() {
+                self.stop_and_wait()?;
+                return Err(aborted_error("stop requested; all axes braked"));
+            }
             let waited = started.elapsed();
             let late = if s.acked != sequence && waited > self.options.ack_timeout {
                 Some("did not acknowledge the command")
@@ -386,7 +400,39 @@ impl ModbusMachine {
         }
     }
 
-    fn stop_best_effort(&mut self) {
+    fn abort_raised(&self) -> bool {
+        self.options.abort.is_some_and(|a| a.is_raised())
+    }
+
+    /// The operator's stop: a stop command, then the PLC's word that it is done (its
+    /// axes braked to rest), so the next command starts from a machine at rest.
+    fn stop_and_wait(&mut self) -> Result<(), MachineError> {
+        let sequence = self.stop_best_effort();
+        let started = Instant::now();
+        let poll = Duration::from_millis(self.bus.poll_ms as u64);
+        loop {
+            let s = self.read_status()?;
+            if s.done == sequence {
+                return Ok(());
+            }
+            let waited = started.elapsed();
+            if (s.acked != sequence && waited > self.options.ack_timeout)
+                || waited > self.options.command_timeout
+            {
+                return Err(MachineError::new(
+                    ErrorKind::Timeout,
+                    format!(
+                        "stop requested, but the PLC did not report the axes stopped within {:.1} s",
+                        waited.as_secs_f64()
+                    ),
+                ));
+            }
+            std::thread::sleep(poll);
+        }
+    }
+
+    /// Writes a stop command; its sequence number.
+    fn stop_best_effort(&mut self) -> u16 {
         let sequence = self.next_sequence();
         let block = CommandBlock {
             command: CommandCode::Stop as u16,
@@ -399,6 +445,7 @@ impl ModbusMachine {
             sequence,
         };
         let _ = self.write_command(&block);
+        sequence
     }
 
     fn result_error(&self, s: &StatusBlock, what: &str, max_distance: f64) -> MachineError {
@@ -608,5 +655,18 @@ impl Machine for ModbusMachine {
 
     fn set_run(&mut self, run_id: u64) {
         self.run_id = run_id;
+    }
+
+    /// One status read: the connection (after the client's retries and reconnects),
+    /// and the PLC's fault bit.
+    fn health(&mut self) -> Result<(), MachineError> {
+        let s = self.read_status()?;
+        if s.has(bits::FAULT) {
+            return Err(MachineError::new(
+                ErrorKind::DriveFault,
+                "the PLC reports a fault (acknowledge it at the PLC)",
+            ));
+        }
+        Ok(())
     }
 }

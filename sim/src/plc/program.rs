@@ -63,6 +63,7 @@ pub struct PlcProgram {
     armed: bool,
     fault: Option<u16>,
     latch_log: Option<std::sync::Arc<crate::machine::LatchLog>>,
+    motion_watch: Option<crate::machine::MotionWatch>,
     pub knobs: Knobs,
 }
 
@@ -118,6 +119,7 @@ impl PlcProgram {
             armed: false,
             fault: None,
             latch_log: None,
+            motion_watch: None,
             knobs: Knobs::default(),
         };
         let here = p.actual();
@@ -129,6 +131,11 @@ impl PlcProgram {
     /// Records the wall-clock instant of every latch into `log` (benchmarks).
     pub fn set_latch_log(&mut self, log: std::sync::Arc<crate::machine::LatchLog>) {
         self.latch_log = Some(log);
+    }
+
+    /// Calls `watch` with the actual positions after every PLC cycle that moves.
+    pub fn set_motion_watch(&mut self, watch: crate::machine::MotionWatch) {
+        self.motion_watch = Some(watch);
     }
 
     pub fn layout(&self) -> Layout {
@@ -206,7 +213,11 @@ impl PlcProgram {
             self.status.acked = block.sequence;
             self.start(&block);
         }
+        let moving = !matches!(self.activity, Activity::Idle);
         self.advance();
+        if let (true, Some(watch)) = (moving, &self.motion_watch) {
+            watch(&self.actual());
+        }
         self.publish();
     }
 

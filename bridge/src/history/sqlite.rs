@@ -1,0 +1,243 @@
+//! The history in an SQLite file, one per gateway (the embedded default). WAL mode: a
+//! reader (`probebridge history`) never blocks the gateway's writes, and a crash
+//! leaves the last committed transaction.
+
+use super::{DispersionRow, Filter, IsoErrorRow, ResultRow, Rows, RunRow, RunStart, Store};
+use rusqlite::{params, Connection};
+use std::path::Path;
+
+const SCHEMA: &str = "
+CREATE TABLE IF NOT EXISTS runs (
+    id INTEGER PRIMARY KEY,
+    started TEXT NOT NULL,
+    finished TEXT,
+    machine TEXT NOT NULL,
+    source TEXT NOT NULL,
+    request_seq INTEGER,
+    program_number INTEGER,
+    program TEXT NOT NULL,
+    status TEXT NOT NULL,
+    message TEXT,
+    protocols TEXT NOT NULL DEFAULT '[]',
+    max_modification REAL
+);
+CREATE INDEX IF NOT EXISTS runs_machine_started ON runs (machine, started);
+CREATE TABLE IF NOT EXISTS results (
+    run_id INTEGER NOT NULL REFERENCES runs (id),
+    position INTEGER NOT NULL,
+    block INTEGER NOT NULL,
+    cycle INTEGER NOT NULL,
+    name TEXT NOT NULL,
+    value REAL NOT NULL
+);
+CREATE TABLE IF NOT EXISTS iso_errors (
+    run_id INTEGER NOT NULL REFERENCES runs (id),
+    block INTEGER NOT NULL,
+    name TEXT NOT NULL,
+    before REAL NOT NULL,
+    after REAL NOT NULL
+);
+CREATE TABLE IF NOT EXISTS parameters (
+    run_id INTEGER NOT NULL REFERENCES runs (id),
+    number INTEGER NOT NULL,
+    value REAL NOT NULL
+);
+CREATE TABLE IF NOT EXISTS axis_dispersion (
+    run_id INTEGER NOT NULL REFERENCES runs (id),
+    block INTEGER NOT NULL,
+    axis TEXT NOT NULL,
+    before REAL NOT NULL,
+    after REAL NOT NULL
+);
+";
+
+pub struct SqliteStore {
+    conn: Connection,
+}
+
+fn text(e: rusqlite::Error) -> String {
+    e.to_string()
+}
+
+impl SqliteStore {
+    pub fn open(path: &Path) -> Result<Self, String> {
+        let conn = Connection::open(path).map_err(text)?;
+        conn.busy_timeout(std::time::Duration::from_secs(5))
+            .map_err(text)?;
+        conn.pragma_update(None, "journal_mode", "WAL")
+            .map_err(text)?;
+        conn.execute_batch(SCHEMA).map_err(text)?;
+        Ok(Self { conn })
+    }
+
+    fn results(&self, id: i64) -> rusqlite::Result<Vec<ResultRow>> {
+        let mut stmt = self.conn.prepare_cached(
+            "SELECT block, cycle, name, value FROM results WHERE run_id = ?1 ORDER BY position, name",
+        )?;
+        let rows = stmt.query_map([id], |r| {
+            Ok(ResultRow {
+                block: r.get(0)?,
+                cycle: r.get(1)?,
+                name: r.get(2)?,
+                value: r.get(3)?,
+            })
+        })?;
+        rows.collect()
+    }
+
+    fn iso_errors(&self, id: i64) -> rusqlite::Result<Vec<IsoErrorRow>> {
+        let mut stmt = self.conn.prepare_cached(
+            "SELECT block, name, before, after FROM iso_errors WHERE run_id = ?1 ORDER BY block, name",
+        )?;
+        let rows = stmt.query_map([id], |r| {
+            Ok(IsoErrorRow {
+                block: r.get(0)?,
+                name: r.get(1)?,
+                before: r.get(2)?,
+                after: r.get(3)?,
+            })
+        })?;
+        rows.collect()
+    }
+
+    fn dispersion(&self, id: i64) -> rusqlite::Result<Vec<DispersionRow>> {
+        let mut stmt = self.conn.prepare_cached(
+            "SELECT block, axis, before, after FROM axis_dispersion WHERE run_id = ?1 ORDER BY block, axis",
+        )?;
+        let rows = stmt.query_map([id], |r| {
+            Ok(DispersionRow {
+                block: r.get(0)?,
+                axis: r.get(1)?,
+                before: r.get(2)?,
+                after: r.get(3)?,
+            })
+        })?;
+        rows.collect()
+    }
+
+    fn parameters(&self, id: i64) -> rusqlite::Result<Vec<f64>> {
+        let mut stmt = self
+            .conn
+            .prepare_cached("SELECT value FROM parameters WHERE run_id = ?1 ORDER BY number")?;
+        let rows = stmt.query_map([id], |r| r.get(0))?;
+        rows.collect()
+    }
+
+    fn list_runs(&self, filter: &Filter) -> rusqlite::Result<Vec<RunRow>> {
+        let mut stmt = self.conn.prepare(
+            "SELECT id, started, finished, machine, source, request_seq, program_number, program, status, message, protocols, max_modification
+             FROM runs WHERE (?1 IS NULL OR machine = ?1) AND (?2 IS NULL OR started >= ?2) ORDER BY started, id",
+        )?;
+        let rows = stmt.query_map(params![filter.machine, filter.since], |r| {
+            let protocols: String = r.get(10)?;
+            Ok(RunRow {
+                id: r.get(0)?,
+                started: r.get(1)?,
+                finished: r.get(2)?,
+                machine: r.get(3)?,
+                source: r.get(4)?,
+                request_seq: r.get(5)?,
+                program_number: r.get(6)?,
+                program: r.get(7)?,
+                status: r.get(8)?,
+                message: r.get(9)?,
+                protocols: serde_json::from_str(&protocols).unwrap_or_default(),
+                results: Vec::new(),
+                iso_errors: Vec::new(),
+                max_modification: r.get(11)?,
+                dispersion: Vec::new(),
+                parameters: Vec::new(),
+            })
+        })?;
+        let mut runs = Vec::new();
+        for row in rows {
+            let mut run = row?;
+            run.results = self.results(run.id)?;
+            run.iso_errors = self.iso_errors(run.id)?;
+            run.dispersion = self.dispersion(run.id)?;
+            run.parameters = self.parameters(run.id)?;
+            runs.push(run);
+        }
+        Ok(runs)
+    }
+}
+
+impl Store for SqliteStore {
+    fn begin(&mut self, run: &RunStart, now: &str) -> Result<i64, String> {
+        let tx = self.conn.transaction().map_err(text)?;
+        tx.execute(
+                "INSERT INTO runs (started, machine, source, request_seq, program_number, program, status, max_modification)
+                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, 'running', ?7)",
+                params![
+                    now,
+                    run.machine,
+                    run.source,
+                    run.request_seq,
+                    run.program_number,
+                    run.program.display().to_string(),
+                    run.max_modification,
+                ],
+            )
+        .map_err(text)?;
+        let id = tx.last_insert_rowid();
+        for (i, v) in run.parameters.iter().enumerate() {
+            tx.execute(
+                "INSERT INTO parameters (run_id, number, value) VALUES (?1, ?2, ?3)",
+                params![id, i as i64 + 1, v],
+            )
+            .map_err(text)?;
+        }
+        tx.commit().map_err(text)?;
+        Ok(id)
+    }
+
+    fn finish(&mut self, id: i64, rows: &Rows) -> Result<(), String> {
+        let tx = self.conn.transaction().map_err(text)?;
+        tx.execute(
+            "UPDATE runs SET finished = ?1, status = ?2, message = ?3, protocols = ?4 WHERE id = ?5",
+            params![rows.finished, rows.status, rows.message, rows.protocols, id],
+        )
+        .map_err(text)?;
+        for (position, r) in &rows.results {
+            tx.execute(
+                "INSERT INTO results (run_id, position, block, cycle, name, value) VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+                params![id, position, r.block, r.cycle, r.name, r.value],
+            )
+            .map_err(text)?;
+        }
+        for e in &rows.iso_errors {
+            tx.execute(
+                "INSERT INTO iso_errors (run_id, block, name, before, after) VALUES (?1, ?2, ?3, ?4, ?5)",
+                params![id, e.block, e.name, e.before, e.after],
+            )
+            .map_err(text)?;
+        }
+        for d in &rows.dispersion {
+            tx.execute(
+                "INSERT INTO axis_dispersion (run_id, block, axis, before, after) VALUES (?1, ?2, ?3, ?4, ?5)",
+                params![id, d.block, d.axis, d.before, d.after],
+            )
+            .map_err(text)?;
+        }
+        tx.commit().map_err(text)
+    }
+
+    fn list(&mut self, filter: &Filter) -> Result<Vec<RunRow>, String> {
+        self.list_runs(filter).map_err(text)
+    }
+
+    fn close_interrupted(&mut self, machine: &str) -> Result<usize, String> {
+        self.conn
+            .execute(
+                "UPDATE runs SET status = 'interrupted' WHERE status = 'running' AND machine = ?1",
+                [machine],
+            )
+            .map_err(text)
+    }
+
+    fn count(&mut self) -> Result<i64, String> {
+        self.conn
+            .query_row("SELECT COUNT(*) FROM runs", [], |r| r.get(0))
+            .map_err(text)
+    }
+}
