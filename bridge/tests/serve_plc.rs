@@ -2,7 +2,9 @@
 //! written from the README's register table): programs 431, 444 and 451 started by
 //! number give the results of `probebridge run --json` to the registers' precision;
 //! refusal while busy, abort mid-cycle, acknowledge after an error, a second
-//! connection refused, PLC heartbeat loss, SIGTERM mid-cycle.
+//! connection refused, PLC heartbeat loss, SIGTERM and SIGHUP mid-cycle, a second
+//! SIGTERM during a slow stop, the lock and iceoryx2's root in the unit's runtime
+//! folder.
 //!
 //! Python with pymodbus: `PROBEBRIDGE_PYTHON`, else `/opt/probebridge-venv/bin/python`
 //! (`scripts/install-test-peers`). Skipped with a line saying why where neither is
@@ -11,6 +13,7 @@
 mod common;
 
 use common::*;
+use std::ffi::OsStr;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -50,7 +53,7 @@ impl Serve {
     /// its own; `plc` adds keys to the `[plc]` section.
     fn start(name: &str, scenario: &str, programs: &[(u16, &str)], plc: &str) -> Self {
         let dir = tmpdir(&format!("serve-{name}"));
-        Self::start_in(dir, name, scenario, programs, plc, None)
+        Self::start_in(dir, name, scenario, programs, plc, &[])
     }
 
     /// As [`Serve::start`], with `machine` added to the `[machine]` section.
@@ -61,19 +64,20 @@ impl Serve {
         machine: &str,
     ) -> Self {
         let dir = tmpdir(&format!("serve-{name}"));
-        Self::start_at(dir, name, scenario, programs, (machine, ""), None)
+        Self::start_at(dir, name, scenario, programs, (machine, ""), &[])
     }
 
-    /// Starts in `dir` (again, after a restart: same configuration and history).
+    /// Starts in `dir` (again, after a restart: same configuration and history), with
+    /// `envs` added to its environment.
     fn start_in(
         dir: PathBuf,
         name: &str,
         scenario: &str,
         programs: &[(u16, &str)],
         plc: &str,
-        notify_socket: Option<&Path>,
+        envs: &[(&str, &OsStr)],
     ) -> Self {
-        Self::start_at(dir, name, scenario, programs, ("", plc), notify_socket)
+        Self::start_at(dir, name, scenario, programs, ("", plc), envs)
     }
 
     /// `extra`: keys added to the `[machine]` and the `[plc]` section.
@@ -83,7 +87,7 @@ impl Serve {
         scenario: &str,
         programs: &[(u16, &str)],
         extra: (&str, &str),
-        notify_socket: Option<&Path>,
+        envs: &[(&str, &OsStr)],
     ) -> Self {
         let (machine, plc) = extra;
         let folder = dir.join("programs");
@@ -112,10 +116,7 @@ impl Serve {
         .unwrap();
         let log = std::fs::File::create(dir.join("serve.log")).unwrap();
         let mut cmd = bin();
-        if let Some(socket) = notify_socket {
-            cmd.env("NOTIFY_SOCKET", socket)
-                .env("WATCHDOG_USEC", "200000");
-        }
+        cmd.envs(envs.iter().copied());
         let mut child = cmd
             .args(["serve", "--config", config.to_str().unwrap()])
             .stdout(Stdio::piped())
@@ -166,8 +167,13 @@ impl Serve {
 
     /// SIGTERM; the exit status.
     fn stop(&mut self) -> std::process::ExitStatus {
+        self.signal(libc::SIGTERM)
+    }
+
+    /// Sends `sig`; the exit status.
+    fn signal(&mut self, sig: libc::c_int) -> std::process::ExitStatus {
         // SAFETY: kill(2) on our own child's pid.
-        unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
+        unsafe { libc::kill(self.child.id() as i32, sig) };
         self.child.wait().unwrap()
     }
 }
@@ -397,6 +403,116 @@ fn sigterm_mid_cycle_aborts_and_exits_0() {
 }
 
 #[test]
+fn sighup_mid_cycle_is_a_stop_like_sigterm() {
+    let Some(py) = python() else { return };
+    let mut serve = Serve::start(
+        "sighup",
+        "demo-sphere.toml",
+        &[(451, "451-check.h")],
+        "heartbeat_timeout_ms = 0\n",
+    );
+    serve.plc(&py, &["start_busy", "451"]);
+    let status = serve.signal(libc::SIGHUP);
+    assert_eq!(status.code(), Some(0), "{status:?}\n{}", serve.log());
+    let log = serve.log();
+    assert!(log.contains("stopping on SIGHUP"), "{log}");
+    assert!(log.contains("Aborted(Shutdown)"), "{log}");
+    assert_eq!(serve.history()[0]["status"], "aborted");
+}
+
+/// Waits (polling the log, up to 60 s) until it holds `text`.
+fn wait_for_log(serve: &Serve, text: &str) {
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while !serve.log().contains(text) {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "no {text:?} in:\n{}",
+            serve.log()
+        );
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+}
+
+#[test]
+fn a_second_sigterm_during_a_slow_stop_exits_at_once() {
+    let Some(py) = python() else { return };
+    let scenario = "plane-z10.toml";
+    let (mut plc, addr) = sim_plc("127.0.0.1:0", scenario);
+    let mut serve = Serve::start_with_machine(
+        "sigterm2",
+        scenario,
+        &[(431, "431-plane.h")],
+        &format!("modbus = {addr:?}\n"),
+    );
+    serve.plc(&py, &["start_busy", "431"]);
+    // The machine's PLC stops answering: braking and closing wait for its replies, so
+    // the stop is slow.
+    // SAFETY: kill(2) on our own child's pid.
+    unsafe { libc::kill(plc.id() as i32, libc::SIGSTOP) };
+    // SAFETY: as above.
+    unsafe { libc::kill(serve.child.id() as i32, libc::SIGTERM) };
+    // The service logs "stopping" with the signal's number once it took the first.
+    wait_for_log(&serve, &format!("signal={}", libc::SIGTERM));
+    let status = serve.signal(libc::SIGTERM);
+    assert_eq!(status.code(), Some(128 + libc::SIGTERM), "{}", serve.log());
+    // SAFETY: as above.
+    unsafe { libc::kill(plc.id() as i32, libc::SIGCONT) };
+    let _ = plc.kill();
+    let _ = plc.wait();
+}
+
+#[test]
+fn the_lock_and_the_iceoryx2_root_are_in_the_units_runtime_directory() {
+    let Some(py) = python() else { return };
+    let dir = tmpdir("serve-rundir");
+    let (run, tmp) = (dir.join("run"), dir.join("tmp"));
+    std::fs::create_dir_all(&run).unwrap();
+    std::fs::create_dir_all(&tmp).unwrap();
+    // A local user holds the lock the service would take in the shared temporary
+    // folder: under systemd it is not the service's lock.
+    let service = format!("pbserve-rundir-{}", std::process::id());
+    let squatted =
+        std::fs::File::create(tmp.join(format!("probebridge-service-{service}.lock"))).unwrap();
+    // SAFETY: flock on a descriptor this test owns.
+    assert_eq!(
+        unsafe { libc::flock(std::os::fd::AsRawFd::as_raw_fd(&squatted), libc::LOCK_EX) },
+        0
+    );
+    let serve = Serve::start_in(
+        dir.clone(),
+        "rundir",
+        "tilted-plane.toml",
+        &[(431, "431-plane.h")],
+        "",
+        &[
+            ("RUNTIME_DIRECTORY", run.as_os_str()),
+            ("TMPDIR", tmp.as_os_str()),
+        ],
+    );
+    assert!(
+        run.join(format!("probebridge-service-{service}.lock"))
+            .is_file(),
+        "{}",
+        serve.log()
+    );
+    // The service and its estimator child meet under this root (a 431 needs none,
+    // but the service asks the child for a ping before it says it is ready).
+    assert!(run.join("iceoryx2").is_dir());
+    let got = serve.plc(&py, &["run", "431"]);
+    assert_eq!(got["cycle"], 431);
+    let in_tmp: Vec<_> = std::fs::read_dir(&tmp)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(
+        in_tmp.len(),
+        1,
+        "only the squatter's file in TMPDIR: {in_tmp:?}"
+    );
+    drop(squatted);
+}
+
+#[test]
 fn kill_9_mid_451_leaves_the_run_interrupted_and_restarts_idle() {
     let Some(py) = python() else { return };
     let programs = [(451, "451-check.h")];
@@ -407,7 +523,7 @@ fn kill_9_mid_451_leaves_the_run_interrupted_and_restarts_idle() {
     serve.child.wait().unwrap();
     let dir = serve.dir.clone();
     drop(serve);
-    let serve = Serve::start_in(dir, "kill9", "demo-sphere.toml", &programs, plc, None);
+    let serve = Serve::start_in(dir, "kill9", "demo-sphere.toml", &programs, plc, &[]);
     let st = serve.plc(&py, &["state"]);
     assert_eq!(st["state"], 0, "idle after the restart, never done: {st}");
     let h = serve.history();
@@ -512,7 +628,10 @@ fn systemd_sees_ready_watchdog_and_status() {
         "tilted-plane.toml",
         &[(431, "431-plane.h")],
         "",
-        Some(&socket),
+        &[
+            ("NOTIFY_SOCKET", socket.as_os_str()),
+            ("WATCHDOG_USEC", OsStr::new("200000")),
+        ],
     );
     let mut seen = String::new();
     let mut buf = [0u8; 512];

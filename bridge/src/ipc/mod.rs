@@ -30,6 +30,7 @@ mod identify;
 mod payload;
 mod process_watch;
 mod publisher;
+mod runtime_dir;
 mod service_lock;
 mod subscriber;
 
@@ -41,6 +42,9 @@ pub use payload::{
     REQUEST_MAX_RUNS, REQUEST_PARAMS,
 };
 pub use publisher::{ContactPublisher, PublisherStats};
+pub use runtime_dir::{
+    iceoryx_config, iceoryx_root_in, lock_dir, unit_runtime_dir, RUNTIME_DIRECTORY,
+};
 pub use service_lock::{ServiceLock, ServiceLockError, ServiceLockErrorKind};
 pub use subscriber::ContactSubscriber;
 
@@ -173,12 +177,15 @@ impl IpcError {
     }
 }
 
-/// Creates a node. Signal handling is left to the application: iceoryx2 would otherwise
-/// install SIGINT/SIGTERM handlers for the whole process.
+/// Creates a node, under the root of [`iceoryx_config`]. Signal handling is left to the
+/// application: iceoryx2 would otherwise install SIGINT/SIGTERM handlers for the whole
+/// process.
 pub fn create_node(name: &str) -> Result<Node<Svc>, IpcError> {
     let name = NodeName::new(name).map_err(|e| IpcError::iox("node name", e))?;
+    let config = iceoryx_config().map_err(|e| IpcError::iox("configuration", e))?;
     NodeBuilder::new()
         .name(&name)
+        .config(config)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<Svc>()
         .map_err(|e| IpcError::iox("create node", e))
@@ -273,7 +280,8 @@ pub struct CleanupReport {
 pub fn remove_stale_resources(timeout: Duration) -> Result<CleanupReport, IpcError> {
     let mut dead = Vec::new();
     let mut report = CleanupReport::default();
-    Node::<Svc>::list(Config::global_config(), |state| {
+    let config = iceoryx_config().map_err(|e| IpcError::iox("configuration", e))?;
+    Node::<Svc>::list(config, |state| {
         match state {
             NodeState::Dead(view) => dead.push(view),
             NodeState::Alive(_) => {}

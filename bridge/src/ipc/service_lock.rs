@@ -1,7 +1,8 @@
 //! One bridge per service prefix. Two sessions on one `--service` would publish their
 //! contacts into one stream and share one estimator, which ends with the first of them;
 //! the second session is refused at once instead. The claim is an exclusive `flock` on
-//! a lock file named after the prefix in the temporary folder: the kernel drops it when
+//! a lock file named after the prefix in [`super::lock_dir`] (the unit's runtime folder
+//! under systemd, else the temporary folder): the kernel drops it when
 //! the holder exits in any way (SIGKILL included), so a crashed bridge never blocks the
 //! next one, and two bridges starting at the same instant cannot both win.
 
@@ -53,7 +54,7 @@ pub enum ServiceLockErrorKind {
 impl ServiceLock {
     /// Claims `prefix` for this process, or says who holds it.
     pub fn acquire(prefix: &str) -> Result<Self, ServiceLockError> {
-        Self::acquire_in(&std::env::temp_dir(), prefix)
+        Self::acquire_in(&super::lock_dir(), prefix)
     }
 
     /// [`ServiceLock::acquire`] with the lock file in `dir`.

@@ -1,7 +1,8 @@
 //! `probebridge serve`: the gateway service. It brings the machine up once, keeps the
 //! estimator process running, and runs measurements the PLC or HMI asks for over its
-//! Modbus TCP face, one at a time. SIGTERM/SIGINT abort a running measurement (the
-//! axes stop, the run ends "aborted") and the service exits 0.
+//! Modbus TCP face, one at a time. SIGTERM, SIGINT or SIGHUP abort a running
+//! measurement (the axes stop, the run ends "aborted") and the service exits 0; a
+//! second one during a slow stop exits at once (128 + signal), as `run` does.
 
 pub mod config;
 pub mod gateway;
@@ -14,30 +15,59 @@ pub mod sd_notify;
 
 use config::GatewayConfig;
 use gateway::{lock, Core, ToMachine};
+use hal::AbortFlag;
 use handshake::{AbortReason, Handshake, State};
 use register_map::RegisterMap;
 use std::io::Write;
 use std::path::Path;
 use std::sync::atomic::{AtomicI32, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 /// The signal that asked the service to stop (0: none).
 static STOP_SIGNAL: AtomicI32 = AtomicI32::new(0);
+/// The gateway's stop request, for the handler: a second signal brakes before it exits.
+static ABORT: OnceLock<AbortFlag> = OnceLock::new();
+
+/// The signals that stop the service: SIGHUP too (a closed terminal, a stray
+/// `kill -HUP`), so it never ends with the axes moving and the run left `running`.
+const SIGNALS: [libc::c_int; 3] = [libc::SIGTERM, libc::SIGINT, libc::SIGHUP];
 
 extern "C" fn on_signal(sig: libc::c_int) {
-    STOP_SIGNAL.store(sig, Ordering::Release);
+    if STOP_SIGNAL
+        .compare_exchange(0, sig, Ordering::AcqRel, Ordering::Acquire)
+        .is_err()
+    {
+        // The second signal during a slow stop: someone insists. The first one has
+        // asked the machine to brake; raise that again (in case the service loop has
+        // not seen the first yet: an atomic store; OnceLock::get is an atomic load
+        // once set) and exit now.
+        if let Some(flag) = ABORT.get() {
+            flag.raise();
+        }
+        // SAFETY: _exit is async-signal-safe.
+        unsafe { libc::_exit(128 + sig) };
+    }
 }
 
 fn install_signal_handlers() {
-    for sig in [libc::SIGTERM, libc::SIGINT] {
-        // SAFETY: the handler only stores into an atomic (async-signal-safe).
+    for sig in SIGNALS {
+        // SAFETY: the handler only touches atomics and calls _exit (async-signal-safe).
         unsafe {
             let mut act: libc::sigaction = std::mem::zeroed();
             act.sa_sigaction = on_signal as extern "C" fn(libc::c_int) as usize;
             libc::sigemptyset(&mut act.sa_mask);
             libc::sigaction(sig, &act, std::ptr::null_mut());
         }
+    }
+}
+
+fn signal_name(sig: i32) -> &'static str {
+    match sig {
+        libc::SIGTERM => "SIGTERM",
+        libc::SIGINT => "SIGINT",
+        libc::SIGHUP => "SIGHUP",
+        _ => "a signal",
     }
 }
 
@@ -53,7 +83,7 @@ fn init_logging() {
 
 const TICK: Duration = Duration::from_millis(50);
 
-/// Runs the service until SIGTERM/SIGINT. Exit status 0 after a clean stop.
+/// Runs the service until SIGTERM, SIGINT or SIGHUP. Exit status 0 after a clean stop.
 pub fn run(config_path: &Path) -> Result<u8, String> {
     let cfg = GatewayConfig::load(config_path).map_err(|e| e.to_string())?;
     init_logging();
@@ -75,6 +105,7 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
         cycles.clone(),
         jobs_tx.clone(),
     );
+    let _ = ABORT.set(core.abort_flag());
     let shared = Arc::new(Mutex::new(core));
     let (ready_tx, ready_rx) = std::sync::mpsc::channel();
     let machine = {
@@ -112,7 +143,11 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     ));
 
     let signal = supervise(&shared, &notifier);
-    tracing::info!(signal, "stopping");
+    tracing::info!(
+        signal,
+        "stopping on {}: aborting a running measurement, closing the machine",
+        signal_name(signal)
+    );
     notifier.notify("STOPPING=1\nSTATUS=stopping");
     {
         let mut core = lock(&shared);
