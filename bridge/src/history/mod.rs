@@ -4,16 +4,41 @@
 //! many gateways report into ([`postgres`]): the same tables in both. A run is recorded
 //! as "running" before the first move and completed in one transaction at its end, so
 //! a gateway killed mid-run leaves the run visible as "running", never half-written
-//! results.
+//! results. The gateway reaches its history through a [`recorder::Recorder`]: a thread
+//! of its own with bounded waits, and a [`spool`] for ends of runs the history could not
+//! take when they happened.
 
 pub mod postgres;
+pub mod recorder;
+pub mod spool;
 pub mod sqlite;
 pub mod time;
 pub mod trend;
 
 use cycles::results::ProgramReport;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// How long the history may take: the connection (PostgreSQL), each statement or
+/// transaction (SQLite: the wait for another process's lock), and the TCP keepalive
+/// (PostgreSQL: idle time before the first probe).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Timeouts {
+    pub connect: Duration,
+    pub statement: Duration,
+    pub keepalive: Duration,
+}
+
+impl Default for Timeouts {
+    fn default() -> Self {
+        Self {
+            connect: Duration::from_secs(3),
+            statement: Duration::from_secs(2),
+            keepalive: Duration::from_secs(10),
+        }
+    }
+}
 
 #[derive(Debug, thiserror::Error)]
 #[error("history {target}: {message}")]
@@ -73,17 +98,26 @@ fn redact(url: &str) -> String {
     }
 }
 
+/// How a backend's error begins when the run to complete is not in the history.
+const NO_RUN: &str = "there is no run";
+
 /// What a backend keeps: the same operations on SQLite and PostgreSQL.
 trait Store: Send {
-    fn begin(&mut self, run: &RunStart, now: &str) -> Result<i64, String>;
+    fn begin(&mut self, run: &NewRun, now: &str) -> Result<i64, String>;
+    /// Completes run `id` in one transaction, if it is still `running` (or was marked
+    /// `interrupted`): a run already completed is left alone, so that an end recorded
+    /// twice (a retry, a replayed spool) makes one row. Errs when there is no run `id`.
     fn finish(&mut self, id: i64, rows: &Rows) -> Result<(), String>;
+    /// Removes run `id` and its rows: begun for a start that was refused after all.
+    fn discard(&mut self, id: i64) -> Result<(), String>;
     fn list(&mut self, filter: &Filter) -> Result<Vec<RunRow>, String>;
     fn close_interrupted(&mut self, machine: &str) -> Result<usize, String>;
     fn count(&mut self) -> Result<i64, String>;
 }
 
-/// The end of a run as rows, the same for every backend.
-struct Rows {
+/// The end of a run as rows, the same for every backend (and in the spool).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Rows {
     finished: String,
     status: String,
     message: Option<String>,
@@ -161,7 +195,33 @@ pub struct RunStart<'a> {
     pub parameters: &'a [f64],
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize)]
+/// A run as it is begun (owned, for the recorder's thread).
+#[derive(Clone, Debug, PartialEq)]
+pub struct NewRun {
+    pub machine: String,
+    pub source: String,
+    pub request_seq: Option<u16>,
+    pub program_number: Option<u16>,
+    pub program: PathBuf,
+    pub max_modification: Option<f64>,
+    pub parameters: Vec<f64>,
+}
+
+impl From<&RunStart<'_>> for NewRun {
+    fn from(r: &RunStart<'_>) -> Self {
+        Self {
+            machine: r.machine.to_string(),
+            source: r.source.to_string(),
+            request_seq: r.request_seq,
+            program_number: r.program_number,
+            program: r.program.to_path_buf(),
+            max_modification: r.max_modification,
+            parameters: r.parameters.to_vec(),
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ResultRow {
     pub block: u32,
     pub cycle: u16,
@@ -169,7 +229,7 @@ pub struct ResultRow {
     pub value: f64,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct IsoErrorRow {
     pub block: u32,
     pub name: String,
@@ -177,7 +237,7 @@ pub struct IsoErrorRow {
     pub after: f64,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DispersionRow {
     pub block: u32,
     pub axis: String,
@@ -222,12 +282,17 @@ pub struct History {
 impl History {
     /// Opens (and creates the tables of) the history at `target`.
     pub fn open(target: &HistoryTarget) -> Result<Self, HistoryError> {
+        Self::open_with(target, &Timeouts::default())
+    }
+
+    /// As [`History::open`], within `timeouts`.
+    pub fn open_with(target: &HistoryTarget, timeouts: &Timeouts) -> Result<Self, HistoryError> {
         let store: Result<Box<dyn Store>, String> = match target {
             HistoryTarget::Sqlite(path) => {
-                sqlite::SqliteStore::open(path).map(|s| Box::new(s) as Box<dyn Store>)
+                sqlite::SqliteStore::open(path, timeouts).map(|s| Box::new(s) as Box<dyn Store>)
             }
             HistoryTarget::Postgres(url) => {
-                postgres::PgStore::open(url).map(|s| Box::new(s) as Box<dyn Store>)
+                postgres::PgStore::open(url, timeouts).map(|s| Box::new(s) as Box<dyn Store>)
             }
         };
         let store = store.map_err(|message| HistoryError {
@@ -253,9 +318,21 @@ impl History {
 
     /// Records a run as "running" before it moves; its id.
     pub fn begin(&mut self, run: &RunStart) -> Result<i64, HistoryError> {
+        self.begin_new(&NewRun::from(run))
+    }
+
+    fn begin_new(&mut self, run: &NewRun) -> Result<i64, HistoryError> {
         self.store
             .begin(run, &time::now_utc())
             .map_err(|e| self.err(e))
+    }
+
+    fn finish_rows(&mut self, id: i64, rows: &Rows) -> Result<(), HistoryError> {
+        self.store.finish(id, rows).map_err(|e| self.err(e))
+    }
+
+    fn discard(&mut self, id: i64) -> Result<(), HistoryError> {
+        self.store.discard(id).map_err(|e| self.err(e))
     }
 
     /// Completes run `id`: status ("done", "error", "aborted"), every result, in one
@@ -266,8 +343,7 @@ impl History {
         status: &str,
         report: &ProgramReport,
     ) -> Result<(), HistoryError> {
-        let rows = Rows::of(status, report);
-        self.store.finish(id, &rows).map_err(|e| self.err(e))
+        self.finish_rows(id, &Rows::of(status, report))
     }
 
     pub fn list(&mut self, filter: &Filter) -> Result<Vec<RunRow>, HistoryError> {

@@ -1,9 +1,16 @@
 //! The history on a central PostgreSQL server, for a factory whose gateways report into
 //! one place: the same tables and columns as the SQLite file, with PostgreSQL's types.
 //! Each gateway only ever closes its own machine's interrupted runs.
+//!
+//! Every call is bounded on the client's side: a server that stops answering (paused,
+//! a network that drops packets) cannot hold the caller longer than the connect or
+//! statement timeout, whatever the kernel's TCP timers say. A connection that timed
+//! out is dropped; the caller opens a new one.
 
-use super::{DispersionRow, Filter, IsoErrorRow, ResultRow, Rows, RunRow, RunStart, Store};
-use postgres::{Client, NoTls};
+use super::{DispersionRow, Filter, IsoErrorRow, NewRun, ResultRow, Rows, RunRow, Store, Timeouts};
+use std::future::Future;
+use std::time::Duration;
+use tokio_postgres::{Client, NoTls};
 
 const SCHEMA: &str = "
 CREATE TABLE IF NOT EXISTS runs (
@@ -56,9 +63,28 @@ const SCHEMA_LOCK: i64 = 0x7072_6f62_6562_7231;
 
 pub struct PgStore {
     client: Client,
+    /// Drives the connection while a call waits (current thread: only then).
+    rt: tokio::runtime::Runtime,
+    statement: Duration,
 }
 
-fn text(e: postgres::Error) -> String {
+/// `f` within `limit`, or an error saying so.
+fn within<T>(
+    rt: &tokio::runtime::Runtime,
+    limit: Duration,
+    what: &str,
+    f: impl Future<Output = Result<T, tokio_postgres::Error>>,
+) -> Result<T, String> {
+    match rt.block_on(async { tokio::time::timeout(limit, f).await }) {
+        Ok(r) => r.map_err(text),
+        Err(_) => Err(format!(
+            "no answer from the server within {} ms ({what})",
+            limit.as_millis()
+        )),
+    }
+}
+
+fn text(e: tokio_postgres::Error) -> String {
     // The server's own message (e.g. "password authentication failed"), not only
     // "db error".
     match e.as_db_error() {
@@ -72,24 +98,55 @@ fn u16_of(v: Option<i32>) -> Option<u16> {
 }
 
 impl PgStore {
-    /// Connects to `url` (`postgres://user:password@host:port/database`; no TLS).
-    pub fn open(url: &str) -> Result<Self, String> {
-        let mut client = Client::connect(url, NoTls).map_err(text)?;
-        let mut tx = client.transaction().map_err(text)?;
-        tx.execute("SELECT pg_advisory_xact_lock($1)", &[&SCHEMA_LOCK])
-            .map_err(text)?;
-        tx.batch_execute(SCHEMA).map_err(text)?;
-        tx.commit().map_err(text)?;
-        Ok(Self { client })
+    /// Connects to `url` (`postgres://user:password@host:port/database`; no TLS) with
+    /// TCP keepalive, within `timeouts.connect`; every later call is bounded by
+    /// `timeouts.statement` (also the server's `statement_timeout`).
+    pub fn open(url: &str, timeouts: &Timeouts) -> Result<Self, String> {
+        let mut cfg: tokio_postgres::Config = url.parse().map_err(text)?;
+        let keepalive = timeouts.keepalive;
+        cfg.connect_timeout(timeouts.connect)
+            .keepalives(true)
+            .keepalives_idle(keepalive)
+            .keepalives_interval((keepalive / 3).max(Duration::from_secs(1)))
+            .keepalives_retries(3)
+            .tcp_user_timeout(keepalive)
+            .options(format!(
+                "-c statement_timeout={}",
+                timeouts.statement.as_millis()
+            ));
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .map_err(|e| format!("cannot start the client's runtime: {e}"))?;
+        let (mut client, connection) =
+            within(&rt, timeouts.connect, "connecting", cfg.connect(NoTls))?;
+        rt.spawn(async move {
+            if let Err(e) = connection.await {
+                tracing::debug!("history connection ended: {e}");
+            }
+        });
+        let statement = timeouts.statement;
+        within(&rt, statement, "creating the tables", async {
+            let tx = client.transaction().await?;
+            tx.execute("SELECT pg_advisory_xact_lock($1)", &[&SCHEMA_LOCK])
+                .await?;
+            tx.batch_execute(SCHEMA).await?;
+            tx.commit().await
+        })?;
+        Ok(Self {
+            client,
+            rt,
+            statement,
+        })
     }
 
-    fn details(&mut self, run: &mut RunRow) -> Result<(), postgres::Error> {
-        run.results = self
-            .client
+    async fn details(client: &Client, run: &mut RunRow) -> Result<(), tokio_postgres::Error> {
+        run.results = client
             .query(
                 "SELECT block, cycle, name, value FROM results WHERE run_id = $1 ORDER BY position, name",
                 &[&run.id],
-            )?
+            )
+            .await?
             .iter()
             .map(|r| ResultRow {
                 block: r.get::<_, i64>(0) as u32,
@@ -98,12 +155,12 @@ impl PgStore {
                 value: r.get(3),
             })
             .collect();
-        run.iso_errors = self
-            .client
+        run.iso_errors = client
             .query(
                 "SELECT block, name, before, after FROM iso_errors WHERE run_id = $1 ORDER BY block, name",
                 &[&run.id],
-            )?
+            )
+            .await?
             .iter()
             .map(|r| IsoErrorRow {
                 block: r.get::<_, i64>(0) as u32,
@@ -112,12 +169,12 @@ impl PgStore {
                 after: r.get(3),
             })
             .collect();
-        run.dispersion = self
-            .client
+        run.dispersion = client
             .query(
                 "SELECT block, axis, before, after FROM axis_dispersion WHERE run_id = $1 ORDER BY block, axis",
                 &[&run.id],
-            )?
+            )
+            .await?
             .iter()
             .map(|r| DispersionRow {
                 block: r.get::<_, i64>(0) as u32,
@@ -126,12 +183,12 @@ impl PgStore {
                 after: r.get(3),
             })
             .collect();
-        run.parameters = self
-            .client
+        run.parameters = client
             .query(
                 "SELECT value FROM parameters WHERE run_id = $1 ORDER BY number",
                 &[&run.id],
-            )?
+            )
+            .await?
             .iter()
             .map(|r| r.get(0))
             .collect();
@@ -140,116 +197,178 @@ impl PgStore {
 }
 
 impl Store for PgStore {
-    fn begin(&mut self, run: &RunStart, now: &str) -> Result<i64, String> {
-        let mut tx = self.client.transaction().map_err(text)?;
-        let row = tx
-            .query_one(
-                "INSERT INTO runs (started, machine, source, request_seq, program_number, program, status, max_modification)
-                 VALUES ($1, $2, $3, $4, $5, $6, 'running', $7) RETURNING id",
-                &[
-                    &now,
-                    &run.machine,
-                    &run.source,
-                    &run.request_seq.map(i32::from),
-                    &run.program_number.map(i32::from),
-                    &run.program.display().to_string(),
-                    &run.max_modification,
-                ],
-            )
-            .map_err(text)?;
-        let id: i64 = row.get(0);
-        for (i, v) in run.parameters.iter().enumerate() {
-            tx.execute(
-                "INSERT INTO parameters (run_id, number, value) VALUES ($1, $2, $3)",
-                &[&id, &(i as i32 + 1), v],
-            )
-            .map_err(text)?;
-        }
-        tx.commit().map_err(text)?;
-        Ok(id)
+    fn begin(&mut self, run: &NewRun, now: &str) -> Result<i64, String> {
+        let client = &mut self.client;
+        within(&self.rt, self.statement, "recording the start", async {
+            let tx = client.transaction().await?;
+            let row = tx
+                .query_one(
+                    "INSERT INTO runs (started, machine, source, request_seq, program_number, program, status, max_modification)
+                     VALUES ($1, $2, $3, $4, $5, $6, 'running', $7) RETURNING id",
+                    &[
+                        &now,
+                        &run.machine,
+                        &run.source,
+                        &run.request_seq.map(i32::from),
+                        &run.program_number.map(i32::from),
+                        &run.program.display().to_string(),
+                        &run.max_modification,
+                    ],
+                )
+                .await?;
+            let id: i64 = row.get(0);
+            for (i, v) in run.parameters.iter().enumerate() {
+                tx.execute(
+                    "INSERT INTO parameters (run_id, number, value) VALUES ($1, $2, $3)",
+                    &[&id, &(i as i32 + 1), v],
+                )
+                .await?;
+            }
+            tx.commit().await?;
+            Ok(id)
+        })
     }
 
     fn finish(&mut self, id: i64, rows: &Rows) -> Result<(), String> {
-        let mut tx = self.client.transaction().map_err(text)?;
-        tx.execute(
-            "UPDATE runs SET finished = $1, status = $2, message = $3, protocols = $4 WHERE id = $5",
-            &[&rows.finished, &rows.status, &rows.message, &rows.protocols, &id],
+        let client = &mut self.client;
+        let known = within(&self.rt, self.statement, "recording the end", async {
+            let tx = client.transaction().await?;
+            let updated = tx
+                .execute(
+                    "UPDATE runs SET finished = $1, status = $2, message = $3, protocols = $4
+                     WHERE id = $5 AND status IN ('running', 'interrupted')",
+                    &[
+                        &rows.finished,
+                        &rows.status,
+                        &rows.message,
+                        &rows.protocols,
+                        &id,
+                    ],
+                )
+                .await?;
+            if updated == 0 {
+                // Completed already (a retry, a replay), or unknown.
+                let n: i64 = tx
+                    .query_one("SELECT COUNT(*) FROM runs WHERE id = $1", &[&id])
+                    .await?
+                    .get(0);
+                return Ok(n == 1);
+            }
+            for (position, r) in &rows.results {
+                tx.execute(
+                    "INSERT INTO results (run_id, position, block, cycle, name, value) VALUES ($1, $2, $3, $4, $5, $6)",
+                    &[&id, &(*position as i32), &i64::from(r.block), &i32::from(r.cycle), &r.name, &r.value],
+                )
+                .await?;
+            }
+            for e in &rows.iso_errors {
+                tx.execute(
+                    "INSERT INTO iso_errors (run_id, block, name, before, after) VALUES ($1, $2, $3, $4, $5)",
+                    &[&id, &i64::from(e.block), &e.name, &e.before, &e.after],
+                )
+                .await?;
+            }
+            for d in &rows.dispersion {
+                tx.execute(
+                    "INSERT INTO axis_dispersion (run_id, block, axis, before, after) VALUES ($1, $2, $3, $4, $5)",
+                    &[&id, &i64::from(d.block), &d.axis, &d.before, &d.after],
+                )
+                .await?;
+            }
+            tx.commit().await?;
+            Ok(true)
+        })?;
+        if known {
+            Ok(())
+        } else {
+            Err(format!("{} {id} to complete", super::NO_RUN))
+        }
+    }
+
+    fn discard(&mut self, id: i64) -> Result<(), String> {
+        let client = &mut self.client;
+        within(
+            &self.rt,
+            self.statement,
+            "removing a refused start",
+            async {
+                let tx = client.transaction().await?;
+                for table in ["parameters", "results", "iso_errors", "axis_dispersion"] {
+                    tx.execute(
+                        format!("DELETE FROM {table} WHERE run_id = $1").as_str(),
+                        &[&id],
+                    )
+                    .await?;
+                }
+                tx.execute("DELETE FROM runs WHERE id = $1", &[&id]).await?;
+                tx.commit().await
+            },
         )
-        .map_err(text)?;
-        for (position, r) in &rows.results {
-            tx.execute(
-                "INSERT INTO results (run_id, position, block, cycle, name, value) VALUES ($1, $2, $3, $4, $5, $6)",
-                &[&id, &(*position as i32), &i64::from(r.block), &i32::from(r.cycle), &r.name, &r.value],
-            )
-            .map_err(text)?;
-        }
-        for e in &rows.iso_errors {
-            tx.execute(
-                "INSERT INTO iso_errors (run_id, block, name, before, after) VALUES ($1, $2, $3, $4, $5)",
-                &[&id, &i64::from(e.block), &e.name, &e.before, &e.after],
-            )
-            .map_err(text)?;
-        }
-        for d in &rows.dispersion {
-            tx.execute(
-                "INSERT INTO axis_dispersion (run_id, block, axis, before, after) VALUES ($1, $2, $3, $4, $5)",
-                &[&id, &i64::from(d.block), &d.axis, &d.before, &d.after],
-            )
-            .map_err(text)?;
-        }
-        tx.commit().map_err(text)
     }
 
     fn list(&mut self, filter: &Filter) -> Result<Vec<RunRow>, String> {
-        let rows = self
-            .client
-            .query(
-                "SELECT id, started, finished, machine, source, request_seq, program_number, program, status, message, protocols, max_modification
-                 FROM runs WHERE ($1::TEXT IS NULL OR machine = $1) AND ($2::TEXT IS NULL OR started >= $2) ORDER BY started, id",
-                &[&filter.machine, &filter.since],
-            )
-            .map_err(text)?;
-        let mut runs = Vec::new();
-        for r in rows {
-            let protocols: String = r.get(10);
-            let mut run = RunRow {
-                id: r.get(0),
-                started: r.get(1),
-                finished: r.get(2),
-                machine: r.get(3),
-                source: r.get(4),
-                request_seq: u16_of(r.get(5)),
-                program_number: u16_of(r.get(6)),
-                program: r.get(7),
-                status: r.get(8),
-                message: r.get(9),
-                protocols: serde_json::from_str(&protocols).unwrap_or_default(),
-                results: Vec::new(),
-                iso_errors: Vec::new(),
-                max_modification: r.get(11),
-                dispersion: Vec::new(),
-                parameters: Vec::new(),
-            };
-            self.details(&mut run).map_err(text)?;
-            runs.push(run);
-        }
-        Ok(runs)
+        let client = &self.client;
+        within(&self.rt, self.statement, "listing", async {
+            let rows = client
+                .query(
+                    "SELECT id, started, finished, machine, source, request_seq, program_number, program, status, message, protocols, max_modification
+                     FROM runs WHERE ($1::TEXT IS NULL OR machine = $1) AND ($2::TEXT IS NULL OR started >= $2) ORDER BY started, id",
+                    &[&filter.machine, &filter.since],
+                )
+                .await?;
+            let mut runs = Vec::new();
+            for r in rows {
+                let protocols: String = r.get(10);
+                let mut run = RunRow {
+                    id: r.get(0),
+                    started: r.get(1),
+                    finished: r.get(2),
+                    machine: r.get(3),
+                    source: r.get(4),
+                    request_seq: u16_of(r.get(5)),
+                    program_number: u16_of(r.get(6)),
+                    program: r.get(7),
+                    status: r.get(8),
+                    message: r.get(9),
+                    protocols: serde_json::from_str(&protocols).unwrap_or_default(),
+                    results: Vec::new(),
+                    iso_errors: Vec::new(),
+                    max_modification: r.get(11),
+                    dispersion: Vec::new(),
+                    parameters: Vec::new(),
+                };
+                Self::details(client, &mut run).await?;
+                runs.push(run);
+            }
+            Ok(runs)
+        })
     }
 
     fn close_interrupted(&mut self, machine: &str) -> Result<usize, String> {
-        self.client
-            .execute(
-                "UPDATE runs SET status = 'interrupted' WHERE status = 'running' AND machine = $1",
-                &[&machine],
-            )
-            .map(|n| n as usize)
-            .map_err(text)
+        let client = &self.client;
+        within(
+            &self.rt,
+            self.statement,
+            "closing interrupted runs",
+            async {
+                client
+                .execute(
+                    "UPDATE runs SET status = 'interrupted' WHERE status = 'running' AND machine = $1",
+                    &[&machine],
+                )
+                .await
+                .map(|n| n as usize)
+            },
+        )
     }
 
     fn count(&mut self) -> Result<i64, String> {
-        self.client
-            .query_one("SELECT COUNT(*) FROM runs", &[])
-            .map(|r| r.get(0))
-            .map_err(text)
+        let client = &self.client;
+        within(&self.rt, self.statement, "counting", async {
+            Ok(client
+                .query_one("SELECT COUNT(*) FROM runs", &[])
+                .await?
+                .get(0))
+        })
     }
 }

@@ -2,7 +2,7 @@
 //! reader (`probebridge history`) never blocks the gateway's writes, and a crash
 //! leaves the last committed transaction.
 
-use super::{DispersionRow, Filter, IsoErrorRow, ResultRow, Rows, RunRow, RunStart, Store};
+use super::{DispersionRow, Filter, IsoErrorRow, NewRun, ResultRow, Rows, RunRow, Store, Timeouts};
 use rusqlite::{params, Connection};
 use std::path::Path;
 
@@ -60,10 +60,11 @@ fn text(e: rusqlite::Error) -> String {
 }
 
 impl SqliteStore {
-    pub fn open(path: &Path) -> Result<Self, String> {
+    /// Opens the file; a lock another process holds is waited for at most
+    /// `timeouts.statement`.
+    pub fn open(path: &Path, timeouts: &Timeouts) -> Result<Self, String> {
         let conn = Connection::open(path).map_err(text)?;
-        conn.busy_timeout(std::time::Duration::from_secs(5))
-            .map_err(text)?;
+        conn.busy_timeout(timeouts.statement).map_err(text)?;
         conn.pragma_update(None, "journal_mode", "WAL")
             .map_err(text)?;
         conn.execute_batch(SCHEMA).map_err(text)?;
@@ -163,7 +164,7 @@ impl SqliteStore {
 }
 
 impl Store for SqliteStore {
-    fn begin(&mut self, run: &RunStart, now: &str) -> Result<i64, String> {
+    fn begin(&mut self, run: &NewRun, now: &str) -> Result<i64, String> {
         let tx = self.conn.transaction().map_err(text)?;
         tx.execute(
                 "INSERT INTO runs (started, machine, source, request_seq, program_number, program, status, max_modification)
@@ -193,11 +194,26 @@ impl Store for SqliteStore {
 
     fn finish(&mut self, id: i64, rows: &Rows) -> Result<(), String> {
         let tx = self.conn.transaction().map_err(text)?;
-        tx.execute(
-            "UPDATE runs SET finished = ?1, status = ?2, message = ?3, protocols = ?4 WHERE id = ?5",
-            params![rows.finished, rows.status, rows.message, rows.protocols, id],
-        )
-        .map_err(text)?;
+        let updated = tx
+            .execute(
+                "UPDATE runs SET finished = ?1, status = ?2, message = ?3, protocols = ?4
+                 WHERE id = ?5 AND status IN ('running', 'interrupted')",
+                params![rows.finished, rows.status, rows.message, rows.protocols, id],
+            )
+            .map_err(text)?;
+        if updated == 0 {
+            let known: i64 = tx
+                .query_row("SELECT COUNT(*) FROM runs WHERE id = ?1", [id], |r| {
+                    r.get(0)
+                })
+                .map_err(text)?;
+            // Completed already (a retry, a replay): nothing more to write.
+            return if known == 1 {
+                Ok(())
+            } else {
+                Err(format!("{} {id} to complete", super::NO_RUN))
+            };
+        }
         for (position, r) in &rows.results {
             tx.execute(
                 "INSERT INTO results (run_id, position, block, cycle, name, value) VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
@@ -219,6 +235,17 @@ impl Store for SqliteStore {
             )
             .map_err(text)?;
         }
+        tx.commit().map_err(text)
+    }
+
+    fn discard(&mut self, id: i64) -> Result<(), String> {
+        let tx = self.conn.transaction().map_err(text)?;
+        for table in ["parameters", "results", "iso_errors", "axis_dispersion"] {
+            tx.execute(&format!("DELETE FROM {table} WHERE run_id = ?1"), [id])
+                .map_err(text)?;
+        }
+        tx.execute("DELETE FROM runs WHERE id = ?1", [id])
+            .map_err(text)?;
         tx.commit().map_err(text)
     }
 

@@ -36,6 +36,20 @@ pub struct HistorySection {
     /// the same tables, shared by many gateways.
     #[serde(default)]
     pub postgres: Option<String>,
+    /// The spool for ends of runs the history could not take (see
+    /// [`GatewayConfig::spool_path`] for the default).
+    #[serde(default)]
+    pub spool: Option<PathBuf>,
+    /// PostgreSQL: the longest wait for a connection.
+    #[serde(default = "default_connect_timeout_ms")]
+    pub connect_timeout_ms: u64,
+    /// The longest wait for one statement or transaction (SQLite: for another
+    /// process's lock); a start waits this long at most for its `running` row.
+    #[serde(default = "default_statement_timeout_ms")]
+    pub statement_timeout_ms: u64,
+    /// PostgreSQL: TCP keepalive, idle seconds before the first probe.
+    #[serde(default = "default_keepalive_s")]
+    pub keepalive_s: u64,
 }
 
 impl Default for HistorySection {
@@ -44,8 +58,22 @@ impl Default for HistorySection {
             enabled: true,
             sqlite: default_sqlite(),
             postgres: None,
+            spool: None,
+            connect_timeout_ms: default_connect_timeout_ms(),
+            statement_timeout_ms: default_statement_timeout_ms(),
+            keepalive_s: default_keepalive_s(),
         }
     }
+}
+
+fn default_connect_timeout_ms() -> u64 {
+    crate::history::Timeouts::default().connect.as_millis() as u64
+}
+fn default_statement_timeout_ms() -> u64 {
+    crate::history::Timeouts::default().statement.as_millis() as u64
+}
+fn default_keepalive_s() -> u64 {
+    crate::history::Timeouts::default().keepalive.as_secs()
 }
 
 fn default_true() -> bool {
@@ -177,6 +205,7 @@ impl GatewayConfig {
             Some(&mut cfg.programs.folder),
             cfg.programs.out.as_mut(),
             Some(&mut cfg.history.sqlite),
+            cfg.history.spool.as_mut(),
         ]
         .into_iter()
         .flatten()
@@ -243,6 +272,7 @@ impl GatewayConfig {
                 ));
             }
         }
+        self.validate_history()?;
         self.listen()?;
         self.word_order()?;
         let p = &self.plc;
@@ -256,6 +286,74 @@ impl GatewayConfig {
             return Err(self.invalid("plc.int_scale", "must be a number in 1..1e9"));
         }
         Ok(())
+    }
+
+    fn validate_history(&self) -> Result<(), GatewayConfigError> {
+        let h = &self.history;
+        for (key, value, range) in [
+            (
+                "history.connect_timeout_ms",
+                h.connect_timeout_ms,
+                100..=60_000,
+            ),
+            (
+                "history.statement_timeout_ms",
+                h.statement_timeout_ms,
+                100..=10_000,
+            ),
+            ("history.keepalive_s", h.keepalive_s, 1..=3600),
+        ] {
+            if !range.contains(&value) {
+                return Err(self.invalid(
+                    key,
+                    format!("{value} is outside {}..={}", range.start(), range.end()),
+                ));
+            }
+        }
+        if let Some(spool) = &h.spool {
+            let folder = spool.parent().unwrap_or(Path::new("."));
+            if !folder.is_dir() {
+                return Err(self.invalid(
+                    "history.spool",
+                    format!("the folder {} does not exist", folder.display()),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    pub fn history_timeouts(&self) -> crate::history::Timeouts {
+        let h = &self.history;
+        crate::history::Timeouts {
+            connect: Duration::from_millis(h.connect_timeout_ms),
+            statement: Duration::from_millis(h.statement_timeout_ms),
+            keepalive: Duration::from_secs(h.keepalive_s),
+        }
+    }
+
+    /// The spool's file: `[history] spool`; else `$STATE_DIRECTORY/history.spool`
+    /// (systemd's `StateDirectory=`); else beside the SQLite file (`NAME.spool`), or
+    /// for PostgreSQL `$XDG_STATE_HOME/probebridge/history.spool` (default
+    /// `~/.local/state`).
+    pub fn spool_path(&self) -> PathBuf {
+        if let Some(p) = &self.history.spool {
+            return p.clone();
+        }
+        let state = std::env::var_os("STATE_DIRECTORY").filter(|s| !s.is_empty());
+        if let Some(dirs) = state {
+            // systemd lists several as a:b; the first is this unit's own.
+            let first = std::env::split_paths(&dirs).next().unwrap_or_default();
+            return first.join("history.spool");
+        }
+        if self.history.postgres.is_none() {
+            return self.history.sqlite.with_extension("spool");
+        }
+        let xdg = std::env::var_os("XDG_STATE_HOME")
+            .filter(|s| !s.is_empty())
+            .map(PathBuf::from)
+            .or_else(|| std::env::var_os("HOME").map(|h| Path::new(&h).join(".local/state")))
+            .unwrap_or_else(|| PathBuf::from("/var/lib"));
+        xdg.join("probebridge").join("history.spool")
     }
 
     pub fn listen(&self) -> Result<SocketAddr, GatewayConfigError> {
@@ -358,6 +456,34 @@ mod tests {
             HistoryTarget::Postgres(url.into()).display(),
             "postgres://gw:***@db.factory:5432/history"
         );
+    }
+
+    #[test]
+    fn history_timeouts_and_spool_are_checked_and_the_spool_has_a_home() {
+        let base = "[machine]\nscenario = \"s\"\n[programs]\nfolder = \".\"\n[history]\nsqlite = \"h.sqlite\"\n";
+        let file = std::env::temp_dir().join("gateway.toml");
+        for (extra, key) in [
+            ("statement_timeout_ms = 0\n", "history.statement_timeout_ms"),
+            (
+                "connect_timeout_ms = 999999\n",
+                "history.connect_timeout_ms",
+            ),
+            ("keepalive_s = 0\n", "history.keepalive_s"),
+            ("spool = \"/nonexistent/h.spool\"\n", "history.spool"),
+        ] {
+            let e = GatewayConfig::parse(&format!("{base}{extra}"), &file)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(key), "{e}");
+        }
+        let c =
+            GatewayConfig::parse(&format!("{base}statement_timeout_ms = 750\n"), &file).unwrap();
+        assert_eq!(c.history_timeouts().statement, Duration::from_millis(750));
+        if std::env::var_os("STATE_DIRECTORY").is_none() {
+            assert_eq!(c.spool_path(), std::env::temp_dir().join("h.spool"));
+        }
+        let c = GatewayConfig::parse(&format!("{base}spool = \"s.spool\"\n"), &file).unwrap();
+        assert_eq!(c.spool_path(), std::env::temp_dir().join("s.spool"));
     }
 
     #[test]

@@ -3,6 +3,8 @@
 
 use super::handshake::{AbortReason, Action, Handshake, Outcome, Refusal, State};
 use super::register_map::{MapException, RegisterMap};
+use crate::history::recorder::Recorder;
+use crate::history::NewRun;
 use cycles::program::{Program, ProgramError};
 use cycles::CyclesConfig;
 use hal::AbortFlag;
@@ -20,6 +22,8 @@ pub struct Job {
     pub confirm: bool,
     /// The request's parameters 1..8, recorded with the run.
     pub params: [f32; super::register_map::REQ_PARAM_COUNT],
+    /// The run's row in the history (written before the start was taken).
+    pub record: Option<i64>,
 }
 
 pub enum ToMachine {
@@ -51,6 +55,8 @@ pub struct Core {
     job_generation: u64,
     owner: Option<u64>,
     heartbeat: u16,
+    /// Where runs are recorded (none: history off).
+    history: Option<Recorder>,
 }
 
 pub type Shared = Arc<Mutex<Core>>;
@@ -78,12 +84,21 @@ impl Core {
             job_generation: 0,
             owner: None,
             heartbeat: 0,
+            history: None,
         };
         c.publish();
         c
     }
 
+    /// Record every run here: a start is taken only once its `running` row is written.
+    pub fn set_history(&mut self, history: Recorder) {
+        self.history = Some(history);
+    }
+
     fn publish(&mut self) {
+        if let Some(h) = &self.history {
+            self.hs.set_not_recorded(h.pending() > 0);
+        }
         self.map.set_state(self.hs.view());
     }
 
@@ -107,10 +122,16 @@ impl Core {
 
     fn on_request(&mut self, now: Instant) {
         let req = self.map.request();
-        let (folder, cfg) = (&self.programs, &self.cycles);
-        let action = self
-            .hs
-            .on_request(&req, now, |n| resolve_program(folder, cfg, n));
+        let (folder, cfg, history) = (&self.programs, &self.cycles, &self.history);
+        let action = self.hs.on_request(&req, now, |n| {
+            let program = resolve_program(folder, cfg, n)?;
+            // The run is in the history as `running` before the start is taken.
+            let record = match history {
+                Some(h) => Some(begin_run(h, cfg, &req, &program)?),
+                None => None,
+            };
+            Ok((program, record))
+        });
         if self.hs.view().reason != 0 && self.hs.view().ack_seq == req.seq && action.is_none() {
             tracing::info!(
                 seq = req.seq,
@@ -122,7 +143,7 @@ impl Core {
         match action {
             Some(Action::Start {
                 seq,
-                program,
+                program: (program, record),
                 confirm,
             }) => {
                 self.job_generation = self.abort.generation();
@@ -140,6 +161,7 @@ impl Core {
                     program,
                     confirm,
                     params: req.params,
+                    record,
                 };
                 if self.jobs.send(ToMachine::Run(Box::new(job))).is_err() {
                     self.hs.finish(
@@ -187,10 +209,12 @@ impl Core {
         self.abort_reason
     }
 
-    /// The periodic tick: gateway heartbeat, PLC heartbeat supervision.
+    /// The periodic tick: gateway heartbeat, PLC heartbeat supervision, the "results
+    /// not yet recorded" bit.
     pub fn tick(&mut self, now: Instant) {
         self.heartbeat = self.heartbeat.wrapping_add(1);
         self.map.set_gateway_heartbeat(self.heartbeat);
+        self.publish();
         if self.hs.heartbeat_lost(now) && self.abort_reason.is_none() {
             tracing::warn!("PLC heartbeat stale while busy: aborting the motion");
             self.request_abort(AbortReason::PlcHeartbeat);
@@ -232,6 +256,29 @@ impl Core {
     pub fn machine_ok(&self) -> bool {
         self.hs.machine_ok()
     }
+}
+
+/// Writes the `running` row of a start; a failure refuses it ("history unavailable").
+fn begin_run(
+    history: &Recorder,
+    cfg: &CyclesConfig,
+    req: &super::register_map::Request,
+    program: &Program,
+) -> Result<i64, Refusal> {
+    history
+        .begin(NewRun {
+            machine: cfg.machine.name.clone(),
+            source: "serve".into(),
+            request_seq: Some(req.seq),
+            program_number: Some(req.program),
+            program: program.path.clone().unwrap_or_default(),
+            max_modification: Some(cfg.parameters.max_modification),
+            parameters: req.params.iter().map(|&p| f64::from(p)).collect(),
+        })
+        .map_err(|e| {
+            tracing::error!(seq = req.seq, "start refused: {e}");
+            Refusal::HistoryUnavailable
+        })
 }
 
 /// Program number NNN is `NNN.h` in the program folder (at least three digits).

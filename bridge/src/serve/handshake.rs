@@ -41,6 +41,8 @@ pub const BIT_DONE: u16 = 1 << 2;
 pub const BIT_ERROR: u16 = 1 << 3;
 pub const BIT_MACHINE_OK: u16 = 1 << 4;
 pub const BIT_RESULTS_VALID: u16 = 1 << 5;
+/// Ends of runs are in the spool, not yet in the history.
+pub const BIT_NOT_RECORDED: u16 = 1 << 6;
 
 /// Why a request was refused (the reason register).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -62,6 +64,8 @@ pub enum Refusal {
     BadRequest = 7,
     /// The machine is not up.
     MachineNotReady = 8,
+    /// The run's `running` row could not be written (nothing moved).
+    HistoryUnavailable = 9,
 }
 
 /// Why a running measurement was aborted (the error kind register).
@@ -104,6 +108,9 @@ impl AbortReason {
 pub const ERROR_KIND_ABORT_REQUEST: u16 = 20;
 pub const ERROR_KIND_PLC_HEARTBEAT: u16 = 21;
 pub const ERROR_KIND_SHUTDOWN: u16 = 22;
+/// The run ended but its end could be kept neither in the history nor in the spool:
+/// its results are not shown.
+pub const ERROR_KIND_NOT_KEPT: u16 = 23;
 /// A cycle failed without a machine error (its own checks, tolerance stop, Q309).
 pub const ERROR_KIND_CYCLE: u16 = 30;
 
@@ -144,6 +151,7 @@ pub struct Handshake {
     view: StateView,
     state: State,
     machine_ok: bool,
+    not_recorded: bool,
     busy_seq: u16,
     plc_heartbeat: u16,
     heartbeat_seen: Instant,
@@ -157,6 +165,7 @@ impl Handshake {
             view: StateView::default(),
             state: State::Idle,
             machine_ok: false,
+            not_recorded: false,
             busy_seq: 0,
             plc_heartbeat: 0,
             heartbeat_seen: now,
@@ -183,6 +192,14 @@ impl Handshake {
         self.refresh_bits();
     }
 
+    /// Whether ends of runs wait in the spool (the "results not yet recorded" bit).
+    pub fn set_not_recorded(&mut self, pending: bool) {
+        if self.not_recorded != pending {
+            self.not_recorded = pending;
+            self.refresh_bits();
+        }
+    }
+
     fn refresh_bits(&mut self) {
         let mut b = 0;
         let s = self.state;
@@ -197,6 +214,9 @@ impl Handshake {
         }
         if self.machine_ok {
             b |= BIT_MACHINE_OK;
+        }
+        if self.not_recorded {
+            b |= BIT_NOT_RECORDED;
         }
         self.view.state = s as u16;
         self.view.bits = b;

@@ -4,9 +4,9 @@
 
 use super::config::GatewayConfig;
 use super::gateway::{lock, Job, Shared, ToMachine};
-use super::handshake::{machine_error_kind, Outcome, ERROR_KIND_CYCLE};
+use super::handshake::{machine_error_kind, Outcome, ERROR_KIND_CYCLE, ERROR_KIND_NOT_KEPT};
 use super::machine_link::MachineLink;
-use crate::history::{History, HistoryTarget, RunStart};
+use crate::history::recorder::{Kept, Recorder};
 use crate::ipc::{EstimatorChild, IpcEstimator};
 use crate::session::Session;
 use cycles::progress::ProgressEvent;
@@ -23,13 +23,15 @@ const ESTIMATOR_TIMEOUT: Duration = Duration::from_secs(10);
 const HEALTH_PERIOD: Duration = Duration::from_millis(500);
 
 /// Runs on its own thread until `Quit` (or the sender goes away). Says on `ready`
-/// whether the machine came up.
+/// whether the machine came up. Ends of runs go to `history` (their starts were
+/// recorded when the PLC's start was taken).
 pub fn run(
     cfg: &GatewayConfig,
     cycles: &CyclesConfig,
     shared: &Shared,
     jobs: &Receiver<ToMachine>,
     ready: &Sender<Result<Vec<String>, String>>,
+    history: Option<&Recorder>,
 ) {
     let mut opts = cfg.machine_options();
     // A move under way brakes on the PLC's abort, a stale heartbeat or SIGTERM.
@@ -38,17 +40,6 @@ pub fn run(
         Ok(s) => s,
         Err(e) => {
             let _ = ready.send(Err(format!("cannot open the machine: {e}")));
-            return;
-        }
-    };
-    let history = cfg
-        .history()
-        .map(|t| open_history(&t, &cycles.machine.name))
-        .transpose();
-    let mut history = match history {
-        Ok(h) => h,
-        Err(e) => {
-            let _ = ready.send(Err(e));
             return;
         }
     };
@@ -65,19 +56,30 @@ pub fn run(
                             cfg,
                             cycles,
                             shared,
-                            history: history.as_mut(),
+                            history,
                         };
                         measure(ctx, session, estimator.as_ref(), &job);
                     }
                     // Lost between the start and here: the run ends at once.
-                    None => lock(shared).finish(
-                        Outcome::Error {
-                            kind: machine_error_kind(hal::ErrorKind::Bus),
-                            code: 0,
-                        },
-                        0,
-                        &BTreeMap::new(),
-                    ),
+                    None => {
+                        if let (Some(h), Some(id)) = (history, job.record) {
+                            let report = ProgramReport {
+                                cycles: Vec::new(),
+                                stopped: Some("the machine was lost before the run began".into()),
+                                aborted: false,
+                                protocols: Vec::new(),
+                            };
+                            let _ = h.finish(id, "error", &report);
+                        }
+                        lock(shared).finish(
+                            Outcome::Error {
+                                kind: machine_error_kind(hal::ErrorKind::Bus),
+                                code: 0,
+                            },
+                            0,
+                            &BTreeMap::new(),
+                        );
+                    }
                 }
                 link.supervise(shared, &opts);
             }
@@ -91,26 +93,11 @@ pub fn run(
     tracing::info!("machine thread: closing the machine");
 }
 
-/// Opens the history; runs of this machine a killed gateway left "running" become
-/// "interrupted".
-fn open_history(target: &HistoryTarget, machine: &str) -> Result<History, String> {
-    let mut h = History::open(target).map_err(|e| e.to_string())?;
-    let n = h.close_interrupted(machine).map_err(|e| e.to_string())?;
-    if n > 0 {
-        tracing::warn!(
-            runs = n,
-            "history: runs interrupted by an earlier stop of the gateway"
-        );
-    }
-    tracing::info!(at = %target.display(), "history");
-    Ok(h)
-}
-
 struct Measure<'a> {
     cfg: &'a GatewayConfig,
     cycles: &'a CyclesConfig,
     shared: &'a Shared,
-    history: Option<&'a mut History>,
+    history: Option<&'a Recorder>,
 }
 
 fn spawn_estimator(service: &str) -> Option<EstimatorChild> {
@@ -153,22 +140,8 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
         cfg,
         cycles,
         shared,
-        mut history,
+        history,
     } = ctx;
-    let program_path = job.program.path.clone().unwrap_or_default();
-    let record = history.as_deref_mut().and_then(|h| {
-        h.begin(&RunStart {
-            machine: &cycles.machine.name,
-            source: "serve",
-            request_seq: Some(job.seq),
-            program_number: Some(job.number),
-            program: &program_path,
-            max_modification: Some(cycles.parameters.max_modification),
-            parameters: &job.params.map(f64::from),
-        })
-        .map_err(|e| tracing::error!("{e}"))
-        .ok()
-    });
     let total = job.program.cycles().count().max(1);
     let (mut started, mut points) = (0usize, 0u16);
     let mut progress = |ev: ProgressEvent| {
@@ -213,7 +186,7 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
     };
     let report = run_program(&job.program, &mut machine, cycles, &mut opts);
     let reason = lock(shared).abort_reason();
-    let outcome = match reason {
+    let mut outcome = match reason {
         Some(r) => Outcome::Aborted(r),
         None if report.completed() => Outcome::Done,
         None => match machine.last_error {
@@ -235,14 +208,29 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
         stopped = report.stopped.as_deref().unwrap_or(""),
         "measurement finished"
     );
-    if let (Some(h), Some(id)) = (history, record) {
+    // The PLC hears of the end only once it is kept: in the history, or in the spool.
+    if let (Some(h), Some(id)) = (history, job.record) {
         let status = match outcome {
             Outcome::Done => "done",
             Outcome::Error { .. } => "error",
             Outcome::Aborted(_) => "aborted",
         };
-        if let Err(e) = h.finish(id, status, &report) {
-            tracing::error!("{e}");
+        match h.finish(id, status, &report) {
+            Kept::Recorded => {}
+            Kept::Spooled => tracing::warn!(
+                seq = job.seq,
+                "results not yet recorded: the end of the run is in the spool"
+            ),
+            Kept::NotKept(e) => {
+                tracing::error!(
+                    seq = job.seq,
+                    "the end of the run could not be kept ({e}): reported as an error, without results"
+                );
+                outcome = Outcome::Error {
+                    kind: ERROR_KIND_NOT_KEPT,
+                    code: 0,
+                };
+            }
         }
     }
     lock(shared).finish(outcome, cycle, &values);

@@ -105,14 +105,29 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
         cycles.clone(),
         jobs_tx.clone(),
     );
+    let history = open_history(&cfg, &cycles)?;
+    let mut core = core;
+    if let Some(h) = &history {
+        core.set_history(h.clone());
+    }
     let _ = ABORT.set(core.abort_flag());
     let shared = Arc::new(Mutex::new(core));
     let (ready_tx, ready_rx) = std::sync::mpsc::channel();
     let machine = {
         let (cfg, cycles, shared) = (cfg.clone(), cycles.clone(), shared.clone());
+        let history = history.clone();
         std::thread::Builder::new()
             .name("probebridge-machine".into())
-            .spawn(move || machine_thread::run(&cfg, &cycles, &shared, &jobs_rx, &ready_tx))
+            .spawn(move || {
+                machine_thread::run(
+                    &cfg,
+                    &cycles,
+                    &shared,
+                    &jobs_rx,
+                    &ready_tx,
+                    history.as_ref(),
+                );
+            })
             .map_err(|e| e.to_string())?
     };
     let notes = match ready_rx.recv() {
@@ -157,8 +172,41 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     let _ = jobs_tx.send(ToMachine::Quit);
     let _ = machine.join();
     drop(face);
+    if let Some(h) = &history {
+        h.stop();
+    }
     tracing::info!(state = lock(&shared).state().name(), "stopped");
     Ok(0)
+}
+
+/// The history of the gateway, opened before the machine (a history that is down is
+/// opened again in the background; starts are refused meanwhile).
+fn open_history(
+    cfg: &GatewayConfig,
+    cycles: &cycles::CyclesConfig,
+) -> Result<Option<crate::history::recorder::Recorder>, String> {
+    let Some(target) = cfg.history() else {
+        return Ok(None);
+    };
+    let spool = cfg.spool_path();
+    if let Some(folder) = spool.parent() {
+        std::fs::create_dir_all(folder).map_err(|e| {
+            format!(
+                "{}: history.spool: cannot make the folder {}: {e}",
+                cfg.path.display(),
+                folder.display()
+            )
+        })?;
+    }
+    let r = crate::history::recorder::Recorder::start(
+        target,
+        cfg.history_timeouts(),
+        &spool,
+        &cycles.machine.name,
+    )
+    .map_err(|e| format!("{}: history.spool: {e}", cfg.path.display()))?;
+    tracing::info!(spool = %spool.display(), "history spool");
+    Ok(Some(r))
 }
 
 /// The service loop: ticks the handshake, keeps systemd's watchdog fed, says the state
