@@ -204,9 +204,20 @@ enum Cmd {
         /// As JSON, with every result.
         #[arg(long)]
         json: bool,
-        /// Write the trend page (451's errors and dispersion over time, SVG) to FILE.
+        /// Write the trend page (451's errors and dispersion over time, SVG) to FILE;
+        /// several machines: FILE is their index, each machine's page beside it
+        /// (FILE-1.html, ...).
         #[arg(long, value_name = "FILE")]
         html: Option<PathBuf>,
+        /// Mark a run whose identified position error or dispersion changed by more
+        /// than this since the previous run, µm (default: the gateway configuration's
+        /// `[history] alarm_um`, else 5).
+        #[arg(long, value_name = "UM")]
+        alarm_um: Option<f64>,
+        /// The same for orientation errors, arcsec (default: `[history] alarm_arcsec`,
+        /// else 10).
+        #[arg(long, value_name = "ARCSEC")]
+        alarm_arcsec: Option<f64>,
     },
     /// Benchmarks.
     #[command(subcommand)]
@@ -313,6 +324,8 @@ fn main() -> ExitCode {
             since,
             json,
             html,
+            alarm_um,
+            alarm_arcsec,
         } => commands::history::run(&commands::history::HistoryArgs {
             db,
             config,
@@ -320,6 +333,8 @@ fn main() -> ExitCode {
             since,
             json,
             html,
+            alarm_um,
+            alarm_arcsec,
         })
         .map(|()| 0),
         Cmd::Serve { config } => probebridge::serve::run(&config),

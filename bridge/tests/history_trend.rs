@@ -7,29 +7,12 @@
 //! (`scripts/install-test-peers` installs Debian's). Skipped with a line saying why
 //! where it is missing, never in CI.
 
+#[path = "common/browser.rs"]
+mod browser;
 mod common;
 
 use common::*;
 use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn chromium() -> Option<PathBuf> {
-    let p = std::env::var_os("PROBEBRIDGE_CHROMIUM")
-        .map_or_else(|| PathBuf::from("chromium"), PathBuf::from);
-    if Command::new(&p)
-        .arg("--version")
-        .output()
-        .is_ok_and(|o| o.status.success())
-    {
-        return Some(p);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "no chromium in CI; scripts/install-test-peers installs it"
-    );
-    eprintln!("SKIPPED: no chromium (run scripts/install-test-peers)");
-    None
-}
 
 /// demo-sphere.toml with the C axis's location errors grown by `i` steps.
 fn drifted_scenario(dir: &Path, i: usize) -> PathBuf {
@@ -98,6 +81,20 @@ fn five_drifting_451_runs_make_a_trend_page_a_browser_renders() {
         ex0c.windows(2).all(|w| w[1] > w[0]),
         "the identified EX0C follows the drift: {ex0c:?}"
     );
+    // The runs were made a minute apart; the history says they were a week apart, as
+    // a weekly calibration check makes them.
+    let c = rusqlite::Connection::open(&db).unwrap();
+    for (week, day) in ["10-28", "11-04", "11-11", "11-18", "11-25"]
+        .iter()
+        .enumerate()
+    {
+        c.execute(
+            "UPDATE runs SET started = ?1 WHERE id = ?2",
+            rusqlite::params![format!("2026-{day}T07:30:00Z"), week as i64 + 1],
+        )
+        .unwrap();
+    }
+    drop(c);
     let page = dir.join("trend.html");
     let out = run(bin().args([
         "history",
@@ -107,60 +104,42 @@ fn five_drifting_451_runs_make_a_trend_page_a_browser_renders() {
         page.to_str().unwrap(),
     ]));
     assert!(out.status.success());
-    let Some(chrome) = chromium() else { return };
-    let profile = dir.join("chromium-profile");
-    let common_flags = [
-        "--headless",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--no-first-run",
-        "--disable-sync",
-        "--enable-logging=stderr",
-        "--v=0",
-    ];
+    let Some(browser) = browser::Browser::find(&dir.join("chromium-profile")) else {
+        return;
+    };
     let url = format!("file://{}", page.display());
-    let shot = dir.join("trend.png");
-    let out = Command::new(&chrome)
-        .args(common_flags)
-        .arg(format!("--user-data-dir={}", profile.display()))
-        .arg(format!("--screenshot={}", shot.display()))
-        .arg("--window-size=1400,1600")
-        .arg(&url)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    browser.screenshot(
+        &url,
+        &dir.join("trend.png"),
+        "1100,1500",
+        "PROBEBRIDGE_TREND_SCREENSHOT",
     );
-    let png = std::fs::read(&shot).unwrap();
+    let page = browser.load(&url);
     assert!(
-        png.len() > 10_000 && png.starts_with(b"\x89PNG"),
-        "screenshot"
+        page.console.is_empty(),
+        "the page logged: {:?}",
+        page.console
     );
-    let out = Command::new(&chrome)
-        .args(common_flags)
-        .arg(format!("--user-data-dir={}", profile.display()))
-        .arg("--dump-dom")
-        .arg(&url)
-        .output()
-        .unwrap();
-    assert!(out.status.success());
-    let dom = String::from_utf8_lossy(&out.stdout);
+    let dom = page.dom;
     // The browser's DOM: one chart per error of A and C (5 + 5) and per axis (2),
-    // a point per run in each.
-    assert_eq!(dom.matches("<svg").count(), 12, "{dom}");
-    assert_eq!(dom.matches("<circle").count(), 12 * 5);
-    assert_eq!(dom.matches("class=\"band\"").count(), 10);
-    let log = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        !log.lines()
-            .any(|l| l.contains("CONSOLE") || l.contains("Uncaught")),
-        "the page logged: {log}"
+    // before and after optimisation per run in each, the unit on every y axis, a dated
+    // time axis.
+    assert_eq!(dom.matches("<svg class=\"trend\"").count(), 12, "{dom}");
+    assert_eq!(dom.matches("class=\"pt after\"").count(), 12 * 5);
+    assert_eq!(dom.matches("class=\"pt before\"").count(), 12 * 5);
+    assert_eq!(
+        dom.matches(" (µm)</text>").count() + dom.matches(" (arcsec)</text>").count(),
+        12
     );
-    if let Some(keep) = std::env::var_os("PROBEBRIDGE_TREND_SCREENSHOT") {
-        std::fs::copy(&shot, keep).unwrap();
-    }
+    assert_eq!(dom.matches("run start (UTC), 2026").count(), 12);
+    assert!(!dom.contains(">-0<") && !dom.contains("-0.0 "));
+    // The summary table has a row per chart; the headline names EX0C's drift (4 µm a
+    // run: +16 µm over the five, +4 µm since the previous run).
+    assert_eq!(
+        dom.matches("<tr data-series=").count() + dom.matches("<tr class=").count(),
+        12
+    );
+    let headline = &dom[dom.find("id=\"headline\"").unwrap()..];
+    let headline = &headline[..headline.find("</p>").unwrap()];
+    assert!(headline.contains("<b>EX0C</b>"), "{headline}");
 }

@@ -387,7 +387,9 @@ pub fn record_run_start(
     Ok(Some((h, id)))
 }
 
-/// One line per run: id, start, machine, program, status, results.
+/// One line per run: id, start, machine, program, status, results. Stored strings
+/// are printed escaped: a name with terminal escape codes cannot move the cursor,
+/// recolour or retitle the terminal of whoever lists the history.
 pub fn to_text(runs: &[RunRow]) -> String {
     let mut s = String::new();
     for r in runs {
@@ -397,18 +399,36 @@ pub fn to_text(runs: &[RunRow]) -> String {
         s.push_str(&format!(
             "{:>5}  {}  {:<20} {:<24} {:<11} {:>3} results",
             r.id,
-            r.started,
-            r.machine,
-            program,
-            r.status,
+            printable(&r.started),
+            printable(&r.machine),
+            printable(&program),
+            printable(&r.status),
             r.results.len()
         ));
         for e in &r.iso_errors {
-            s.push_str(&format!("  {} {:+.4}->{:+.4}", e.name, e.before, e.after));
+            let name = printable(&e.name);
+            s.push_str(&format!("  {name} {:+.4}->{:+.4}", e.before, e.after));
         }
         s.push('\n');
     }
     s
+}
+
+/// Control characters (ESC, BEL, CR, ...), the bidirectional and zero-width format
+/// characters, and the backslash as Rust escapes (`\u{1b}`), the rest as it is.
+pub fn printable(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        let format_char = matches!(c, '\u{200b}'..='\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}' | '\u{feff}');
+        if c.is_control() || c == '\\' {
+            out.extend(c.escape_default());
+        } else if format_char {
+            out.extend(c.escape_unicode());
+        } else {
+            out.push(c);
+        }
+    }
+    out
 }
 
 #[cfg(test)]

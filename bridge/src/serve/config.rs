@@ -21,6 +21,41 @@ pub struct GatewayConfig {
     pub plc: PlcSection,
     #[serde(default)]
     pub history: HistorySection,
+    #[serde(default)]
+    pub web: WebSection,
+}
+
+/// The read-only web face (trend page, measuring protocols, status): off unless
+/// `listen` is given.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WebSection {
+    /// `HOST:PORT`, or a port alone for loopback (127.0.0.1).
+    #[serde(default)]
+    pub listen: Option<String>,
+    /// Connections served at once; more are closed at once.
+    #[serde(default = "default_web_connections")]
+    pub max_connections: usize,
+    /// A request must arrive, and its answer go out, within this time.
+    #[serde(default = "default_web_timeout_ms")]
+    pub request_timeout_ms: u64,
+}
+
+impl Default for WebSection {
+    fn default() -> Self {
+        Self {
+            listen: None,
+            max_connections: default_web_connections(),
+            request_timeout_ms: default_web_timeout_ms(),
+        }
+    }
+}
+
+fn default_web_connections() -> usize {
+    16
+}
+fn default_web_timeout_ms() -> u64 {
+    10_000
 }
 
 #[derive(Clone, Debug, Deserialize)]
@@ -50,6 +85,20 @@ pub struct HistorySection {
     /// PostgreSQL: TCP keepalive, idle seconds before the first probe.
     #[serde(default = "default_keepalive_s")]
     pub keepalive_s: u64,
+    /// The trend page marks a run whose identified position error (or dispersion)
+    /// changed by more than this since the previous run, µm.
+    #[serde(default = "default_alarm_um")]
+    pub alarm_um: f64,
+    /// The same for orientation errors, arcsec.
+    #[serde(default = "default_alarm_arcsec")]
+    pub alarm_arcsec: f64,
+}
+
+fn default_alarm_um() -> f64 {
+    crate::history::trend::DEFAULT_ALARM_UM
+}
+fn default_alarm_arcsec() -> f64 {
+    crate::history::trend::DEFAULT_ALARM_ARCSEC
 }
 
 impl Default for HistorySection {
@@ -62,6 +111,8 @@ impl Default for HistorySection {
             connect_timeout_ms: default_connect_timeout_ms(),
             statement_timeout_ms: default_statement_timeout_ms(),
             keepalive_s: default_keepalive_s(),
+            alarm_um: default_alarm_um(),
+            alarm_arcsec: default_alarm_arcsec(),
         }
     }
 }
@@ -273,6 +324,21 @@ impl GatewayConfig {
             }
         }
         self.validate_history()?;
+        for (key, v) in [
+            ("history.alarm_um", self.history.alarm_um),
+            ("history.alarm_arcsec", self.history.alarm_arcsec),
+        ] {
+            if !(v.is_finite() && v > 0.0 && v <= 1e6) {
+                return Err(self.invalid(key, "must be a number in (0, 1e6]"));
+            }
+        }
+        self.web_listen()?;
+        if !(1..=1024).contains(&self.web.max_connections) {
+            return Err(self.invalid("web.max_connections", "must be 1..1024"));
+        }
+        if !(100..=600_000).contains(&self.web.request_timeout_ms) {
+            return Err(self.invalid("web.request_timeout_ms", "must be 100..600000"));
+        }
         self.listen()?;
         self.word_order()?;
         let p = &self.plc;
@@ -365,6 +431,31 @@ impl GatewayConfig {
         })
     }
 
+    /// The web face's address, if it is on: `HOST:PORT`, or a port alone on loopback.
+    pub fn web_listen(&self) -> Result<Option<SocketAddr>, GatewayConfigError> {
+        let Some(l) = &self.web.listen else {
+            return Ok(None);
+        };
+        let addr = match l.parse::<u16>() {
+            Ok(port) => Ok(SocketAddr::from(([127, 0, 0, 1], port))),
+            Err(_) => l.parse::<SocketAddr>(),
+        };
+        addr.map(Some).map_err(|e| {
+            self.invalid(
+                "web.listen",
+                format!("{l:?} is not an address HOST:PORT or a port ({e})"),
+            )
+        })
+    }
+
+    /// The trend page's alarm thresholds.
+    pub fn alarm(&self) -> crate::history::trend::Alarm {
+        crate::history::trend::Alarm {
+            um: self.history.alarm_um,
+            arcsec: self.history.alarm_arcsec,
+        }
+    }
+
     pub fn word_order(&self) -> Result<super::register_map::WordOrder, GatewayConfigError> {
         match self.plc.word_order.as_str() {
             "high_first" => Ok(super::register_map::WordOrder::HighFirst),
@@ -433,6 +524,11 @@ mod tests {
         .to_string();
         assert!(e.contains("history.sqlite"), "{e}");
         assert_eq!(c.plc.listen, "127.0.0.1:502");
+        assert_eq!(
+            c.web_listen().unwrap(),
+            None,
+            "the web face is off by default"
+        );
         assert_eq!(c.heartbeat_timeout(), Some(Duration::from_secs(2)));
         assert!(c.machine.scenario.unwrap().is_absolute());
     }
@@ -501,6 +597,12 @@ mod tests {
             ("[plc]\nword_order = \"middle\"\n", "plc.word_order"),
             ("[plc]\nlisten = \"localhost\"\n", "plc.listen"),
             ("[plc]\nint_scale = 0.5\n", "plc.int_scale"),
+            ("[web]\nlisten = \"localhost\"\n", "web.listen"),
+            (
+                "[web]\nlisten = \"8080\"\nmax_connections = 0\n",
+                "web.max_connections",
+            ),
+            ("[web]\nrequest_timeout_ms = 5\n", "web.request_timeout_ms"),
         ] {
             let e = parse(&format!("{base}{extra}")).unwrap_err().to_string();
             assert!(e.contains(key), "{e}");

@@ -12,6 +12,7 @@ pub mod machine_thread;
 pub mod modbus_face;
 pub mod register_map;
 pub mod sd_notify;
+pub mod web_face;
 
 use config::GatewayConfig;
 use gateway::{lock, Core, ToMachine};
@@ -151,6 +152,7 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     tracing::info!(listen = %face.local_addr, machine = %machine_cfg.name, "gateway ready");
     // Tests and scripts read the bound address (port 0 takes any) from this line.
     crate::say!("probebridge serve: listening on {}", face.local_addr);
+    let web = web_face::start_configured(&cfg, &shared, &machine_cfg.name)?;
     let _ = std::io::stdout().flush();
     notifier.notify(&format!(
         "READY=1\nSTATUS=idle, PLC face on {}",
@@ -175,6 +177,7 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     if let Some(h) = &history {
         h.stop();
     }
+    drop(web);
     tracing::info!(state = lock(&shared).state().name(), "stopped");
     Ok(0)
 }
