@@ -66,8 +66,8 @@ svg text{font-size:11px;fill:#333}svg .title{font-size:14px;font-weight:bold}\
 .frame{fill:none;stroke:#888}.grid{stroke:#e6e6e6}.zero{stroke:#999}\
 .line{fill:none;stroke-width:2}.line.before{stroke:#c0392b;stroke-dasharray:5 3}.line.after{stroke:#1e8449}\
 .pt.before{fill:#c0392b}.pt.after{fill:#1e8449}\
-.tol{fill:none;stroke:#e67e22;stroke-width:1.5;stroke-dasharray:7 4}svg .arrow{fill:#c25e00;font-weight:bold}\
-.alarm-ring{fill:none;stroke:#d10000;stroke-width:2.5}svg .alarm-label{fill:#d10000;font-weight:bold}\
+.tol{fill:none;stroke:#e67e22;stroke-width:1.5;stroke-dasharray:7 4}svg .arrow{fill:#c25e00;font-weight:bold;paint-order:stroke;stroke:#fff;stroke-width:3px}\
+.alarm-ring{fill:none;stroke:#d10000;stroke-width:2.5}svg .alarm-label{fill:#d10000;font-weight:bold;paint-order:stroke;stroke:#fff;stroke-width:3px}\
 .swatch{display:inline-block;width:2em;height:0;border-top:3px solid;vertical-align:middle;margin-right:0.3em}\
 .swatch.before{border-color:#c0392b;border-top-style:dashed}.swatch.after{border-color:#1e8449}\
 .swatch.tol{border-color:#e67e22;border-top-style:dashed}\

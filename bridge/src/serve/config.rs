@@ -583,6 +583,26 @@ mod tests {
     }
 
     #[test]
+    fn the_web_face_listens_on_loopback_for_a_port_alone_and_alarms_are_checked() {
+        let base = "[machine]\nscenario = \"s\"\n[programs]\nfolder = \".\"\n";
+        let c = parse(&format!("{base}[web]\nlisten = \"8080\"\n")).unwrap();
+        assert_eq!(c.web_listen().unwrap(), Some(([127, 0, 0, 1], 8080).into()));
+        let c = parse(&format!("{base}[web]\nlisten = \"0.0.0.0:8081\"\n")).unwrap();
+        assert_eq!(c.web_listen().unwrap(), Some(([0, 0, 0, 0], 8081).into()));
+        let dir = std::env::temp_dir().join("gateway.toml");
+        let e = GatewayConfig::parse(
+            &format!("{base}[history]\nsqlite = \"h.sqlite\"\nalarm_um = 0\n"),
+            &dir,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("history.alarm_um") && e.contains("gateway.toml"),
+            "{e}"
+        );
+    }
+
+    #[test]
     fn unknown_key_is_refused_with_its_name() {
         let e = parse("[machine]\nscenario = \"s\"\nspeed = 1\n[programs]\nfolder = \".\"\n")
             .unwrap_err()
