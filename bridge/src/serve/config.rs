@@ -243,7 +243,11 @@ impl GatewayConfig {
                 message: e.to_string(),
             })?;
         cfg.path = path.to_path_buf();
-        let base = path.parent().unwrap_or(Path::new("."));
+        // A bare file name (`--config gateway.toml`) has the empty path as its parent.
+        let base = match path.parent() {
+            Some(folder) if !folder.as_os_str().is_empty() => folder,
+            _ => Path::new("."),
+        };
         let anchor = |p: &mut PathBuf| {
             if p.is_relative() {
                 *p = base.join(&*p);
@@ -552,6 +556,17 @@ mod tests {
             HistoryTarget::Postgres(url.into()).display(),
             "postgres://gw:***@db.factory:5432/history"
         );
+    }
+
+    #[test]
+    fn a_bare_file_name_anchors_relative_paths_in_the_current_folder() {
+        let c = GatewayConfig::parse(
+            "[machine]\nscenario = \"s\"\n[programs]\nfolder = \"p\"\n[history]\nsqlite = \"h.sqlite\"\n",
+            Path::new("gateway.toml"),
+        )
+        .unwrap();
+        assert_eq!(c.history.sqlite, Path::new("./h.sqlite"));
+        assert_eq!(c.programs.folder, Path::new("./p"));
     }
 
     #[test]
