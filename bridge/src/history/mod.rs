@@ -280,9 +280,17 @@ pub struct History {
 }
 
 impl History {
-    /// Opens (and creates the tables of) the history at `target`.
+    /// Opens (and creates the tables of) the history at `target`, for a command
+    /// (`history`, `run --history`): with room for a long listing or a slow server.
     pub fn open(target: &HistoryTarget) -> Result<Self, HistoryError> {
-        Self::open_with(target, &Timeouts::default())
+        Self::open_with(
+            target,
+            &Timeouts {
+                connect: Duration::from_secs(10),
+                statement: Duration::from_secs(30),
+                ..Timeouts::default()
+            },
+        )
     }
 
     /// As [`History::open`], within `timeouts`.
