@@ -488,10 +488,21 @@ mod tests {
             })
             .unwrap()
             .is_empty());
+        // The same end again (a retry, a replayed spool): still one set of rows.
+        h.finish(id, "done", &report()).unwrap();
+        assert_eq!(h.list(&Filter::default()).unwrap()[0].results.len(), 2);
+        assert!(h.finish(9999, "done", &report()).is_err(), "no such run");
         let all = h.list(&Filter::default()).unwrap();
         assert_eq!(
             all.iter().find(|r| r.id == other).unwrap().status,
             "interrupted"
+        );
+        // A run marked interrupted whose end comes later (from the spool) is completed.
+        h.finish(other, "aborted", &report()).unwrap();
+        let all = h.list(&Filter::default()).unwrap();
+        assert_eq!(
+            all.iter().find(|r| r.id == other).unwrap().status,
+            "aborted"
         );
         assert!(to_text(&all).contains("431.h"));
     }
