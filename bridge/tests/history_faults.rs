@@ -337,6 +337,11 @@ struct Tmpfs(PathBuf);
 
 fn tmpfs(dir: &Path, size: &str) -> Option<Tmpfs> {
     std::fs::create_dir_all(dir).unwrap();
+    // SAFETY: geteuid cannot fail.
+    if unsafe { libc::geteuid() } != 0 {
+        eprintln!("SKIPPED: mounting a tmpfs for the full-disk test needs root");
+        return None;
+    }
     let out = Command::new("mount")
         .args([
             "-t",
@@ -354,11 +359,9 @@ fn tmpfs(dir: &Path, size: &str) -> Option<Tmpfs> {
                 Ok(o) => String::from_utf8_lossy(&o.stderr).trim().to_string(),
                 Err(e) => e.to_string(),
             };
-            assert!(
-                !in_ci(),
-                "cannot mount a tmpfs in CI (the runner is root): {why}"
-            );
-            eprintln!("SKIPPED: cannot mount a tmpfs for the full-disk test (needs root): {why}");
+            // As root it should work: in CI a refusal is a failure.
+            assert!(!in_ci(), "cannot mount a tmpfs in CI as root: {why}");
+            eprintln!("SKIPPED: mount refused a tmpfs for the full-disk test: {why}");
             None
         }
     }
@@ -455,11 +458,7 @@ fn an_unwritable_wal_refuses_starts_until_it_is_writable() {
     std::fs::create_dir(&wal).unwrap();
     let g = Gateway::start(&py, &dir, "wal", &format!("sqlite = {db:?}\n"));
     g.start_refused();
-    assert!(
-        g.log().contains("history unavailable") || g.log().contains("unable to open"),
-        "{}",
-        g.log()
-    );
+    assert!(g.log().contains("disk I/O error"), "{}", g.log());
     std::fs::remove_dir(&wal).unwrap();
     let seq = g.start_taken();
     assert_done(&g.plc(&["end", &seq]), false);

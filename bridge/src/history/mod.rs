@@ -280,9 +280,17 @@ pub struct History {
 }
 
 impl History {
-    /// Opens (and creates the tables of) the history at `target`.
+    /// Opens (and creates the tables of) the history at `target`, for a command
+    /// (`history`, `run --history`): with room for a long listing or a slow server.
     pub fn open(target: &HistoryTarget) -> Result<Self, HistoryError> {
-        Self::open_with(target, &Timeouts::default())
+        Self::open_with(
+            target,
+            &Timeouts {
+                connect: Duration::from_secs(10),
+                statement: Duration::from_secs(30),
+                ..Timeouts::default()
+            },
+        )
     }
 
     /// As [`History::open`], within `timeouts`.
@@ -500,10 +508,21 @@ mod tests {
             })
             .unwrap()
             .is_empty());
+        // The same end again (a retry, a replayed spool): still one set of rows.
+        h.finish(id, "done", &report()).unwrap();
+        assert_eq!(h.list(&Filter::default()).unwrap()[0].results.len(), 2);
+        assert!(h.finish(9999, "done", &report()).is_err(), "no such run");
         let all = h.list(&Filter::default()).unwrap();
         assert_eq!(
             all.iter().find(|r| r.id == other).unwrap().status,
             "interrupted"
+        );
+        // A run marked interrupted whose end comes later (from the spool) is completed.
+        h.finish(other, "aborted", &report()).unwrap();
+        let all = h.list(&Filter::default()).unwrap();
+        assert_eq!(
+            all.iter().find(|r| r.id == other).unwrap().status,
+            "aborted"
         );
         assert!(to_text(&all).contains("431.h"));
     }
