@@ -561,12 +561,12 @@ mod tests {
     #[test]
     fn a_bare_file_name_anchors_relative_paths_in_the_current_folder() {
         let c = GatewayConfig::parse(
-            "[machine]\nscenario = \"s\"\n[programs]\nfolder = \"p\"\n[history]\nsqlite = \"h.sqlite\"\n",
+            "[machine]\nscenario = \"s\"\n[programs]\nfolder = \".\"\n[history]\nsqlite = \"h.sqlite\"\n",
             Path::new("gateway.toml"),
         )
         .unwrap();
         assert_eq!(c.history.sqlite, Path::new("./h.sqlite"));
-        assert_eq!(c.programs.folder, Path::new("./p"));
+        assert_eq!(c.programs.folder, Path::new("./."));
     }
 
     #[test]
