@@ -132,28 +132,44 @@ struct Approach {
 
 impl Probing3dParams {
     /// The pre-position and probing path with the active datum at `origin` (machine
-    /// XYZ).
-    fn approach(&self, call: &CycleBlock, origin: Vector3<f64>) -> Approach {
+    /// XYZ). The pre-position must lie below the safe height: the probe comes down to
+    /// it from Q260 at FMAX, unmonitored, so a Q260 under it would drive the probe
+    /// through the part on the way over (refused as cycle 431 refuses it).
+    fn approach(&self, call: &CycleBlock, origin: Vector3<f64>) -> Result<Approach, CycleError> {
         let probe = &call.tool.probe;
         let axis = call.tool.axis;
+        let t = axis.tool_index();
         let n = Vector3::from(axis.to_machine(self.normal));
         // Program coordinates: relative to the active preset plus shift (`origin`).
         let nominal = Vector3::from(axis.to_machine(self.nominal)) + origin;
         let approach = probe.radius + probe.set_up + self.clearance;
-        Approach {
-            n,
-            start: nominal + n * approach,
-            max_distance: approach + probe.dist,
-            safe_height: self.safe_height + origin[axis.tool_index()],
+        let start = nominal + n * approach;
+        let safe_height = self.safe_height + origin[t];
+        if start[t] > safe_height {
+            return Err(CycleError::Plan(format!(
+                "Q260={} is below the start of the point ({:.4} = nominal + (R + SET_UP + Q320) along the normal); nothing moved",
+                self.safe_height,
+                start[t] - origin[t]
+            )));
         }
+        Ok(Approach {
+            n,
+            start,
+            max_distance: approach + probe.dist,
+            safe_height,
+        })
     }
 
     /// Every move the cycle commands, in order, with the active datum at `origin`
     /// (machine XYZ): what `check` and `run` hold against the machine before the
     /// program's first move. The retraction after the contact, MB back along the
     /// normal, lies between its ends for a contact at the start and at the path's end.
-    pub fn planned_moves(&self, call: &CycleBlock, origin: [f64; 3]) -> Vec<PlannedMove> {
-        let a = self.approach(call, Vector3::from(origin));
+    pub fn planned_moves(
+        &self,
+        call: &CycleBlock,
+        origin: [f64; 3],
+    ) -> Result<Vec<PlannedMove>, CycleError> {
+        let a = self.approach(call, Vector3::from(origin))?;
         let probe = &call.tool.probe;
         let axis = call.tool.axis;
         let [main, minor, _] = axis.indices();
@@ -167,7 +183,7 @@ impl Probing3dParams {
             .with(Axis::LINEAR[main], a.start[main])
             .with(Axis::LINEAR[minor], a.start[minor]);
         let path_end = a.start - a.n * a.max_distance;
-        vec![
+        Ok(vec![
             position("moving to the safe height", safe),
             position("positioning in the working plane", over),
             position(
@@ -192,7 +208,7 @@ impl Probing3dParams {
                 AxisPositions::linear((path_end + a.n * probe.mb).into()),
             ),
             position("moving to the safe height", safe),
-        ]
+        ])
     }
 }
 
@@ -212,7 +228,7 @@ fn measure<M: Machine>(
         start,
         max_distance,
         safe_height,
-    } = p.approach(call, origin);
+    } = p.approach(call, origin)?;
     let direction = -n;
 
     let mut pos = Positioner {

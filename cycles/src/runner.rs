@@ -11,14 +11,14 @@ use crate::error::{CycleError, CycleErrorKind};
 use crate::kinematics::{Estimator, LocalEstimator};
 use crate::kinematics_file::ActiveKinematics;
 use crate::linear::{parse_linear, LinearBlockError, LinearBlockErrorKind, LinearMove, MoveFeed};
-use crate::planned_move::check_planned;
+use crate::planned_move::{check_planned, PlannedMove};
 use crate::program::{CycleCall, CycleKind, Program, Statement};
 use crate::progress::{ProgressEvent, ProgressSink};
 use crate::results::{CycleOutput, CycleResult, ProgramReport, Status};
 use hal::config::MachineConfig;
 use hal::machine::Error as _;
 use hal::motion_guard::MotionGuard;
-use hal::{Axis, Machine};
+use hal::{Axis, AxisPositions, Machine};
 use std::path::PathBuf;
 
 pub struct RunOptions<'a> {
@@ -139,12 +139,38 @@ impl Preflight {
 }
 
 /// Everything `run_program` checks before the first move, without a machine: `check`
-/// runs it on the configuration's axes, `run` on the connected machine's.
+/// runs it on the configuration's axes, `run` on the connected machine's. The axes
+/// start where [`assumed_start`] puts them (`run` starts from where the machine stands,
+/// [`preflight_program_from`]).
 pub fn preflight_program(
     program: &Program,
     machine_axes: u8,
     cfg: &CyclesConfig,
     kinematics: &std::path::Path,
+) -> Result<(), Preflight> {
+    let start = assumed_start(&cfg.machine);
+    preflight_program_from(program, machine_axes, cfg, kinematics, &start)
+}
+
+/// Where `check` assumes the axes stand before the program's first block: every axis
+/// at 0 (or the software limit nearest to it). The program's `L` blocks move them from
+/// there, so a program that pre-positions the probe is planned exactly as `run` will
+/// move it.
+pub fn assumed_start(machine: &MachineConfig) -> AxisPositions {
+    let mut p = AxisPositions::new();
+    for a in &machine.axes {
+        p.set(a.name, 0.0f64.clamp(a.min, a.max));
+    }
+    p
+}
+
+/// [`preflight_program`] with the axes at `start` before the first block.
+pub fn preflight_program_from(
+    program: &Program,
+    machine_axes: u8,
+    cfg: &CyclesConfig,
+    kinematics: &std::path::Path,
+    start: &AxisPositions,
 ) -> Result<(), Preflight> {
     for call in program.cycles() {
         preflight(call, machine_axes, cfg, kinematics).map_err(|(kind, message)| {
@@ -158,9 +184,12 @@ pub fn preflight_program(
         })?;
     }
     // The moves themselves, in program order with the datum as the program changes
-    // it: `L` targets and the probing cycles' points in machine coordinates.
+    // it and every axis where the blocks before leave it: `L` targets, the probing
+    // cycles' points, and every move of cycle 451 (planned by running its sequence on
+    // a dry-run machine), in machine coordinates.
     let guard = MotionGuard::new(&cfg.machine);
     let mut datum = Datum::new(cfg.presets.clone());
+    let mut here = assumed_start(&cfg.machine).merged(start);
     for block in &program.blocks {
         match &block.statement {
             // `run` stops at a preset row that does not exist, with the same message;
@@ -170,36 +199,66 @@ pub fn preflight_program(
                 let checked = parse_linear(code, program.unit).map(|r| {
                     r.and_then(|mut mv| {
                         mv.target = datum.to_machine(&mv.target);
-                        check_linear_move(&mv, &cfg.machine)
+                        check_linear_move(&mv, &cfg.machine).map(|()| mv)
                     })
                 });
-                if let Some(Err(error)) = checked {
-                    return Err(Preflight::Positioning {
-                        line: block.line,
-                        error,
-                    });
+                match checked {
+                    Some(Err(error)) => {
+                        return Err(Preflight::Positioning {
+                            line: block.line,
+                            error,
+                        })
+                    }
+                    Some(Ok(mv)) => here = here.merged(&mv.target),
+                    None => {}
                 }
             }
             Statement::Cycle(call) => {
                 let origin = datum.origin();
+                let refused = |kind: PreflightKind, message: String| Preflight::Cycle {
+                    block: call.head.block,
+                    cycle: call.head.cycle,
+                    line: call.head.line,
+                    kind,
+                    message,
+                };
                 let moves = match &call.kind {
                     CycleKind::MeasurePlane(p) => p
                         .planned_moves(&call.head, origin)
                         .map_err(|e| e.to_string()),
-                    CycleKind::Probing3d(p) => Ok(p.planned_moves(&call.head, origin)),
-                    CycleKind::MeasureKinematics(_) | CycleKind::SaveKinematics(_) => {
+                    CycleKind::Probing3d(p) => p
+                        .planned_moves(&call.head, origin)
+                        .map_err(|e| e.to_string()),
+                    CycleKind::MeasureKinematics(p) => {
+                        let planned = cycle451::dry_run::plan_moves(
+                            p, &call.head, cfg, kinematics, &datum, &here,
+                        )
+                        .map_err(|e| {
+                            let mut message = e.to_string();
+                            if !message.ends_with("nothing moved") {
+                                message.push_str("; nothing moved");
+                            }
+                            refused(PreflightKind::Plan(e.kind()), message)
+                        })?;
+                        here = planned.end;
+                        // Q431 = 1/3 in modes 1..3: later blocks are relative to the
+                        // preset the cycle writes at the sphere centre.
+                        if (p.preset == 1 || p.preset == 3) && p.mode.writes() {
+                            let row = [0, 1, 2].map(|i| planned.preset[i] - datum.shift[i]);
+                            datum.presets.set_active_xyz(row);
+                        }
                         Ok(Vec::new())
                     }
+                    CycleKind::SaveKinematics(_) => Ok(Vec::new()),
                 };
-                moves
-                    .and_then(|m| check_planned(&m, &guard))
-                    .map_err(|message| Preflight::Cycle {
-                        block: call.head.block,
-                        cycle: call.head.cycle,
-                        line: call.head.line,
-                        kind: PreflightKind::Moves,
-                        message,
-                    })?;
+                let moves = moves
+                    .and_then(|m| check_planned(&m, &guard).map(|()| m))
+                    .map_err(|message| refused(PreflightKind::Moves, message))?;
+                for m in &moves {
+                    if let PlannedMove::Position { target, .. } = m {
+                        here = here.merged(target);
+                    }
+                }
             }
             _ => {}
         }
@@ -260,7 +319,12 @@ pub fn run_program<M: Machine>(
 ) -> ProgramReport {
     let mut report = ProgramReport::default();
     let kinematics = opts.kinematics_path(&cfg.machine);
-    match preflight_program(program, machine.axes(), cfg, &kinematics) {
+    // Planned from where the machine stands (as `check` plans from where it assumes
+    // the axes, [`assumed_start`]).
+    let start = machine
+        .positions()
+        .unwrap_or_else(|_| assumed_start(&cfg.machine));
+    match preflight_program_from(program, machine.axes(), cfg, &kinematics, &start) {
         Ok(()) => {}
         Err(Preflight::Cycle {
             block,

@@ -892,16 +892,21 @@ fn tool_axis_y_on_a_horizontal_spindle_recovers_the_injected_errors() {
         }
     };
     let v = assert_recovers(&r, &sc, &['A', 'C']);
-    // Locating the sphere and its pole: along -Y; at A = C = 0 the four equator
-    // points lie in the ZX plane, the first (Q380 = 0) on the main axis Z.
+    // Locating the sphere: along -Y; then its first pass, four points in the ZX
+    // plane (at A = C = 0), the first (Q380 = 0) on the main axis Z; then the second
+    // pass: the pole along -Y and the four points again.
     let along = |d: [f64; 3], want: [f64; 3]| (0..3).all(|i| (d[i] - want[i]).abs() < 1e-12);
     assert!(along(directions[0], [0.0, -1.0, 0.0]), "{directions:?}");
-    assert!(along(directions[1], [0.0, -1.0, 0.0]), "{directions:?}");
-    assert!(along(directions[2], [0.0, 0.0, -1.0]), "{directions:?}");
-    assert!(
-        directions[2..6].iter().all(|d| d[1].abs() < 1e-12),
-        "{directions:?}"
-    );
+    for first in [1, 6] {
+        assert!(along(directions[first], [0.0, 0.0, -1.0]), "{directions:?}");
+        assert!(
+            directions[first..first + 4]
+                .iter()
+                .all(|d| d[1].abs() < 1e-12),
+            "{directions:?}"
+        );
+    }
+    assert!(along(directions[5], [0.0, -1.0, 0.0]), "{directions:?}");
     // Q431 = 0: cycle 247 activates the sphere centre, the start 100 mm away in X.
     let mut cfg = cycles_config(&sc);
     let mut row = cycles::preset_table::Preset::origin(1);

@@ -7,8 +7,9 @@
 use crate::session::{cycles_config_with_presets, resolve_machine, MachineOptions};
 use cycles::kinematics_file::ActiveKinematics;
 use cycles::parser::parse_program;
-use cycles::runner::{check_complete, preflight_program};
+use cycles::runner::{assumed_start, check_complete, preflight_program_from};
 use cycles::CyclesConfig;
+use hal::AxisPositions;
 use std::path::{Path, PathBuf};
 
 /// Exit status 0 when valid, 2 with every error listed.
@@ -24,7 +25,13 @@ pub fn run(
     let text = cycles::parser::read_program_text(program)
         .map_err(|e| format!("cannot read {}: {e}", program.display()))?;
     let kinematics = kinematics.unwrap_or_else(|| ActiveKinematics::default_path(&cfg));
-    let errors = check_text(&text, &cycles_cfg, &kinematics);
+    // With a scenario the axes start where the simulator starts them, as `run` will
+    // find them; a real machine's are not known here ([`assumed_start`]).
+    let start = match &scenario {
+        Some(sc) => assumed_start(&cfg).merged(&sim::machine::SimMachine::start_positions(sc)),
+        None => assumed_start(&cfg),
+    };
+    let errors = check_text_from(&text, &cycles_cfg, &kinematics, &start);
     if errors.is_empty() {
         say!("{}: ok (machine {})", program.display(), cfg.name);
         return Ok(0);
@@ -43,13 +50,25 @@ pub fn run(
 /// missing BEGIN/END PGM and what `run` refuses before the first move. Empty: ok.
 /// (The fuzz target `check` runs this on mutated programs.)
 pub fn check_text(text: &str, cycles_cfg: &CyclesConfig, kinematics: &Path) -> Vec<String> {
+    let start = assumed_start(&cycles_cfg.machine);
+    check_text_from(text, cycles_cfg, kinematics, &start)
+}
+
+/// [`check_text`] with the axes at `start` before the program's first block.
+pub fn check_text_from(
+    text: &str,
+    cycles_cfg: &CyclesConfig,
+    kinematics: &Path,
+    start: &AxisPositions,
+) -> Vec<String> {
     match parse_program(text, cycles_cfg) {
         Err(invalid) => invalid.0.iter().map(|d| d.to_string()).collect(),
         // Valid text: now what only the machine can tell, as `run` checks it.
         Ok(parsed) => check_complete(&parsed)
             .and_then(|()| {
                 let axes = cycles_cfg.machine.axis_mask();
-                preflight_program(&parsed, axes, cycles_cfg, kinematics).map_err(|e| e.to_string())
+                preflight_program_from(&parsed, axes, cycles_cfg, kinematics, start)
+                    .map_err(|e| e.to_string())
             })
             .err()
             .into_iter()

@@ -24,6 +24,13 @@ use std::collections::BTreeMap;
 pub const RE_PROBE_TOLERANCE: f64 = 0.1;
 /// Largest rotary step of a move that follows the sphere (Q408 = 0), deg.
 pub const TRACK_STEP_DEG: f64 = 5.0;
+/// How far off the sphere centre the probe may start locating it (Q431 = 1/3), as a
+/// fraction of Q407 + ball radius, in any direction of the working plane.
+pub const LOCATE_REACH: f64 = 0.6;
+/// Depth of the first locating pass's points below the pole contact, as a fraction
+/// of Q407 + ball radius: a start within [`LOCATE_REACH`] puts the centre 0.8 to 1
+/// of it below the contact, so the points pass within 0.1 of the centre's height.
+pub const LOCATE_DEPTH: f64 = 0.9;
 
 pub(super) fn axis_map(axes: &[Axis], a: &Angles) -> BTreeMap<String, f64> {
     axes.iter()
@@ -120,14 +127,26 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
         });
     }
 
-    /// Locates the sphere below the probe: probes down along the tool axis, then
-    /// measures the sphere around that estimate. Returns its centre (ball centre in
-    /// machine X/Y/Z); Q431 = 1/3 set the preset there.
+    /// Locates the sphere below the probe in two passes (the seeds' note on preset
+    /// setting: with an inaccurate pre-position the sphere is probed twice, and the
+    /// radius is monitored only in the second measurement). First pass
+    /// ([`Measure::first_pass`]): from the contact of the pole probe, every
+    /// positioning move clears the sphere for any centre consistent with that contact;
+    /// its rough centre is not checked against Q407. Second pass: the sphere measured
+    /// around that centre, radius monitored against maxDevCalBall. Returns its centre
+    /// (ball centre in machine X/Y/Z); Q431 = 1/3 set the preset there.
     pub fn locate(&mut self) -> Result<Vector3<f64>, CycleError> {
         let start = self.start;
         let p = &self.plan.params;
         let n0 = self.frame(&start)[0];
-        let dist = self.clearance() + self.probe.dist;
+        let rs = p.sphere_radius + self.probe.radius;
+        // A start up to LOCATE_REACH x (Q407 + R) off the centre meets the sphere up
+        // to (1 - sqrt(1 - reach^2)) x (Q407 + R) below its pole: probed that much
+        // further than from a centred start (with a tenth more reach, so that a start
+        // at both limits at once still triggers).
+        let reach = 1.1 * LOCATE_REACH;
+        let dist = self.clearance() + self.probe.dist + rs * (1.0 - (1.0 - reach * reach).sqrt());
+        let run = self.next_run();
         let first = self
             .probe(
                 "locating the sphere: probing along the tool axis from the start position",
@@ -143,14 +162,15 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
                     step,
                     kind,
                     message: format!(
-                        "{message}; before cycle 451 position the probe over the sphere centre, about Q320 + SET_UP = {:.3} mm above the sphere",
+                        "{message}; before cycle 451 position the probe over the sphere centre (at most {:.3} mm off it in the working plane), about Q320 + SET_UP = {:.3} mm above the sphere",
+                        LOCATE_REACH * rs,
                         self.clearance()
                     ),
                 },
                 e => e,
             })?;
-        let c0 = Vector3::from(first.positions.xyz()) - n0 * (p.sphere_radius + self.probe.radius);
-        let located = self.sphere(&start, c0, "locating the sphere")?;
+        let rough = self.first_pass(&start, run, first)?;
+        let located = self.sphere(&start, rough, "locating the sphere")?;
         self.table_point = self.model.table_point(&located.angles, &located.centre);
         let ball = self.model.ball_in_machine(&located.angles, &located.centre);
         self.located = Some(located);
@@ -164,16 +184,70 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
         Ok(ball)
     }
 
-    /// Q431 = 0/2: the sphere centre is the active datum (with the rotary axes where
-    /// they stand). From wherever the probe is: up along the tool axis to the safe
-    /// height (the pole start, or Q408 above the datum when higher, or where the probe
-    /// already is), over the sphere, down to the pole start; every point inside the
-    /// software limits, else nothing moves.
+    /// The first locating pass from the pole contact `touch` (ball centre, axes at
+    /// `a`, in run `run`): the centre is somewhere on the half sphere of radius Q407 + R below
+    /// `touch` (the ball came down along the tool axis without touching before). Every
+    /// move clears all of those spheres by the clearance Q320 + SET_UP: up to
+    /// Q407 + R + clearance over `touch`, out to 2 (Q407 + R) + clearance from its axis,
+    /// down to LOCATE_DEPTH x (Q407 + R) below it, then Q423 points probed toward the
+    /// axis (each from its own side, back out the way it came, up again). A sphere with
+    /// free radius through the pole contact and those points is the rough centre;
+    /// nothing is checked against Q407 here.
+    fn first_pass(
+        &mut self,
+        a: &Angles,
+        run: u64,
+        pole: Contact,
+    ) -> Result<Vector3<f64>, CycleError> {
+        let p = &self.plan.params;
+        let rs = p.sphere_radius + self.probe.radius;
+        let clearance = self.clearance();
+        let [n, u, v] = self.frame(a);
+        let what = "locating the sphere (first pass)";
+        let touch = Vector3::from(pole.positions.xyz());
+        let mut contacts = Vec::with_capacity(1 + p.points as usize);
+        contacts.push(pole);
+        let safe = touch + n * (rs + clearance);
+        self.move_xyz(&format!("{what}: up to clear the sphere"), safe)?;
+        let out = 2.0 * rs + clearance;
+        for i in 0..p.points {
+            let phi = (p.reference_angle + 360.0 * f64::from(i) / f64::from(p.points)).to_radians();
+            let w = u * phi.cos() + v * phi.sin();
+            let step = format!("{what}: point {} of {}", i + 1, p.points);
+            let high = safe + w * out;
+            let low = touch - n * (LOCATE_DEPTH * rs) + w * out;
+            self.move_xyz(&step, high)?;
+            self.move_xyz(&step, low)?;
+            contacts.push(self.probe(&step, -w, out + self.probe.dist)?);
+            self.move_xyz(&step, low)?;
+            self.move_xyz(&step, high)?;
+        }
+        self.move_xyz(&format!("{what}: back over the pole"), safe)?;
+        let fit =
+            self.ctx.estimator.fit_sphere(run, &contacts).map_err(|e| {
+                CycleError::Geometry(format!("{what}: sphere fit (run {run}): {e}"))
+            })?;
+        self.note(format!(
+            "{what}: the sphere centre is about {:.4} mm from below the start position; measuring it again around that centre",
+            ((fit.centre - touch) - n * n.dot(&(fit.centre - touch))).norm()
+        ));
+        Ok(fit.centre)
+    }
+
+    /// Q431 = 0/2: the sphere centre is the active datum with the rotary axes at their
+    /// reference (0 deg), as the preset was set. From wherever the probe is: up along
+    /// the tool axis to a height that clears the sphere for every angle the rotary
+    /// axes pass on their way to the first measurement's angles (and the pole start,
+    /// and Q408 above the datum when higher, or where the probe already is); the
+    /// rotary axes turn there; then over the sphere and down to the pole start. Every
+    /// point inside the software limits, else nothing moves.
     pub fn approach_datum(&mut self) -> Result<(), CycleError> {
         let start = self.start;
-        let c = self.preset - self.model.ball_in_machine(&start, &Vector3::zeros());
-        self.table_point = self.model.table_point(&start, &c);
-        let pole = self.pole(&start, &c);
+        let zero = [0.0; 3];
+        let c = self.preset - self.model.ball_offset(&zero);
+        self.table_point = self.model.table_point(&zero, &c);
+        let first = self.plan.angles(self.plan.axes[0].axis, 0.0);
+        let pole = self.predicted_pole(&first);
         let here = self
             .machine
             .positions()
@@ -181,7 +255,8 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
             .xyz();
         let t = self.tool.tool_index();
         let q408 = self.plan.params.retract_height;
-        let mut height = pole[t].max(here[t]);
+        let clear = self.clear_height(&[start, first], self.reach());
+        let mut height = pole[t].max(here[t]).max(clear);
         if q408 > 0.0 {
             height = height.max(self.preset[t] + q408);
         }
@@ -202,7 +277,7 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
             }
         }
         self.note(format!(
-            "Q431={}: the sphere is at the active datum X{:+.4} Y{:+.4} Z{:+.4}; moving over it",
+            "Q431={}: the sphere is at the active datum X{:+.4} Y{:+.4} Z{:+.4} (rotary axes at 0); moving over it",
             self.plan.params.preset, self.preset.x, self.preset.y, self.preset.z
         ));
         let up = AxisPositions::new().with(Axis::LINEAR[t], height);
@@ -211,8 +286,64 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
             up,
             self.plan.positioning_feed,
         )?;
+        if (0..3).any(|s| (first[s] - start[s]).abs() > 1e-9) {
+            self.note(format!(
+                "the rotary axes turn from {} to {} at the safe height before the approach",
+                self.rotary(&start),
+                self.rotary(&first)
+            ));
+            self.mv(
+                "turning the rotary axes to the first measurement at the safe height",
+                self.rotary(&first),
+                self.plan.rotary_feed,
+            )?;
+            self.now = first;
+        }
         self.move_xyz("moving over the sphere at the safe height", above)?;
         self.move_xyz("approaching the sphere", pole)
+    }
+
+    /// Every angle set the cycle commands, in order: from the start, each axis's
+    /// reference and positions (from both sides with Q432), back to the start.
+    fn cycle_path(&self) -> Vec<Angles> {
+        let plan = self.plan;
+        let mut path = vec![self.start];
+        for ap in &plan.axes {
+            let b = if plan.backlash_measured(ap) {
+                plan.params.backlash
+            } else {
+                0.0
+            };
+            for &angle in std::iter::once(&0.0).chain(&ap.positions) {
+                if b != 0.0 {
+                    path.push(plan.angles(ap.axis, angle + b));
+                    path.push(plan.angles(ap.axis, angle));
+                    path.push(plan.angles(ap.axis, angle - b));
+                }
+                path.push(plan.angles(ap.axis, angle));
+            }
+        }
+        path.push(self.start);
+        path
+    }
+
+    /// The tool-axis coordinate of the X/Y/Z axes at which the ball passes `gap`
+    /// from the sphere centre (or more) along the tool axis at every angle the rotary
+    /// axes take on the straight way through `path` (sampled every degree).
+    fn clear_height(&self, path: &[Angles], gap: f64) -> f64 {
+        let t = self.tool.tool_index();
+        let mut high = f64::NEG_INFINITY;
+        for w in path.windows(2).chain(std::iter::once(&path[..1])) {
+            let (from, to) = (w[0], *w.last().expect("one angle"));
+            let turn = (0..3).map(|s| (to[s] - from[s]).abs()).fold(0.0, f64::max);
+            let steps = (turn.ceil() as usize).max(1);
+            for i in 0..=steps {
+                let f = i as f64 / steps as f64;
+                let a: Angles = std::array::from_fn(|s| from[s] + (to[s] - from[s]) * f);
+                high = high.max(self.model.predict(&a, &self.table_point)[t] + gap);
+            }
+        }
+        high
     }
 
     /// Measures every planned axis: the 0 deg reference, then its positions (from both
@@ -407,12 +538,12 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
             run_ids.push(run);
             let mut contacts = Vec::with_capacity(1 + p.points as usize);
             let top = c + n * reach;
+            let phi0 = self.equator_start(a, c, what);
             self.move_xyz(&format!("{what}: moving over the pole"), top)?;
             contacts.push(self.probe(&format!("{what}: probing the pole"), -n, dist)?);
             self.move_xyz(&format!("{what}: retracting from the pole"), top)?;
             for i in 0..p.points {
-                let phi =
-                    (p.reference_angle + 360.0 * f64::from(i) / f64::from(p.points)).to_radians();
+                let phi = (phi0 + 360.0 * f64::from(i) / f64::from(p.points)).to_radians();
                 let w = u * phi.cos() + v * phi.sin();
                 let step = format!("{what}: point {} of {}", i + 1, p.points);
                 self.move_xyz(&step, top + w * reach)?;
@@ -472,6 +603,54 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
         unreachable!("the second round returns")
     }
 
+    /// Where the Q423 points around the sphere at `c` (axes at `a`) start: Q380, or,
+    /// when one of their positions or probing paths would leave the software limits
+    /// (a head tilted to B+90 puts a point under the sphere), the first arrangement
+    /// turned from Q380 in steps of 1/24 of their spacing that stays inside: the same
+    /// points around the same equator, approached from where the machine can go.
+    fn equator_start(&mut self, a: &Angles, c: Vector3<f64>, what: &str) -> f64 {
+        let p = &self.plan.params;
+        let (reach, dist) = (self.reach(), self.clearance() + self.probe.dist);
+        let [n, u, v] = self.frame(a);
+        let top = c + n * reach;
+        let guard = hal::motion_guard::MotionGuard::new(&self.ctx.cfg.machine);
+        let rotary = self.rotary(a);
+        let fits = |phi0: f64| {
+            (0..p.points).all(|i| {
+                let phi = (phi0 + 360.0 * f64::from(i) / f64::from(p.points)).to_radians();
+                let w = u * phi.cos() + v * phi.sin();
+                let at = |x: Vector3<f64>| AxisPositions::linear(arr(&x)).merged(&rotary);
+                let from = at(c + w * reach);
+                guard.check_target(&from, "move").is_ok()
+                    && guard.check_target(&at(top + w * reach), "move").is_ok()
+                    && guard
+                        .check_probe(
+                            &from,
+                            &ProbeMove {
+                                direction: arr(&-w),
+                                feed: self.probe.f,
+                                max_distance: dist,
+                            },
+                        )
+                        .is_ok()
+            })
+        };
+        let spacing = 360.0 / f64::from(p.points);
+        let turned = (0..24)
+            .map(|k| p.reference_angle + spacing * f64::from(k) / 24.0)
+            .find(|phi0| fits(*phi0));
+        match turned {
+            Some(phi0) if phi0 != p.reference_angle => {
+                self.note(format!(
+                    "{what}: the probing points start at {phi0:.1} deg instead of Q380 = {:.1} deg, to stay inside the software limits",
+                    p.reference_angle
+                ));
+                phi0
+            }
+            _ => p.reference_angle,
+        }
+    }
+
     /// Turns the rotary axes to `to` following the sphere at the pole, in steps.
     fn track(&mut self, to: Angles) -> Result<(), CycleError> {
         let from = self.now;
@@ -510,6 +689,23 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
         if h > 0.0 {
             let t = self.tool.tool_index();
             let height = self.preset[t] + h;
+            // The probe stands at Q408 unmonitored while the rotary axes turn: it must
+            // clear the sphere by the ball radius and SET_UP at every angle on the way,
+            // this turn's and every later one's (the message names one value for all).
+            let mut path: Vec<Angles> = std::iter::once(self.now)
+                .chain(via)
+                .chain(std::iter::once(to))
+                .collect();
+            path.extend(self.cycle_path());
+            let rs = self.plan.params.sphere_radius + self.probe.radius;
+            let lowest = super::plan::round_up(
+                self.clear_height(&path, rs + self.probe.set_up) - self.preset[t],
+            );
+            if h < lowest {
+                return Err(CycleError::Plan(format!(
+                    "Q408={h}: the retraction height does not clear the sphere by the ball radius + SET_UP at every angle the rotary axes turn through (the sphere rises with them); the lowest Q408 that clears it is {lowest:.4}"
+                )));
+            }
             let [main, minor, _] = self.tool.indices();
             let up = AxisPositions::new().with(Axis::LINEAR[t], height);
             self.mv("retracting to Q408", up, self.plan.positioning_feed)?;

@@ -38,6 +38,7 @@
 //!    corrected errors written through [`crate::kinematics_file::ActiveKinematics::write`]: only after all of that
 //!    succeeded, and beyond `maxModification` only when confirmed.
 
+pub mod dry_run;
 pub mod evaluate;
 pub mod identify;
 pub mod measure;

@@ -26,6 +26,10 @@ pub enum PlanErrorKind {
     SoftwareLimit,
     /// Q406 = 3 but no measured axis has a machine datum to take up its error.
     NoMachineDatum,
+    /// A move of the cycle the machine would refuse, one that would touch the sphere
+    /// outside a probing move, or a Q408 that does not clear the sphere (found by
+    /// planning every move before the first, [`super::dry_run`]).
+    Moves,
 }
 
 /// A 451 block the machine cannot run; the message names the parameter.
@@ -37,7 +41,7 @@ pub struct PlanError {
 }
 
 impl PlanError {
-    fn new(kind: PlanErrorKind, message: impl Into<String>) -> Self {
+    pub(crate) fn new(kind: PlanErrorKind, message: impl Into<String>) -> Self {
         Self {
             kind,
             message: message.into(),
@@ -173,6 +177,12 @@ pub fn plan(
         positioning_feed,
         rotary_feed,
     })
+}
+
+/// `v` rounded up to the 4 decimals a message shows, so that the value it names as
+/// the lowest that clears does clear.
+pub(crate) fn round_up(v: f64) -> f64 {
+    (v * 1e4 - 1e-3).ceil() / 1e4
 }
 
 /// The axes Q414/Q418/Q422 ask for that the machine has, with their measuring

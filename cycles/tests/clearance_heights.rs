@@ -1,0 +1,127 @@
+//! Clearance heights that would cut through what is measured are refused at the block,
+//! before anything moves: cycle 451's Q408 below the sphere's top plus the ball and
+//! SET_UP, cycle 444's Q260 below the start of its point. Each on both sides of the
+//! limit, with several spheres, probes, normals and datums.
+
+mod common;
+
+use common::{MockMachine, Surface};
+use nalgebra::Vector3;
+use probebridge_cycles::runner::preflight_program;
+use probebridge_cycles::{CyclesConfig, Program, Status};
+use std::path::PathBuf;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// configs/programs/451-check.h measuring C alone (C turns the sphere about Z, its
+/// height stays), with Q407 and Q408 set.
+fn program451(cfg: &CyclesConfig, q407: f64, q408: f64) -> Program {
+    let text = std::fs::read_to_string(root().join("configs/programs/451-check.h")).unwrap();
+    let text = text
+        .replacen("Q407=+12.5", &format!("Q407={q407:+}"), 1)
+        .replacen("Q408=+0", &format!("Q408={q408:+}"), 1)
+        .replacen("Q414=+3", "Q414=+0", 1);
+    Program::parse(&text, cfg).unwrap_or_else(|e| panic!("{e}"))
+}
+
+#[test]
+fn q408_below_the_sphere_top_plus_ball_and_set_up_is_refused_naming_the_lowest() {
+    let dir = common::temp_dir("q408");
+    let kinematics = dir.join("k.toml");
+    for (q407, radius, set_up) in [(12.5, 3.0, 2.0), (7.25, 1.5, 0.8), (30.0, 2.5, 4.0)] {
+        let mut cfg = CyclesConfig::load(&root().join("configs/machines/table-ac.toml")).unwrap();
+        cfg.probes[0].radius = radius;
+        cfg.probes[0].set_up = set_up;
+        let lowest = q407 + radius + set_up;
+        let check = |q408: f64| {
+            preflight_program(&program451(&cfg, q407, q408), 0b111, &cfg, &kinematics)
+                .map_err(|e| e.to_string())
+        };
+        for q408 in [1.0, lowest * 0.5, lowest - 0.01] {
+            let e = check(q408).unwrap_err();
+            assert!(
+                e.contains(&format!("(cycle 451): Q408={q408}: "))
+                    && e.contains(&format!("the lowest Q408 that clears it is {lowest:.4}")),
+                "{e}"
+            );
+        }
+        for q408 in [lowest, lowest + 0.01, lowest + 40.0] {
+            check(q408).unwrap_or_else(|e| panic!("Q408={q408}: {e}"));
+        }
+        // Q408 = 0: no retraction height, nothing to clear.
+        check(0.0).unwrap();
+    }
+}
+
+fn block444(nominal: [f64; 3], normal: [f64; 3], q320: f64, q260: f64) -> String {
+    format!(
+        "5 TCH PROBE 444 PROBING 3D ~\n  Q263={:+} ~\n  Q264={:+} ~\n  Q294={:+} ~\n  Q581={:+} ~\n  Q582={:+} ~\n  Q583={:+} ~\n  Q320={q320:+} ~\n  Q260={q260:+} ~\n  QS400=\" \" ~\n  Q309=+0\n",
+        nominal[0], nominal[1], nominal[2], normal[0], normal[1], normal[2]
+    )
+}
+
+/// A program with a datum shift of `shift` (program coordinates relative to it).
+fn program444(shift: [f64; 3], block: &str) -> Program {
+    let text = format!(
+        "0 BEGIN PGM P MM\n1 TOOL CALL \"TOUCH_PROBE\" Z\n2 TRANS DATUM AXIS X{:+} Y{:+} Z{:+}\n{block}99 END PGM P MM\n",
+        shift[0], shift[1], shift[2]
+    );
+    Program::parse(&text, &common::config()).unwrap_or_else(|e| panic!("{e}\n{text}"))
+}
+
+#[test]
+fn q260_below_the_start_of_the_444_point_is_refused_before_anything_moves() {
+    let cfg = common::config();
+    // TOUCH_PROBE: R 3, SET_UP 2.
+    for (nominal, normal, q320, shift) in [
+        ([0.0, 0.0, 10.0], [0.0, 0.0, 1.0], 0.0, [0.0; 3]),
+        ([12.0, -4.0, -3.5], [0.0, 0.6, 0.8], 1.5, [5.0, 5.0, 40.0]),
+        ([-20.0, 7.0, 22.0], [1.0, 0.0, 0.0], 3.0, [0.0, 0.0, -15.0]),
+    ] {
+        let n = Vector3::from(normal).normalize();
+        let start = Vector3::from(nominal) + n * (3.0 + 2.0 + q320);
+        for q260 in [start.z - 0.01, start.z - 15.0, -50.0] {
+            let prog = program444(shift, &block444(nominal, normal, q320, q260));
+            let e = preflight_program(&prog, 0b111, &cfg, std::path::Path::new("k.toml"))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(&format!("Q260={q260} is below the start of the point"))
+                    && e.contains(&format!("({:.4} =", start.z))
+                    && e.contains("block 5"),
+                "{e}"
+            );
+            // `run` refuses the same, at the block, before its first move.
+            let mut m = MockMachine::new(vec![Surface::Plane {
+                point: Vector3::from(nominal) + Vector3::from(shift),
+                normal: n,
+            }]);
+            let (report, _) = common::run(&prog, &mut m, &common::temp_dir("q260"), true);
+            assert_eq!(m.motion_count(), 0, "Q260={q260}: something moved");
+            assert_eq!(report.cycles[0].status, Status::Error);
+            let stopped = report.stopped.unwrap();
+            assert!(
+                stopped.contains(&e[e.find("Q260=").unwrap()..]),
+                "{stopped} / {e}"
+            );
+        }
+        for q260 in [start.z, start.z + 0.01, start.z + 100.0] {
+            let prog = program444(shift, &block444(nominal, normal, q320, q260));
+            preflight_program(&prog, 0b111, &cfg, std::path::Path::new("k.toml"))
+                .unwrap_or_else(|e| panic!("Q260={q260}: {e}"));
+            let mut m = MockMachine::new(vec![Surface::Plane {
+                point: Vector3::from(nominal) + Vector3::from(shift),
+                normal: n,
+            }]);
+            let (report, _) = common::run(&prog, &mut m, &common::temp_dir("q260-ok"), true);
+            assert_eq!(
+                report.cycles[0].status,
+                Status::Ok,
+                "Q260={q260}: {:?}",
+                report.stopped
+            );
+        }
+    }
+}

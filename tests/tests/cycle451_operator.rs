@@ -1,0 +1,593 @@
+//! Cycle 451 as an operator uses it, on the simulated machines over CANopen: a probe
+//! pre-positioned by eye (off the centre, too low, too high), rotary axes left off
+//! their reference, clearance heights on both sides of their limit, and `check`
+//! (the preflight) refusing exactly what `run` refuses, at the same step.
+
+use cycles::program::Program;
+use cycles::progress::ProgressEvent;
+use cycles::results::{ProgramReport, Status};
+use cycles::runner::{preflight_program, run_program, RunOptions};
+use probebridge_tests::conformance::{Backend, CanInproc};
+use probebridge_tests::spec451::errors_of;
+use probebridge_tests::{configs_dir, cycles_config};
+use std::path::PathBuf;
+
+/// Per rotary axis: (start, end, incidence, points).
+#[derive(Clone, Copy, Debug)]
+struct Ax(f64, f64, f64, u32);
+const NONE: Ax = Ax(0.0, 0.0, 0.0, 0);
+
+#[derive(Clone, Debug)]
+struct P451 {
+    mode: u8,
+    radius: f64,
+    q320: f64,
+    q408: f64,
+    q380: f64,
+    a: Ax,
+    b: Ax,
+    c: Ax,
+    points: u32,
+    preset: u8,
+    backlash: f64,
+}
+
+impl Default for P451 {
+    fn default() -> Self {
+        P451 {
+            mode: 2,
+            radius: 12.5,
+            q320: 0.0,
+            q408: 0.0,
+            q380: 0.0,
+            a: NONE,
+            b: NONE,
+            c: NONE,
+            points: 4,
+            preset: 1,
+            backlash: 0.0,
+        }
+    }
+}
+
+fn block451(p: &P451) -> String {
+    let ax = |a: Ax, q: [u32; 4]| {
+        format!(
+            "  Q{}={:+} ~\n  Q{}={:+} ~\n  Q{}={:+} ~\n  Q{}={:+} ~\n",
+            q[0], a.0, q[1], a.1, q[2], a.2, q[3], a.3
+        )
+    };
+    format!(
+        "20 TCH PROBE 451 MEASURE KINEMATICS ~\n  Q406={:+} ;MODE ~\n  Q407={:+} ;SPHERE RADIUS ~\n\
+  Q320={:+} ;SET-UP CLEARANCE ~\n  Q408={:+} ;RETR. HEIGHT ~\n  Q253=+750 ;F PRE-POSITIONING ~\n\
+  Q380={:+} ;REFERENCE ANGLE ~\n{}{}{}  Q423={:+} ;NO. OF PROBE POINTS ~\n  Q431={:+} ;PRESET ~\n\
+  Q432={:+} ;BACKLASH, ANG. RANGE\n",
+        p.mode,
+        p.radius,
+        p.q320,
+        p.q408,
+        p.q380,
+        ax(p.a, [411, 412, 413, 414]),
+        ax(p.b, [415, 416, 417, 418]),
+        ax(p.c, [419, 420, 421, 422]),
+        p.points,
+        p.preset,
+        p.backlash
+    )
+}
+
+/// Tool axis `axis`: up along it, over `start` in the working plane, down to `start`
+/// along it; `before` (more blocks) then the 451 block.
+fn program(p: &P451, axis: char, start: [f64; 3], before: &str) -> String {
+    let t = "XYZ".find(axis).unwrap();
+    let names = ['X', 'Y', 'Z'];
+    let plane: Vec<String> = (0..3)
+        .filter(|&i| i != t)
+        .map(|i| format!("{}{:+.4}", names[i], start[i]))
+        .collect();
+    format!(
+        "0 BEGIN PGM K451 MM\n1 TOOL CALL \"TOUCH_PROBE\" {axis}\n2 L {axis}{:+.4} R0 FMAX\n\
+3 L {} R0 FMAX\n4 L {axis}{:+.4} R0 FMAX\n{before}{}99 END PGM K451 MM\n",
+        start[t] + 80.0,
+        plane.join(" "),
+        start[t],
+        block451(p)
+    )
+}
+
+fn load(name: &str) -> sim::Scenario {
+    sim::Scenario::load(
+        &configs_dir().join("scenarios").join(name),
+        Some(&configs_dir().join("machines")),
+    )
+    .unwrap()
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let d = std::env::temp_dir().join(format!("pb-451op-{name}-{}-{n}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+struct Run {
+    report: ProgramReport,
+    events: Vec<ProgressEvent>,
+    /// What `check` says of the same program (its preflight): `None` = ok.
+    check: Option<String>,
+}
+
+fn run_text(text: &str, sc: &sim::Scenario, cfg: &cycles::CyclesConfig, tag: &str) -> Run {
+    let program = Program::parse(text, cfg).unwrap_or_else(|e| panic!("{e}\n{text}"));
+    let dir = temp_dir(tag);
+    let kinematics = dir.join("kinematics.toml");
+    let check = preflight_program(&program, cfg.machine.axis_mask(), cfg, &kinematics)
+        .err()
+        .map(|e| e.to_string());
+    let mut m = CanInproc::open(sc);
+    let mut events = Vec::new();
+    let mut confirm = |_: &str| true;
+    let mut progress = |e| events.push(e);
+    let mut opts = RunOptions {
+        out_dir: dir.clone(),
+        confirm: &mut confirm,
+        progress: &mut progress,
+        kinematics: Some(kinematics),
+        estimator: None,
+    };
+    let report = run_program(&program, &mut m, cfg, &mut opts);
+    let _ = std::fs::remove_dir_all(&dir);
+    Run {
+        report,
+        events,
+        check,
+    }
+}
+
+fn json(r: &Run) -> serde_json::Value {
+    let v: serde_json::Value = serde_json::from_str(&r.report.to_json()).unwrap();
+    v["cycles"][0].clone()
+}
+
+/// The run's 451 result: errors after, and the preset the cycle set (its centre).
+fn result(r: &Run) -> (std::collections::BTreeMap<String, f64>, [f64; 3]) {
+    assert!(r.check.is_none(), "check refused: {:?}", r.check);
+    let c = &r.report.cycles[0];
+    assert_eq!(c.status, Status::Ok, "{:?}", c.message);
+    let v = json(r);
+    let after = errors_of(&v["kinematics"]["errors_after"]);
+    let p = &v["kinematics"]["preset_after"];
+    (after, [0, 1, 2].map(|i| p[i].as_f64().unwrap()))
+}
+
+/// A point `f` x (Q407 + R) off `centre` in the working plane of tool axis `t` at
+/// `deg`, `gap` above the sphere's pole along the tool axis (ball centre).
+fn start_at(centre: [f64; 3], t: usize, rs: f64, f: f64, deg: f64, gap: f64) -> [f64; 3] {
+    let [main, minor] = match t {
+        0 => [1, 2],
+        1 => [2, 0],
+        _ => [0, 1],
+    };
+    let mut s = centre;
+    s[main] += f * rs * deg.to_radians().cos();
+    s[minor] += f * rs * deg.to_radians().sin();
+    s[t] += rs + gap;
+    s
+}
+
+/// Starts up to 0.6 x (Q407 + R) off the centre in several directions, from Q320 +
+/// SET_UP up to the probing distance above the pole and below Q320 + SET_UP, with the
+/// tool axis Z, Y and X: the same kinematics (1e-4) and preset (1e-3) as a centred
+/// start, and no contact outside a probing move (the simulator stops at any).
+#[test]
+fn inaccurate_pre_positions_give_the_centred_result() {
+    // (scenario, tool axis, sphere centre, params, [(off, direction deg, gap)]).
+    type Case = (&'static str, char, [f64; 3], P451, Vec<(f64, f64, f64)>);
+    let cases: Vec<Case> = vec![
+        (
+            "demo-sphere.toml",
+            'Z',
+            [50.0, -30.0, 80.0],
+            P451 {
+                a: Ax(-60.0, 60.0, 0.0, 2),
+                c: Ax(90.0, 270.0, 0.0, 3),
+                ..P451::default()
+            },
+            vec![(0.6, 0.0, 2.0), (0.6, 137.0, 12.0), (0.45, 250.0, 0.7)],
+        ),
+        (
+            "horizontal-y-sphere.toml",
+            'Y',
+            [50.0, -30.0, 80.0],
+            P451 {
+                a: Ax(-45.0, 75.0, 0.0, 2),
+                c: Ax(90.0, 270.0, 0.0, 2),
+                points: 5,
+                q320: 1.5,
+                ..P451::default()
+            },
+            vec![(0.58, 300.0, 3.5), (0.3, 45.0, 13.0)],
+        ),
+        (
+            "horizontal-x-head-b-table-c.toml",
+            'X',
+            [40.0, 25.0, 60.0],
+            P451 {
+                b: Ax(-50.0, 40.0, 0.0, 2),
+                c: Ax(120.0, 240.0, 0.0, 2),
+                points: 3,
+                preset: 3,
+                ..P451::default()
+            },
+            vec![(0.6, 210.0, 2.0), (0.5, 80.0, 9.0)],
+        ),
+    ];
+    for (name, axis, centre, p, starts) in cases {
+        let sc = load(name);
+        let cfg = cycles_config(&sc);
+        let t = "XYZ".find(axis).unwrap();
+        let rs = p.radius + 3.0;
+        let clearance = 2.0 + p.q320;
+        let centred = start_at(centre, t, rs, 0.0, 0.0, clearance);
+        let r0 = run_text(&program(&p, axis, centred, ""), &sc, &cfg, "centred");
+        let (e0, p0) = result(&r0);
+        for (k, (f, deg, gap)) in starts.into_iter().enumerate() {
+            let s = start_at(centre, t, rs, f, deg, gap);
+            let r = run_text(&program(&p, axis, s, ""), &sc, &cfg, "off");
+            let (e, pr) = result(&r);
+            for (name_e, v) in &e0 {
+                assert!(
+                    (e[name_e] - v).abs() < 1e-4,
+                    "{name} start {k} ({f} x {rs} at {deg} deg, {gap} above): {name_e} {} vs centred {v}",
+                    e[name_e]
+                );
+            }
+            for i in 0..3 {
+                assert!(
+                    (pr[i] - p0[i]).abs() < 1e-3,
+                    "{name} start {k}: preset {pr:?} vs centred {p0:?}"
+                );
+            }
+            assert!(
+                r.events.iter().any(
+                    |e| matches!(e, ProgressEvent::Note { text, .. } if text.contains("first pass"))
+                ),
+                "{name}: no first pass"
+            );
+        }
+    }
+}
+
+/// A start so far off that the pole probe misses the sphere: today's message, and
+/// nothing moves after that probing move.
+#[test]
+fn a_start_whose_pole_probe_misses_stops_and_nothing_else_moves() {
+    for (name, axis, centre, f) in [
+        ("demo-sphere.toml", 'Z', [50.0, -30.0, 80.0], 1.08),
+        ("horizontal-y-sphere.toml", 'Y', [50.0, -30.0, 80.0], 1.4),
+    ] {
+        let sc = load(name);
+        let cfg = cycles_config(&sc);
+        let t = "XYZ".find(axis).unwrap();
+        let p = P451 {
+            c: Ax(90.0, 270.0, 0.0, 3),
+            ..P451::default()
+        };
+        let s = start_at(centre, t, 15.5, f, 33.0, 2.0);
+        let r = run_text(&program(&p, axis, s, ""), &sc, &cfg, "miss");
+        assert!(r.check.is_none(), "{:?}", r.check);
+        let c = &r.report.cycles[0];
+        assert_eq!(c.status, Status::Error);
+        let m = c.message.as_deref().unwrap();
+        assert!(
+            m.contains("probe did not trigger")
+                && m.contains("before cycle 451 position the probe over the sphere centre"),
+            "{m}"
+        );
+        let started = r
+            .events
+            .iter()
+            .position(|e| matches!(e, ProgressEvent::CycleStarted { .. }))
+            .unwrap();
+        let after: Vec<_> = r.events[started..]
+            .iter()
+            .filter(|e| matches!(e, ProgressEvent::Move { .. } | ProgressEvent::Probe { .. }))
+            .collect();
+        assert_eq!(after.len(), 1, "{after:?}");
+        assert!(matches!(after[0], ProgressEvent::Probe { .. }));
+    }
+}
+
+/// `cfg` with preset row 1 at `centre`, activated by cycle 247 in the program.
+fn with_preset_row(cfg: &mut cycles::CyclesConfig, centre: [f64; 3]) {
+    let mut row = cycles::preset_table::Preset::origin(1);
+    [row.x, row.y, row.z] = centre;
+    cfg.presets.rows.push(row);
+}
+
+/// Q431 = 0 with a rotary axis left off its reference by the program (`L C+90`,
+/// `L A+30`, both): the datum is the sphere centre with the axes at 0, the axes turn
+/// at a height that clears the sphere before the approach, and the result is the one
+/// of a start with every axis at 0; on the vertical and the Y-spindle machine.
+#[test]
+fn q431_0_with_rotary_axes_off_their_reference() {
+    for (name, axis, centre, turned) in [
+        (
+            "demo-sphere.toml",
+            'Z',
+            [50.0, -30.0, 80.0],
+            vec!["L C+90 R0 FMAX"],
+        ),
+        (
+            "demo-sphere.toml",
+            'Z',
+            [50.0, -30.0, 80.0],
+            vec!["L A+30 R0 FMAX"],
+        ),
+        (
+            "demo-sphere.toml",
+            'Z',
+            [50.0, -30.0, 80.0],
+            vec!["L A-25 C+200 R0 FMAX"],
+        ),
+        (
+            "horizontal-y-sphere.toml",
+            'Y',
+            [50.0, -30.0, 80.0],
+            vec!["L C-135 R0 FMAX", "L A+40 R0 FMAX"],
+        ),
+    ] {
+        let sc = load(name);
+        let mut cfg = cycles_config(&sc);
+        with_preset_row(&mut cfg, centre);
+        let p = P451 {
+            preset: 0,
+            a: Ax(-60.0, 60.0, 0.0, 2),
+            c: Ax(90.0, 270.0, 0.0, 3),
+            ..P451::default()
+        };
+        let t = "XYZ".find(axis).unwrap();
+        // In preset 1's coordinates: 60 above the sphere, 70 off in the plane.
+        let mut away = [70.0, 0.0, 0.0];
+        away[t] = 60.0;
+        let base = "10 CYCL DEF 247 DATUM SETTING ~\n  Q339=+1 ;DATUM NUMBER\n".to_string();
+        let reference = run_text(&program(&p, axis, away, &base), &sc, &cfg, "ref0");
+        let (e0, _) = result(&reference);
+        let before = format!(
+            "{base}{}",
+            turned
+                .iter()
+                .enumerate()
+                .map(|(i, l)| format!("{} {l}\n", 11 + i))
+                .collect::<String>()
+        );
+        let r = run_text(&program(&p, axis, away, &before), &sc, &cfg, "turned");
+        let (e, _) = result(&r);
+        for (n, v) in &e0 {
+            assert!(
+                (e[n] - v).abs() < 1e-4,
+                "{name} {turned:?}: {n} {} vs {v}",
+                e[n]
+            );
+        }
+        let v = json(&r);
+        for q in ["Q147", "Q148", "Q149"] {
+            assert!(
+                v["q"][q].as_f64().unwrap().abs() < 1e-6,
+                "{q}: {}",
+                v["q"][q]
+            );
+        }
+        assert!(
+            r.events.iter().any(
+                |e| matches!(e, ProgressEvent::Note { text, .. } if text.contains("turn from"))
+            ),
+            "{name}: the axes did not turn before the approach"
+        );
+    }
+}
+
+/// The seed's second 451 example on head-b-table-c.toml (B -90..+90 in 4, C 90..270
+/// in 3, Q423 = 3, Q431 = 1, Q432 = 0.5): `check` accepts it and it runs, B+90
+/// approached from the side within the software limits.
+#[test]
+fn the_seeds_second_example_runs_on_the_b_head() {
+    let sc = load("head-b-table-c.toml");
+    let cfg = cycles_config(&sc);
+    let p = P451 {
+        mode: 1,
+        b: Ax(-90.0, 90.0, 0.0, 4),
+        c: Ax(90.0, 270.0, 0.0, 3),
+        points: 3,
+        preset: 1,
+        backlash: 0.5,
+        ..P451::default()
+    };
+    let s = start_at([40.0, 25.0, 60.0], 2, 15.5, 0.0, 0.0, 2.0);
+    let r = run_text(&program(&p, 'Z', s, ""), &sc, &cfg, "seed2");
+    let (e, _) = result(&r);
+    for n in ["EX0B", "EZ0B", "EX0C", "EY0C"] {
+        let truth = sc.truth.get(n).unwrap();
+        // Mode 1 corrects positions only (the angle errors stay in them): near.
+        assert!((e[n] - truth).abs() < 0.02, "{n}: {} vs {truth}", e[n]);
+    }
+    assert!(
+        r.events.iter().any(
+            |e| matches!(e, ProgressEvent::Note { text, .. } if text.contains("instead of Q380"))
+        ),
+        "B+90 not approached from the side"
+    );
+}
+
+/// Q408 on a tilting table: at the centre's own height the sphere rises when A tilts;
+/// Q408 just below what clears it at every angle on the way is refused by `check` and
+/// `run` alike with the lowest value, which then runs.
+#[test]
+fn q408_must_clear_the_sphere_at_every_angle_on_the_way() {
+    let sc = load("demo-sphere.toml");
+    let cfg = cycles_config(&sc);
+    let mut p = P451 {
+        mode: 0,
+        q408: 18.0,
+        a: Ax(-90.0, 90.0, 0.0, 3),
+        ..P451::default()
+    };
+    let s = start_at([50.0, -30.0, 80.0], 2, 15.5, 0.0, 0.0, 2.0);
+    let r = run_text(&program(&p, 'Z', s, ""), &sc, &cfg, "q408-low");
+    let check = r
+        .check
+        .clone()
+        .expect("check accepted a Q408 that cuts the sphere");
+    assert!(
+        check.contains("Q408=18") && check.contains("the lowest Q408 that clears it is"),
+        "{check}"
+    );
+    let stopped = r.report.stopped.clone().unwrap();
+    let msg = &check[check.find("Q408=").unwrap()..];
+    assert!(stopped.contains(msg), "run: {stopped}\ncheck: {check}");
+    // Refused before the first block: not even the L blocks moved.
+    assert!(
+        !r.events
+            .iter()
+            .any(|e| matches!(e, ProgressEvent::Move { .. })),
+        "something moved"
+    );
+    let lowest: f64 = msg
+        .rsplit("the lowest Q408 that clears it is ")
+        .next()
+        .unwrap()
+        .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    // Higher than the untilted Q407 + R + SET_UP: the sphere rises with A.
+    assert!(lowest > 17.5, "{lowest}");
+    p.q408 = lowest;
+    let r = run_text(&program(&p, 'Z', s, ""), &sc, &cfg, "q408-ok");
+    result(&r);
+}
+
+/// `check` and `run` agree: what `check` refuses, `run` refuses before its first
+/// move with the same message; what `check` accepts, `run` carries out. On every
+/// shipped program on its scenario, the seed's two 451 examples, and the issue's
+/// cases (Q408 = +350 leaving the limits after the datum moved to the sphere, Q320 =
+/// +99999, Q408 = +5, a 444 Q260 under its point).
+#[test]
+fn check_and_run_agree_at_the_same_move() {
+    let read =
+        |name: &str| std::fs::read_to_string(configs_dir().join("programs").join(name)).unwrap();
+    let check451 = read("451-check.h");
+    let seed = |b: Ax, c: Ax, points: u32, preset: u8, backlash: f64| {
+        let p = P451 {
+            mode: 0,
+            b,
+            c,
+            points,
+            preset,
+            backlash,
+            ..P451::default()
+        };
+        let s = start_at([40.0, 25.0, 60.0], 2, 15.5, 0.0, 0.0, 2.0);
+        program(
+            &p,
+            'Z',
+            s,
+            "10 CYCL DEF 247 DATUM SETTING ~\n  Q339=+1 ;DATUM NUMBER\n",
+        )
+    };
+    // (scenario, program text, preset row 1, refused?)
+    let cases: Vec<(&str, String, Option<[f64; 3]>, bool)> = vec![
+        ("tilted-plane.toml", read("431-plane.h"), None, false),
+        ("plane-z10.toml", read("431-plane.h"), None, false),
+        ("tilted-plane-y.toml", read("431-plane-y.h"), None, false),
+        ("freeform.toml", read("444-freeform.h"), None, false),
+        ("seed-444.toml", read("444-seed.h"), None, false),
+        (
+            "seed-444.toml",
+            read("444-seed.h").replace("Q260=+100", "Q260=-1"),
+            None,
+            true,
+        ),
+        ("demo-sphere.toml", check451.clone(), None, false),
+        ("demo-sphere.toml", read("451-optimise.h"), None, false),
+        (
+            "demo-sphere.toml",
+            read("451-preset-247.h"),
+            Some([50.0, -30.0, 80.0]),
+            false,
+        ),
+        ("demo-sphere.toml", read("451-preset-set.h"), None, false),
+        ("demo-sphere.toml", read("450-save-restore.h"), None, false),
+        (
+            "demo-sphere.toml",
+            check451.replace("Q408=+0 ", "Q408=+350 "),
+            None,
+            true,
+        ),
+        (
+            "demo-sphere.toml",
+            check451.replace("Q408=+0 ", "Q408=+5 "),
+            None,
+            true,
+        ),
+        (
+            "demo-sphere.toml",
+            check451.replace("Q320=+0 ", "Q320=+99999 "),
+            None,
+            true,
+        ),
+        // Seed example 1 (Q431 = 0, B and C from -90 to +90 in 2, Q423 = 4): at B+-90
+        // four points cannot all stay above Z-200 on this machine.
+        (
+            "head-b-table-c.toml",
+            seed(Ax(-90.0, 90.0, 0.0, 2), Ax(-90.0, 90.0, 0.0, 2), 4, 0, 0.0),
+            Some([40.0, 25.0, 60.0]),
+            true,
+        ),
+        // Seed example 2.
+        (
+            "head-b-table-c.toml",
+            seed(Ax(-90.0, 90.0, 0.0, 4), Ax(90.0, 270.0, 0.0, 3), 3, 1, 0.5),
+            Some([40.0, 25.0, 60.0]),
+            false,
+        ),
+    ];
+    for (k, (name, text, row, refused)) in cases.into_iter().enumerate() {
+        let sc = load(name);
+        let mut cfg = cycles_config(&sc);
+        if let Some(c) = row {
+            with_preset_row(&mut cfg, c);
+        }
+        let r = run_text(&text, &sc, &cfg, &format!("agree{k}"));
+        match &r.check {
+            Some(check) => {
+                assert!(refused, "case {k} ({name}): check refused: {check}");
+                let stopped = r.report.stopped.clone().unwrap_or_default();
+                // The same message (after "line L, block N (cycle C): ").
+                let msg = check.split_once("): ").map_or(check.as_str(), |(_, m)| m);
+                assert!(
+                    stopped.contains(msg),
+                    "case {k}: run: {stopped}\ncheck: {check}"
+                );
+                assert!(
+                    !r.events.iter().any(|e| matches!(
+                        e,
+                        ProgressEvent::Move { .. } | ProgressEvent::Probe { .. }
+                    )),
+                    "case {k}: something moved"
+                );
+            }
+            None => {
+                assert!(!refused, "case {k} ({name}): check accepted it");
+                assert!(
+                    r.report.cycles.iter().all(|c| c.status == Status::Ok),
+                    "case {k} ({name}): {:?}",
+                    r.report.stopped
+                );
+            }
+        }
+    }
+}
