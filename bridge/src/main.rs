@@ -110,7 +110,8 @@ enum Cmd {
         program: PathBuf,
         #[command(flatten)]
         machine: MachineArgs,
-        /// Folder for the protocols (default: next to the program).
+        /// Folder for the protocols (default: protocols/ in the machine's state
+        /// folder).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Write the results as JSON.
@@ -120,32 +121,25 @@ enum Cmd {
         #[arg(long)]
         yes: bool,
         /// Active kinematics file of the machine (cycles 450/451); default:
-        /// <machine>.kinematics.toml beside the machine configuration.
+        /// <machine>.kinematics.toml in the machine's state folder.
         #[arg(long)]
         kinematics: Option<PathBuf>,
+        /// The state directory (preset table, kinematics, protocols, one folder per
+        /// machine); default: $XDG_STATE_HOME/probebridge, else
+        /// ~/.local/state/probebridge.
+        #[arg(long, value_name = "DIR")]
+        state_dir: Option<PathBuf>,
         /// Record the run in this history: an SQLite file (as `serve` keeps it) or a
         /// PostgreSQL server's `postgres://` URL.
         #[arg(long, value_name = "FILE|URL")]
         history: Option<PathBuf>,
         /// Preset table of the machine (cycles 247, 451); default:
-        /// <machine>.presets.toml beside the machine configuration.
+        /// <machine>.presets.toml in the machine's state folder.
         #[arg(long)]
         presets: Option<PathBuf>,
     },
     /// Parse and validate an NC program; nothing moves. Exit 0, or 2 with every error.
-    Check {
-        program: PathBuf,
-        #[command(flatten)]
-        machine: MachineArgs,
-        /// Active kinematics file the program's cycle 451 would use; default:
-        /// <machine>.kinematics.toml beside the machine configuration.
-        #[arg(long)]
-        kinematics: Option<PathBuf>,
-        /// Preset table the program's cycle 247 is checked against; default:
-        /// <machine>.presets.toml beside the machine configuration.
-        #[arg(long)]
-        presets: Option<PathBuf>,
-    },
+    Check(CheckArgs),
     /// Run the simulated drives of a scenario alone on a SocketCAN interface, or the
     /// simulated PLC on Modbus TCP (--modbus HOST:PORT) or RTU (--modbus-rtu DEVICE).
     Sim {
@@ -231,6 +225,37 @@ enum BenchCmd {
     Trigger(commands::bench::BenchArgs),
 }
 
+/// `check`'s arguments.
+#[derive(Args)]
+struct CheckArgs {
+    program: PathBuf,
+    #[command(flatten)]
+    machine: MachineArgs,
+    /// Active kinematics file the program's cycle 451 would use; default:
+    /// <machine>.kinematics.toml in the machine's state folder.
+    #[arg(long)]
+    kinematics: Option<PathBuf>,
+    /// Preset table the program's cycle 247 is checked against; default:
+    /// <machine>.presets.toml in the machine's state folder.
+    #[arg(long)]
+    presets: Option<PathBuf>,
+    /// The state directory (see `run`); `check` only reads it.
+    #[arg(long, value_name = "DIR")]
+    state_dir: Option<PathBuf>,
+}
+
+impl CheckArgs {
+    fn run(self) -> Result<u8, String> {
+        commands::check::run(
+            &self.program,
+            &self.machine.options(),
+            self.kinematics.as_deref(),
+            self.presets.as_deref(),
+            self.state_dir.as_deref(),
+        )
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     // iceoryx2 logs its defaults at warning level; keep the operator's terminal for
@@ -264,6 +289,7 @@ fn main() -> ExitCode {
             json,
             yes,
             kinematics,
+            state_dir,
             history,
             presets,
         } => machine.moving_options().and_then(|machine| {
@@ -276,14 +302,10 @@ fn main() -> ExitCode {
                 kinematics,
                 history,
                 presets,
+                state_dir,
             })
         }),
-        Cmd::Check {
-            program,
-            machine,
-            kinematics,
-            presets,
-        } => commands::check::run(&program, &machine.options(), kinematics, presets.as_deref()),
+        Cmd::Check(c) => c.run(),
         Cmd::Demo { machine } => machine
             .moving_options()
             .and_then(|m| commands::demo::run(&m))

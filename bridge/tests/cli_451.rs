@@ -270,7 +270,6 @@ fn run_451_restarts_a_killed_estimator_and_gives_the_same_results() {
             "--service",
             &format!("pb-cli-restart451-{}", std::process::id()),
         ])
-        .args(["--presets", killed.join("presets.toml").to_str().unwrap()])
         .args(["--kinematics", kin.to_str().unwrap()])
         .stderr(Stdio::piped())
         .stdout(Stdio::null())

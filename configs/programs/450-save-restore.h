@@ -3,15 +3,20 @@
 2 ; configs/scenarios/demo-sphere.toml: save the active kinematics under designation
 3 ; 1, let 451 optimise and write the positions, then restore what was saved: the
 4 ; kinematics file is as before the program (its 451 result stays in the protocol).
-5 ; Give --kinematics FILE and --presets FILE to keep the shipped files as they are.
-6 TOOL CALL "TOUCH_PROBE" Z
-7 TCH PROBE 450 SAVE KINEMATICS ~
+5 ; All of it in the machine's state directory, never configs/.
+6 ; The probe is put over the sphere in machine coordinates (M91), whatever the
+7 ; active preset; cycle 247 makes row 1, the sphere centre, the row Q431 sets,
+8 ; so the program runs again and again, and row 0 stays at the machine origin.
+9 TOOL CALL "TOUCH_PROBE" Z
+10 CYCL DEF 247 DATUM SETTING ~
+    Q339=+1        ;DATUM NUMBER
+11 TCH PROBE 450 SAVE KINEMATICS ~
     Q410=+0        ;MODE ~
     Q409=+1        ;MEMORY DESIGNATION
-8 L Z+150 R0 FMAX
-9 L X+50 Y-30 R0 FMAX
-10 L Z+102.5 R0 FMAX
-12 TCH PROBE 451 MEASURE KINEMATICS ~
+12 L Z+150 R0 FMAX M91
+13 L X+50 Y-30 R0 FMAX M91
+14 L Z+102.5 R0 FMAX M91
+16 TCH PROBE 451 MEASURE KINEMATICS ~
     Q406=+1        ;MODE ~
     Q407=+12.5     ;SPHERE RADIUS ~
     Q320=+0        ;SET-UP CLEARANCE ~
@@ -33,8 +38,8 @@
     Q423=+4        ;NO. OF PROBE POINTS ~
     Q431=+1        ;PRESET ~
     Q432=+0        ;BACKLASH, ANG. RANGE
-13 L Z+150 R0 FMAX
-14 TCH PROBE 450 SAVE KINEMATICS ~
+17 L Z+150 R0 FMAX M91
+18 TCH PROBE 450 SAVE KINEMATICS ~
     Q410=+1        ;MODE ~
     Q409=+1        ;MEMORY DESIGNATION
-15 END PGM 450-save-restore MM
+19 END PGM 450-save-restore MM

@@ -3,13 +3,18 @@
 2 ; A at -90, -30, +30, +90 and C at 90, 180, 270 deg around the 0 deg references.
 3 ; The probe goes over the sphere (R12.5 at X+50 Y-30 Z+80) first. Q431=1 sets the
 4 ; preset to the sphere centre before measuring. The corrected position errors of A
-5 ; and C go into the active kinematics file: give --kinematics FILE to keep the
-6 ; shipped configuration as it is.
-7 TOOL CALL "TOUCH_PROBE" Z
-8 L Z+150 R0 FMAX
-9 L X+50 Y-30 R0 FMAX
-10 L Z+102.5 R0 FMAX
-11 TCH PROBE 451 MEASURE KINEMATICS ~
+5 ; and C go into the machine's active kinematics file (in its state directory, never
+6 ; configs/).
+7 ; The probe is put over the sphere in machine coordinates (M91), whatever the
+8 ; active preset; cycle 247 makes row 1, the sphere centre, the row Q431 sets,
+9 ; so the program runs again and again, and row 0 stays at the machine origin.
+10 TOOL CALL "TOUCH_PROBE" Z
+11 CYCL DEF 247 DATUM SETTING ~
+    Q339=+1        ;DATUM NUMBER
+12 L Z+150 R0 FMAX M91
+13 L X+50 Y-30 R0 FMAX M91
+14 L Z+102.5 R0 FMAX M91
+15 TCH PROBE 451 MEASURE KINEMATICS ~
     Q406=+1        ;MODE ~
     Q407=+12.5     ;SPHERE RADIUS ~
     Q320=+0        ;SET-UP CLEARANCE ~
@@ -31,5 +36,5 @@
     Q423=+4        ;NO. OF PROBE POINTS ~
     Q431=+1        ;PRESET ~
     Q432=+0        ;BACKLASH, ANG. RANGE
-12 L Z+150 R0 FMAX
-13 END PGM 451-optimise MM
+16 L Z+150 R0 FMAX M91
+17 END PGM 451-optimise MM

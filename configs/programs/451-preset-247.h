@@ -6,7 +6,7 @@
 5 ; no L block over the sphere, no locating measurement. Q147..Q149 are the sphere
 6 ; centre relative to preset 1 (about 0). Mode 0 changes nothing.
 7 TOOL CALL "TOUCH_PROBE" Z
-8 L Z+150 R0 FMAX
+8 L Z+150 R0 FMAX M91
 9 CYCL DEF 247 DATUM SETTING ~
     Q339=+1        ;DATUM NUMBER
 10 L X+0 Y+100 R0 FMAX

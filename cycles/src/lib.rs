@@ -34,6 +34,7 @@ pub mod kinematics;
 pub mod kinematics_file;
 pub mod length_unit;
 pub mod linear;
+pub mod m_function;
 pub mod machine_parameters;
 pub mod measuring_log;
 pub mod params;

@@ -1,11 +1,14 @@
 //! Straight positioning blocks between the cycles, `L X+50 Y-30 Z+97.5 R0 FMAX`: the
 //! runner moves there, so that a program can pre-position the probe (cycle 451 starts
-//! over the calibration sphere). Absolute machine coordinates of X, Y, Z, A, B, C;
-//! `R0`; `F<feed>`, `FMAX`, `FAUTO`; `M` functions are accepted and ignored. Anything
+//! over the calibration sphere). Absolute coordinates of X, Y, Z, A, B, C, relative to
+//! the datum (preset plus shift), or with M91 to the machine datum, with M92 to the
+//! machine's reference point; `R0`; `F<feed>`, `FMAX`, `FAUTO`; the other M functions
+//! as [`crate::m_function`] classifies them (the parser refuses the rest). Anything
 //! else in an `L` block (incremental `IX`, radius compensation `RL`/`RR`, polar or
 //! circular moves) is refused before anything moves.
 
 use crate::length_unit::LengthUnit;
+use crate::m_function;
 use hal::{Axis, AxisPositions};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -16,10 +19,52 @@ pub enum MoveFeed {
     Feed(f64),
 }
 
+/// What the coordinates of an `L` block refer to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Coordinates {
+    /// The active datum: preset plus datum shift (no M91/M92).
+    Datum,
+    /// M91: the machine datum (machine coordinates).
+    Machine,
+    /// M92: the machine's reference point (`[cycles] m92_reference`).
+    Reference,
+}
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LinearMove {
     pub target: AxisPositions,
     pub feed: MoveFeed,
+    pub coordinates: Coordinates,
+}
+
+impl LinearMove {
+    /// The target in machine coordinates: through the datum, or as M91/M92 say (M92's
+    /// point shifts X/Y/Z; rotary axes are machine angles with both).
+    pub fn machine_target(
+        &self,
+        datum: &crate::datum::Datum,
+        m92_reference: Option<[f64; 3]>,
+    ) -> Result<AxisPositions, LinearBlockError> {
+        match self.coordinates {
+            Coordinates::Datum => Ok(datum.to_machine(&self.target)),
+            Coordinates::Machine => Ok(self.target),
+            Coordinates::Reference => {
+                let Some(r) = m92_reference else {
+                    return Err(LinearBlockError::new(
+                        LinearBlockErrorKind::MFunction,
+                        "L block: M92: the machine configuration names no reference point ([cycles] m92_reference)",
+                    ));
+                };
+                let mut m = self.target;
+                for (i, axis) in Axis::LINEAR.into_iter().enumerate() {
+                    if let Some(v) = m.get(axis) {
+                        m.set(axis, v + r[i]);
+                    }
+                }
+                Ok(m)
+            }
+        }
+    }
 }
 
 /// Why an `L` block cannot run.
@@ -38,6 +83,8 @@ pub enum LinearBlockErrorKind {
     NoCoordinate,
     /// A target outside the axis's software limits.
     SoftwareLimit,
+    /// An M function that is refused ([`crate::m_function`]).
+    MFunction,
 }
 
 /// An `L` block that cannot run; the message names the word.
@@ -76,12 +123,25 @@ pub fn parse_linear(code: &str, unit: LengthUnit) -> Option<Result<LinearMove, L
     let inch = unit == LengthUnit::Inch;
     let mut target = AxisPositions::new();
     let mut feed = MoveFeed::Rapid;
+    let mut coordinates = Coordinates::Datum;
     for w in words {
         let u = w.to_ascii_uppercase();
         if u == "R0" || u == "FMAX" || u == "FAUTO" {
             continue;
         }
-        if u.starts_with('M') && u[1..].chars().all(|c| c.is_ascii_digit()) && u.len() > 1 {
+        if m_function::m_number(&u).is_some() {
+            // M92 is checked against the machine where its point is known.
+            match m_function::check_words(&u, true) {
+                Ok(m) if m.m91 => coordinates = Coordinates::Machine,
+                Ok(m) if m.m92 => coordinates = Coordinates::Reference,
+                Ok(_) => {}
+                Err(e) => {
+                    return Some(Err(LinearBlockError::new(
+                        K::MFunction,
+                        format!("L block: {e}"),
+                    )))
+                }
+            }
             continue;
         }
         if let Some(rest) = u.strip_prefix('F') {
@@ -129,7 +189,11 @@ pub fn parse_linear(code: &str, unit: LengthUnit) -> Option<Result<LinearMove, L
             "L block without a coordinate",
         )));
     }
-    Some(Ok(LinearMove { target, feed }))
+    Some(Ok(LinearMove {
+        target,
+        feed,
+        coordinates,
+    }))
 }
 
 #[cfg(test)]

@@ -25,6 +25,10 @@ pub struct MachineParameters {
     /// come at the workpiece from a side the stylus does not point to.
     #[serde(default = "default_tool_axes")]
     pub tool_axes: Vec<ProbeAxis>,
+    /// The machine's reference point M92 refers to, machine X/Y/Z in mm (a tool change
+    /// position set by the machine builder); none: M92 is refused.
+    #[serde(default)]
+    pub m92_reference: Option<[f64; 3]>,
 }
 
 fn default_max_dev_cal_ball() -> f64 {
@@ -44,6 +48,7 @@ impl Default for MachineParameters {
             max_modification: default_max_modification(),
             predef: BTreeMap::new(),
             tool_axes: default_tool_axes(),
+            m92_reference: None,
         }
     }
 }
@@ -86,6 +91,15 @@ impl MachineParameters {
             return Some((
                 "cycles.tool_axes".to_string(),
                 "must name at least one tool axis (\"X\", \"Y\" or \"Z\")".to_string(),
+            ));
+        }
+        if let Some(p) = self
+            .m92_reference
+            .filter(|p| p.iter().any(|v| !v.is_finite()))
+        {
+            return Some((
+                "cycles.m92_reference".to_string(),
+                format!("{p:?}: must be three finite numbers X, Y, Z (mm)"),
             ));
         }
         None

@@ -13,6 +13,7 @@ use crate::cycles_config::CyclesConfig;
 use crate::datum::DatumBlock;
 use crate::diagnostic::{Diagnostic, ProgramErrors};
 use crate::length_unit::LengthUnit;
+use crate::m_function::{self, FunctionBlock};
 use crate::params::{self, CycleTable, Default as ParamDefault, Kind, ParamSpec};
 use crate::probe_axis::ProbeAxis;
 use crate::program::{Block, CycleCall, CycleKind, Program, ProgramError, Statement};
@@ -331,6 +332,8 @@ struct State {
     tool: Option<ToolCall>,
     /// The block before was CYCL DEF 7.0 or 7.x: a 7.x may follow.
     cycle7: bool,
+    /// The line of a `FUNCTION MODE TURN` not yet undone by `FUNCTION MODE MILL`.
+    turn_mode: Option<usize>,
 }
 
 fn analyse(text: &str, cfg: &CyclesConfig) -> (Program, Vec<Diagnostic>) {
@@ -343,6 +346,7 @@ fn analyse(text: &str, cfg: &CyclesConfig) -> (Program, Vec<Diagnostic>) {
         end_line: None,
         tool: None,
         cycle7: false,
+        turn_mode: None,
     };
     let mut blocks = Vec::new();
     for (index, rb) in raw_blocks.iter().enumerate() {
@@ -355,6 +359,18 @@ fn analyse(text: &str, cfg: &CyclesConfig) -> (Program, Vec<Diagnostic>) {
             continue;
         }
         let statement = statement(rb, index, &mut st, cfg, &mut diags);
+        if let (Statement::Cycle(call), Some(turn)) = (&statement, st.turn_mode) {
+            if matches!(call.head.cycle, 431 | 444 | 451) {
+                err(
+                    &mut diags,
+                    line,
+                    format!(
+                        "cycle {}: refused after FUNCTION MODE TURN (line {turn}): the touch-probe cycles run in milling mode only (FUNCTION MODE MILL first)",
+                        call.head.cycle
+                    ),
+                );
+            }
+        }
         blocks.push(Block {
             line,
             number: rb.head.number,
@@ -404,6 +420,14 @@ fn statement(
     match (w(0), w(1)) {
         (Some("CYCL"), Some("DEF")) => cycl_def(rb, after_cycle7, st, cfg, diags),
         (Some("TRANS"), Some("DATUM")) => trans_datum(code, line, st.unit, diags),
+        (Some("FUNCTION"), _) => {
+            match m_function::function_block(code) {
+                Ok(FunctionBlock::ModeMill) => st.turn_mode = None,
+                Ok(FunctionBlock::ModeTurn) => st.turn_mode = Some(line),
+                Err(e) => err(diags, line, e),
+            }
+            other()
+        }
         (Some("BEGIN"), Some("PGM")) => {
             let Some((name, unit)) = pgm_name_unit(code, line, diags) else {
                 return other();
@@ -487,7 +511,7 @@ fn statement(
                 return tool_call(rest, true, line, st, cfg, diags)
                     .map_or_else(other, Statement::ToolCall);
             }
-            other_block(code, line, diags)
+            other_block(code, line, cfg, diags)
         }
     }
 }
@@ -712,7 +736,12 @@ fn datum_setting(
 /// and blocks of M functions alone are accepted and run or skipped as such; anything
 /// else cannot run here and is refused, so that a mistyped block (`TCH PROB 431`,
 /// `CYCL DEFF`, `LL Z+100`) is never skipped without a word.
-fn other_block(code: &str, line: usize, diags: &mut Vec<Diagnostic>) -> Statement {
+fn other_block(
+    code: &str,
+    line: usize,
+    cfg: &CyclesConfig,
+    diags: &mut Vec<Diagnostic>,
+) -> Statement {
     let accepted = match code.split_whitespace().next() {
         // Only a comment.
         None => true,
@@ -721,6 +750,19 @@ fn other_block(code: &str, line: usize, diags: &mut Vec<Diagnostic>) -> Statemen
         Some(w) if w.eq_ignore_ascii_case("L") => true,
         Some(_) => code.split_whitespace().all(is_m_function),
     };
+    // What each M function means, at its line ([`m_function`]): refused ones never
+    // reach `run`.
+    let has_moves_or_m = code
+        .split_whitespace()
+        .next()
+        .is_some_and(|w| !w.starts_with('*'));
+    if accepted && has_moves_or_m {
+        let m92 = cfg.parameters.m92_reference.is_some();
+        if let Err(e) = m_function::check_words(code, m92) {
+            err(diags, line, e);
+            return Statement::Other(code.to_string());
+        }
+    }
     if !accepted {
         let upper = code.to_ascii_uppercase();
         let hint = if upper.starts_with("TCH") {
@@ -736,7 +778,7 @@ fn other_block(code: &str, line: usize, diags: &mut Vec<Diagnostic>) -> Statemen
             diags,
             line,
             format!(
-                "{shown}{more}: not a block probebridge can run{hint}; it runs BEGIN/END PGM, TOOL CALL, TCH PROBE {} (or G{}), CYCL DEF 7 and 247 (G54, G247), TRANS DATUM, L positioning blocks, M functions and comments",
+                "{shown}{more}: not a block probebridge can run{hint}; it runs BEGIN/END PGM, TOOL CALL, TCH PROBE {} (or G{}), CYCL DEF 7 and 247 (G54, G247), TRANS DATUM, L positioning blocks, M functions, FUNCTION MODE and comments",
                 params::known_cycles(),
                 params::known_cycles().replace(", ", "/G")
             ),
@@ -745,13 +787,9 @@ fn other_block(code: &str, line: usize, diags: &mut Vec<Diagnostic>) -> Statemen
     Statement::Other(code.to_string())
 }
 
-/// `M30`, `M3`: an M function (accepted, not run).
+/// `M30`, `M3`: an M function ([`m_function`] says what it does).
 fn is_m_function(word: &str) -> bool {
-    let mut c = word.chars();
-    matches!(c.next(), Some('M' | 'm')) && {
-        let rest = c.as_str();
-        !rest.is_empty() && rest.bytes().all(|b| b.is_ascii_digit())
-    }
+    m_function::m_number(word).is_some()
 }
 
 /// `NAME MM|INCH` after `BEGIN PGM` / `END PGM`; the name keeps its case.

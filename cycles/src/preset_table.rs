@@ -255,8 +255,143 @@ impl PresetTable {
     }
 
     /// Writes the table to its path atomically, keeping the replaced file as `.prev`.
+    /// The file's comments stay: the values of the rows that changed are replaced in
+    /// the old text ([`PresetTable::rewrite`]).
     pub fn write(&self) -> Result<(), WriteError> {
-        write_atomic_keeping_previous(&self.path, self.to_toml().as_bytes())
+        let text = match std::fs::read_to_string(&self.path) {
+            Ok(old) => self.rewrite(&old),
+            Err(_) => self.to_toml(),
+        };
+        write_atomic_keeping_previous(&self.path, text.as_bytes())
+    }
+
+    /// Writes row `number` of this table into the file as it is now (the other rows
+    /// and its `active` as they are there: cycle 247 activates a row for the program
+    /// that runs, not for the next one), atomically, keeping `.prev` and comments.
+    pub fn write_row(&self, number: u32, cfg: &MachineConfig) -> Result<(), WriteError> {
+        let Some(row) = self.row(number).copied() else {
+            return self.write();
+        };
+        let mut file = match Self::load(&self.path, cfg) {
+            Ok(t) => t,
+            // An unreadable file is replaced by this table (its `.prev` keeps it).
+            Err(_) => return self.write(),
+        };
+        match file.rows.iter_mut().find(|r| r.number == number) {
+            Some(r) => *r = row,
+            None => {
+                file.rows.push(row);
+                file.rows.sort_by_key(|r| r.number);
+            }
+        }
+        file.write()
+    }
+
+    /// The table as text, written into `old` (the file as it is): the `active` line and
+    /// each row's values replaced where they stand, new rows and offsets appended,
+    /// every comment and blank line kept. Where the old text cannot be followed (a
+    /// layout this does not recognise), its leading comment block above the freshly
+    /// serialised table. Either way the result parses back to this table.
+    pub fn rewrite(&self, old: &str) -> String {
+        if let Some(t) = self.rewrite_in_place(old) {
+            return t;
+        }
+        let header: String = old
+            .lines()
+            .take_while(|l| l.trim().is_empty() || l.trim_start().starts_with('#'))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        format!("{header}{}", self.to_toml())
+    }
+
+    fn rewrite_in_place(&self, old: &str) -> Option<String> {
+        // `key = value  # comment` -> the key, and the line with the value replaced.
+        fn key_of(line: &str) -> Option<&str> {
+            let (k, _) = line.split_once('=')?;
+            let k = k.trim();
+            (!k.is_empty() && !k.starts_with('#')).then_some(k)
+        }
+        fn with_value(line: &str, value: &str) -> String {
+            let (k, rest) = line.split_once('=').expect("a key line");
+            let comment = rest.find('#').map(|i| &rest[i..]).unwrap_or("");
+            let sep = if comment.is_empty() { "" } else { " " };
+            format!("{k}= {value}{sep}{comment}")
+        }
+        let value = |r: &Preset, k: &str| -> Option<f64> {
+            match k {
+                "X" => Some(r.x),
+                "Y" => Some(r.y),
+                "Z" => Some(r.z),
+                "A" => r.a,
+                "B" => r.b,
+                "C" => r.c,
+                _ => None,
+            }
+        };
+        // The header, then one chunk per [[preset]].
+        let mut chunks: Vec<Vec<String>> = vec![Vec::new()];
+        for line in old.lines() {
+            if line.trim() == "[[preset]]" {
+                chunks.push(Vec::new());
+            }
+            chunks.last_mut().expect("a chunk").push(line.to_string());
+        }
+        let mut out = String::new();
+        for line in &chunks[0] {
+            match key_of(line) {
+                Some("active") => out.push_str(&with_value(line, &self.active.to_string())),
+                Some("machine") | None => out.push_str(line),
+                Some(_) => return None,
+            }
+            out.push('\n');
+        }
+        let mut seen = Vec::new();
+        for chunk in &chunks[1..] {
+            let number: u32 = chunk
+                .iter()
+                .find(|l| key_of(l) == Some("number"))
+                .and_then(|l| l.split_once('=')?.1.split('#').next()?.trim().parse().ok())?;
+            let row = self.row(number)?;
+            seen.push(number);
+            let mut written = Vec::new();
+            let mut lines = Vec::new();
+            for line in chunk {
+                match key_of(line) {
+                    Some(k) if k.len() == 1 && "XYZABC".contains(k) => {
+                        let v = value(row, k)?;
+                        written.push(k.to_string());
+                        lines.push(with_value(line, &format!("{v:?}")));
+                    }
+                    _ => lines.push(line.clone()),
+                }
+            }
+            // Offsets the row has gained: after its last key line.
+            let last_key = lines.iter().rposition(|l| key_of(l).is_some())?;
+            let gained: Vec<String> = ["X", "Y", "Z", "A", "B", "C"]
+                .iter()
+                .filter(|k| !written.iter().any(|w| w == *k))
+                .filter_map(|k| value(row, k).map(|v| format!("{k} = {v:?}")))
+                .collect();
+            lines.splice(last_key + 1..last_key + 1, gained);
+            for l in lines {
+                out.push_str(&l);
+                out.push('\n');
+            }
+        }
+        for r in self.rows.iter().filter(|r| !seen.contains(&r.number)) {
+            out.push_str(&format!("\n[[preset]]\nnumber = {}\n", r.number));
+            for k in ["X", "Y", "Z", "A", "B", "C"] {
+                if let Some(v) = value(r, k) {
+                    out.push_str(&format!("{k} = {v:?}\n"));
+                }
+            }
+        }
+        // Only a text that reads back as this very table.
+        let back: FileFormat = toml::from_str(&out).ok()?;
+        let mut rows = back.rows;
+        rows.sort_by_key(|r| r.number);
+        (back.machine == self.machine && back.active == self.active && rows == self.rows)
+            .then_some(out)
     }
 }
 
@@ -332,5 +467,45 @@ mod tests {
             .unwrap_err();
         assert_eq!(e.kind(), hal::config::ConfigErrorKind::Parse, "{e}");
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A rewritten table keeps its comments: the shipped table's header, a comment
+    /// beside a value, a row's own comment; values change where they stand.
+    #[test]
+    fn a_rewrite_keeps_the_comments() {
+        let cfg = machine();
+        let shipped = std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/machines/table-ac.presets.toml"),
+        )
+        .unwrap();
+        let path = PathBuf::from("table-ac.presets.toml");
+        for (old, set, row) in [
+            (shipped.clone(), [12.5, -7.25, 99.0], 0),
+            (shipped.clone(), [1e-5, 0.0, -3.0], 1),
+            (
+                "# mine\nmachine = \"table-ac\" # the name\nactive = 0 # row\n\n[[preset]]\n# the origin\nnumber = 0\nX = 0.0 # x\nY = 0.0\nZ = 0.0\n".to_string(),
+                [4.0, 5.0, 6.0],
+                0,
+            ),
+        ] {
+            let mut t = PresetTable::parse(&old, &path, &cfg).unwrap();
+            t.activate(row).unwrap();
+            t.set_active_xyz(set);
+            let new = t.rewrite(&old);
+            for comment in old.lines().filter(|l| l.contains('#')) {
+                let c = &comment[comment.find('#').unwrap()..];
+                assert!(new.contains(c), "{c:?} lost:\n{new}");
+            }
+            assert_eq!(PresetTable::parse(&new, &path, &cfg).unwrap(), t, "{new}");
+        }
+        // A row that gains a rotary offset, and a new row.
+        let mut t = PresetTable::parse(&shipped, &path, &cfg).unwrap();
+        t.rows[1].c = Some(2.5);
+        let mut r = Preset::origin(5);
+        r.x = 7.0;
+        t.rows.push(r);
+        let new = t.rewrite(&shipped);
+        assert!(new.starts_with("# The preset table"), "{new}");
+        assert_eq!(PresetTable::parse(&new, &path, &cfg).unwrap(), t, "{new}");
     }
 }

@@ -10,7 +10,9 @@ use crate::datum::Datum;
 use crate::error::{CycleError, CycleErrorKind};
 use crate::kinematics::{Estimator, LocalEstimator};
 use crate::kinematics_file::ActiveKinematics;
-use crate::linear::{parse_linear, LinearBlockError, LinearBlockErrorKind, LinearMove, MoveFeed};
+use crate::linear::{
+    parse_linear, Coordinates, LinearBlockError, LinearBlockErrorKind, LinearMove, MoveFeed,
+};
 use crate::planned_move::{check_planned, PlannedMove};
 use crate::program::{CycleCall, CycleKind, Program, Statement};
 use crate::progress::{ProgressEvent, ProgressSink};
@@ -198,7 +200,7 @@ pub fn preflight_program_from(
             Statement::Other(code) => {
                 let checked = parse_linear(code, program.unit).map(|r| {
                     r.and_then(|mut mv| {
-                        mv.target = datum.to_machine(&mv.target);
+                        mv.target = mv.machine_target(&datum, cfg.parameters.m92_reference)?;
                         check_linear_move(&mv, &cfg.machine).map(|()| mv)
                     })
                 });
@@ -378,8 +380,18 @@ pub fn run_program<M: Machine>(
             }
             Statement::Other(code) => {
                 if let Some(Ok(mut mv)) = parse_linear(code, program.unit) {
-                    // Program coordinates: relative to the active preset plus shift.
-                    mv.target = ctx.datum.to_machine(&mv.target);
+                    // Program coordinates: relative to the active preset plus shift, or
+                    // machine coordinates (M91) / the reference point (M92). The
+                    // preflight refused a block whose target cannot be resolved.
+                    let Ok(target) = mv.machine_target(&ctx.datum, cfg.parameters.m92_reference)
+                    else {
+                        report.stopped = Some(format!(
+                            "line {}: L block: M92 without a reference point",
+                            block.line
+                        ));
+                        break;
+                    };
+                    mv.target = target;
                     let feed = match mv.feed {
                         MoveFeed::Rapid => rapid,
                         MoveFeed::Feed(f) => f,
@@ -392,7 +404,15 @@ pub fn run_program<M: Machine>(
                     });
                     if let Err(e) = machine.move_to(&mv.target, feed) {
                         report.aborted = e.kind() == hal::ErrorKind::Aborted;
-                        report.stopped = Some(format!("block {number} (line {}): {e}", block.line));
+                        let note = if misplaced(CycleErrorKind::Machine(e.kind()))
+                            && mv.coordinates == Coordinates::Datum
+                        {
+                            datum_note(&ctx.datum)
+                        } else {
+                            String::new()
+                        };
+                        report.stopped =
+                            Some(format!("block {number} (line {}): {e}{note}", block.line));
                         break;
                     }
                 }
@@ -401,12 +421,78 @@ pub fn run_program<M: Machine>(
             _ => continue,
         };
         let result = run_cycle(call, machine, &mut ctx, &mut report);
+        if let (CycleKind::SaveKinematics(p), Status::Ok) = (&call.kind, result.status) {
+            if p.mode == crate::cycle450::SaveMode::Restore {
+                note_restore(&mut report, &ctx.kinematics, &cfg.machine, call.head.block);
+            }
+        }
         report.cycles.push(result);
         if report.stopped.is_some() {
             break;
         }
     }
     report
+}
+
+/// After cycle 450 restored `path`: each earlier 451 result that wrote it says what the
+/// file is now, back as it was before that 451, or not.
+fn note_restore(
+    report: &mut ProgramReport,
+    path: &std::path::Path,
+    cfg: &MachineConfig,
+    block: u32,
+) {
+    let Ok(now) = ActiveKinematics::load(path, cfg) else {
+        return;
+    };
+    for k in report
+        .cycles
+        .iter_mut()
+        .filter_map(|c| c.kinematics.as_mut())
+    {
+        if !k.written || k.kinematics_file != path {
+            continue;
+        }
+        let back = k.errors_before.iter().all(|(n, v)| now.error(n) == *v)
+            && now.errors.keys().all(|n| k.errors_before.contains_key(n));
+        k.restored = Some(if back {
+            format!("restored by cycle 450 (block {block}): the file is back as it was before this cycle")
+        } else {
+            format!("cycle 450 (block {block}) restored a saved version that differs from the one before this cycle")
+        });
+    }
+}
+
+/// A failure that says the probe was not where the program assumed: no contact where
+/// one was due, or one where none was.
+fn misplaced(kind: CycleErrorKind) -> bool {
+    use hal::ErrorKind as K;
+    matches!(
+        kind,
+        CycleErrorKind::Machine(K::NotTriggered | K::AlreadyDeflected | K::ProbeCollision)
+    )
+}
+
+/// "; the active preset is row N (X.. Y.. Z..)": where the program's coordinates
+/// pointed, for a failure that may come from a preset set elsewhere.
+fn datum_note(datum: &Datum) -> String {
+    let row = datum.presets.active_row();
+    let shift = if datum.shift == [0.0; 3] {
+        String::new()
+    } else {
+        format!(
+            ", plus the datum shift X{:+.4} Y{:+.4} Z{:+.4}",
+            datum.shift[0], datum.shift[1], datum.shift[2]
+        )
+    };
+    format!(
+        " (the program's coordinates were relative to preset row {} of {}: X{:+.4} Y{:+.4} Z{:+.4}{shift}; M91 blocks are machine coordinates)",
+        row.number,
+        datum.presets.path.display(),
+        row.x,
+        row.y,
+        row.z
+    )
 }
 
 /// Runs one cycle and reports it: its start, its result, the logs it wrote, why the
@@ -463,7 +549,10 @@ fn run_cycle<M: Machine>(
             CycleResult::aborted(head.block, head.cycle, message)
         }
         Err(e) => {
-            let message = e.to_string();
+            let mut message = e.to_string();
+            if misplaced(e.kind()) {
+                message.push_str(&datum_note(&ctx.datum));
+            }
             report.stopped = Some(format!(
                 "block {}: cycle {} failed: {message}",
                 head.block, head.cycle

@@ -124,6 +124,8 @@ struct Expect {
     q: Vec<(String, f64)>,
     /// The program run must equal this one but for its name, comments and Q253.
     derived: Option<String>,
+    /// Runs on the machine state case NAME left (the same example again).
+    again: Option<String>,
 }
 
 #[derive(Debug)]
@@ -165,6 +167,7 @@ fn parse_cases(configs: &Path, text: &str) -> Result<Vec<Case>, String> {
             truth_431: false,
             q: Vec::new(),
             derived: None,
+            again: None,
         };
         for word in fields[3].split_whitespace() {
             let (k, v) = word.split_once('=').ok_or_else(|| {
@@ -182,6 +185,15 @@ fn parse_cases(configs: &Path, text: &str) -> Result<Vec<Case>, String> {
                         .map_err(|_| format!("line {}: tol={v:?}", i + 1))?
                 }
                 ("derived", p) => expect.derived = Some(p.to_string()),
+                ("again", n) => {
+                    if !cases.iter().any(|c: &Case| c.name == n) {
+                        return Err(format!(
+                            "tests/vcan/cases line {}: again={n}: no case {n} before this one",
+                            i + 1
+                        ));
+                    }
+                    expect.again = Some(n.to_string())
+                }
                 ("truth", "probe") => expect.truth_probe = true,
                 ("truth", "431") => expect.truth_431 = true,
                 (q, v) if q.starts_with('Q') => expect.q.push((
@@ -404,6 +416,16 @@ fn check_case(case: &Case, results: &Path, reference: &Path, r: &mut Report) {
             tail(&results.join(format!("{name}.stderr")), 8)
         )
     });
+    if let Some(first) = &case.expect.again {
+        // A second run in a row: on the machine state the first left.
+        let state = results.join(format!("{first}.state"));
+        r.check(state.is_dir(), || {
+            format!(
+                "{name}: again={first}: no machine state {} to run on",
+                state.display()
+            )
+        });
+    }
     if !case.moves() {
         return; // `check`: the exit status is all it has
     }

@@ -21,6 +21,9 @@ FOREIGN_NAME="python-canopen LocalNode CiA 402 drive"
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
 export PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin
 export IOX2_LOG_LEVEL=${IOX2_LOG_LEVEL:-Error}
+# The machine's state of a run without --state-dir (the signal runs below): writable,
+# in the results, never the (read-only) tree or a home folder.
+export XDG_STATE_HOME=$RESULTS/xdg-state
 exec > "$RESULTS/vm.log" 2>&1
 echo "vm: $(uname -r), $(nproc) cpus, $(awk '/MemTotal/ {print $2 " kB"}' /proc/meminfo)"
 date +%s > "$RESULTS/vm.started"

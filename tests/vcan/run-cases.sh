@@ -13,6 +13,8 @@
 # PROBEBRIDGE_VCAN_CONFIGS: a folder holding configs/scenarios and configs/machines to
 #   use instead of the repository's (.ci/vcan/run writes one with the bus timing
 #   relaxed for the emulated VM); programs always come from the repository.
+# The machine's state of `run` and `check` is RESULTS/NAME.state (`--state-dir`;
+# again=OTHER in EXPECT: OTHER's, left by that case), never the tree.
 # The files a program writes (`--presets FILE`, `--kinematics FILE` in ARGS: the preset
 # table, the active kinematics) are copied first to RESULTS/NAME.state/ (FILE relative
 # to PROBEBRIDGE_VCAN_CONFIGS; a FILE that does not exist there starts absent), and the
@@ -48,6 +50,13 @@ while IFS='|' read -r name scenario args expect; do
         *) echo "tests/vcan/cases: $name: unknown command ${argv[0]}" >&2 ;;
     esac
     rm -rf "$RESULTS/$name".*
+    # The machine's state: the case's own folder, or with again=NAME that of case NAME
+    # (which ran before it), so the example runs a second time on what the first left.
+    again=$(printf '%s\n' $expect | sed -n 's/^again=//p')
+    state="$RESULTS/${again:-$name}.state"
+    case "${argv[0]}" in
+        run|check) extra+=(--state-dir "$state") ;;
+    esac
     for ((i = 0; i + 1 < ${#argv[@]}; i++)); do
         case "${argv[$i]}" in
             --presets|--kinematics)

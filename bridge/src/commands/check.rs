@@ -4,34 +4,39 @@
 //! moves of `L` blocks and cycles 431 and 444 against the motion guard); nothing moves
 //! and no bus is opened.
 
+use crate::machine_state::machine_files;
 use crate::session::{cycles_config_with_presets, resolve_machine, MachineOptions};
-use cycles::kinematics_file::ActiveKinematics;
 use cycles::parser::parse_program;
 use cycles::runner::{assumed_start, check_complete, preflight_program_from};
 use cycles::CyclesConfig;
 use hal::AxisPositions;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Exit status 0 when valid, 2 with every error listed.
 pub fn run(
     program: &Path,
     machine: &MachineOptions,
-    kinematics: Option<PathBuf>,
+    kinematics: Option<&Path>,
     presets: Option<&Path>,
+    state_dir: Option<&Path>,
 ) -> Result<u8, String> {
     let (cfg, scenario) = resolve_machine(machine).map_err(|e| e.to_string())?;
-    let cycles_cfg =
-        cycles_config_with_presets(&cfg, scenario.as_ref(), presets).map_err(|e| e.to_string())?;
+    // The files `run` would use; `check` writes nothing (no seeding).
+    let files = machine_files(&cfg, state_dir, presets, kinematics, false)?;
+    for n in &files.notes {
+        tell!("state: {n}");
+    }
+    let cycles_cfg = cycles_config_with_presets(&cfg, scenario.as_ref(), Some(&files.presets))
+        .map_err(|e| e.to_string())?;
     let text = cycles::parser::read_program_text(program)
         .map_err(|e| format!("cannot read {}: {e}", program.display()))?;
-    let kinematics = kinematics.unwrap_or_else(|| ActiveKinematics::default_path(&cfg));
     // With a scenario the axes start where the simulator starts them, as `run` will
     // find them; a real machine's are not known here ([`assumed_start`]).
     let start = match &scenario {
         Some(sc) => assumed_start(&cfg).merged(&sim::machine::SimMachine::start_positions(sc)),
         None => assumed_start(&cfg),
     };
-    let errors = check_text_from(&text, &cycles_cfg, &kinematics, &start);
+    let errors = check_text_from(&text, &cycles_cfg, &files.kinematics, &start);
     if errors.is_empty() {
         say!("{}: ok (machine {})", program.display(), cfg.name);
         return Ok(0);

@@ -247,6 +247,33 @@ fn scratch_files(cfg: &mut CyclesConfig) -> Result<(PathBuf, PathBuf), String> {
     Ok((dir, kin))
 }
 
+/// What mode 1 can and cannot correct, with this scenario's injected errors: it
+/// corrects positions only, so injected orientation errors stay, and the positions it
+/// writes absorb them ("after" differs from "injected" there).
+fn mode1_line(measured: &[Axis], scenario: &sim::scenario::Scenario) -> String {
+    let orientation: Vec<&str> = measured
+        .iter()
+        .flat_map(|a| cycles::iso230_7::error_names(*a).iter().copied())
+        // E{A,B,C}0{k} with k another axis: orientation (E{j}0{j} is the zero error).
+        .filter(|n| {
+            let b = n.as_bytes();
+            b"ABC".contains(&b[1]) && b[1] != b[3]
+        })
+        .filter(|n| scenario.truth.get(n).is_some_and(|v| v != 0.0))
+        .collect();
+    format!(
+        "  mode 1 corrects the axes' position errors only; {}; mode 2 (orientation) and 3 (both) correct those too",
+        if orientation.is_empty() {
+            "no orientation error is injected, so after equals injected".to_string()
+        } else {
+            format!(
+                "it cannot correct the injected orientation errors {}, which the positions absorb, so after differs from injected",
+                orientation.join(", ")
+            )
+        }
+    )
+}
+
 /// Cycle 451 mode 1 on the scenario's rotary axes; see the module doc.
 fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), String> {
     let mut opts = opts.clone();
@@ -341,9 +368,7 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
     for (name, v) in &result.qs {
         say!("  {name} = \"{v}\"");
     }
-    say!(
-        "  mode 1 corrects the positions of the axes; the orientation errors stay (mode 2 finds them too)"
-    );
+    say!("{}", mode1_line(&measured, &scenario));
     say!(
         "  kinematics {}: {}",
         kin.display(),

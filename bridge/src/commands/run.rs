@@ -1,11 +1,12 @@
 //! `probebridge run PROGRAM`: every measuring cycle of an NC program, in order, on the
-//! configured machine; results as a table, protocols next to the program (or in
-//! `--out`), and JSON with `--json`.
+//! configured machine; results as a table, protocols in the machine's state folder
+//! (or in `--out`), and JSON with `--json`. The preset table and the kinematics are
+//! the machine's state ([`crate::machine_state`]), never the shipped `configs/`.
 
 use crate::ipc::{EstimatorChild, EstimatorClient, IpcEstimator};
+use crate::machine_state::machine_files;
 use crate::output::write_atomic;
 use crate::session::{cycles_config_with_presets, resolve_machine, MachineOptions, Session};
-use cycles::kinematics_file::ActiveKinematics;
 use cycles::program::{Program, ProgramError};
 use cycles::progress::ProgressEvent;
 use cycles::runner::{check_complete, preflight_program, run_program, RunOptions};
@@ -23,53 +24,51 @@ pub struct RunArgs {
     pub json: Option<PathBuf>,
     /// Go on without asking where a cycle asks for confirmation.
     pub yes: bool,
-    /// The active kinematics file (cycles 450/451); default: beside the machine
-    /// configuration.
+    /// The active kinematics file (cycles 450/451); default: in the machine's state
+    /// folder.
     pub kinematics: Option<PathBuf>,
     /// Record the run in this history file.
     pub history: Option<PathBuf>,
-    /// The preset table (cycles 247, 451); default: beside the machine configuration.
+    /// The preset table (cycles 247, 451); default: in the machine's state folder.
     pub presets: Option<PathBuf>,
+    /// The state directory (`--state-dir`); default: [`crate::state_dir`]'s.
+    pub state_dir: Option<PathBuf>,
 }
 
 /// Exit status: 0 every cycle succeeded, 1 a cycle failed or stopped the program,
 /// 2 the program is invalid (nothing moved).
 pub fn run(args: &RunArgs) -> Result<u8, String> {
-    let (cfg, scenario) = resolve_machine(&args.machine).map_err(|e| e.to_string())?;
-    let cfg = cycles_config_with_presets(&cfg, scenario.as_ref(), args.presets.as_deref())
-        .map_err(|e| e.to_string())?;
-    let program = match Program::load(&args.program, &cfg) {
-        Ok(p) => p,
-        Err(ProgramError::Invalid { path, errors }) => {
-            super::tell_errors(&path, &errors.0);
-            tell!(
-                "{}: {} error(s); nothing moved",
-                path.display(),
-                errors.0.len()
-            );
-            return Ok(2);
-        }
-        Err(e) => return Err(e.to_string()),
+    let (machine_cfg, scenario) = resolve_machine(&args.machine).map_err(|e| e.to_string())?;
+    // The machine's state (preset table, kinematics) is never the shipped
+    // configuration: it lives in the state folder, seeded from configs/ on first use,
+    // which is once the program is found valid (a refused program writes nothing).
+    let files = |seed: bool| {
+        machine_files(
+            &machine_cfg,
+            args.state_dir.as_deref(),
+            args.presets.as_deref(),
+            args.kinematics.as_deref(),
+            seed,
+        )
     };
-    // What `check` refuses, `run` refuses the same way (exit 2) before the machine
-    // is opened.
-    let kinematics = args
-        .kinematics
-        .clone()
-        .unwrap_or_else(|| ActiveKinematics::default_path(&cfg.machine));
-    if let Err(e) = check_complete(&program).and_then(|()| {
-        preflight_program(&program, cfg.machine.axis_mask(), &cfg, &kinematics)
-            .map_err(|e| e.to_string())
-    }) {
-        tell!("{}: {e}", args.program.display());
-        tell!("{}: 1 error(s); nothing moved", args.program.display());
+    let read_only = files(false)?;
+    let cfg = cycles_config_with_presets(&machine_cfg, scenario.as_ref(), Some(&read_only.presets))
+        .map_err(|e| e.to_string())?;
+    let Some(program) = validated(args, &cfg, &read_only.kinematics)? else {
         return Ok(2);
+    };
+    // Valid: the state files this run reads and writes (seeded now, the same contents).
+    let files = files(true)?;
+    for n in &files.notes {
+        tell!("state: {n}");
     }
-    let out_dir = args
-        .out
-        .clone()
-        .or_else(|| program.folder().map(|p| p.to_path_buf()))
-        .unwrap_or_else(|| PathBuf::from("."));
+    let mut cfg = cfg;
+    cfg.presets = cycles::preset_table::PresetTable::load(&files.presets, &cfg.machine)
+        .map_err(|e| e.to_string())?;
+    if let Some(n) = scenario.as_ref().and_then(|sc| sc.preset) {
+        cfg.start_with_preset(n)?;
+    }
+    let out_dir = args.out.clone().unwrap_or_else(|| files.protocols_dir());
     std::fs::create_dir_all(&out_dir)
         .map_err(|e| format!("cannot create {}: {e}", out_dir.display()))?;
     crate::output::check_output(args.json.as_deref())?;
@@ -131,7 +130,7 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
         out_dir,
         confirm: &mut confirm,
         progress: &mut progress,
-        kinematics: args.kinematics.clone(),
+        kinematics: Some(files.kinematics.clone()),
         estimator: None,
     };
     let mut ipc = estimator.as_mut().map(|e| match e {
@@ -143,6 +142,7 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
         opts.estimator = Some(e);
     }
     let mut history = crate::history::record_run_start(args.history.as_deref(), &cfg, &program)?;
+    let before = files.snapshot();
     let report = run_program(&program, &mut session.machine, &cfg, &mut opts);
     drop(opts);
     // The drives are disabled before anything else is said or written.
@@ -161,11 +161,45 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     if let Some(path) = &args.json {
         write_atomic(path, report.to_json().as_bytes())?;
     }
+    for w in files.written_since(&before) {
+        tell!("state: {w}");
+    }
     if let Some(why) = &report.stopped {
         tell!("program stopped: {why}");
     }
     closed?;
     Ok(if report.completed() { 0 } else { 1 })
+}
+
+/// The program, loaded and refused (`None`, said on stderr) as `check` refuses it:
+/// invalid text, then what `run` would refuse before the machine is opened.
+fn validated(
+    args: &RunArgs,
+    cfg: &cycles::CyclesConfig,
+    kinematics: &std::path::Path,
+) -> Result<Option<Program>, String> {
+    let program = match Program::load(&args.program, cfg) {
+        Ok(p) => p,
+        Err(ProgramError::Invalid { path, errors }) => {
+            super::tell_errors(&path, &errors.0);
+            tell!(
+                "{}: {} error(s); nothing moved",
+                path.display(),
+                errors.0.len()
+            );
+            return Ok(None);
+        }
+        Err(e) => return Err(e.to_string()),
+    };
+    if let Err(e) = check_complete(&program).and_then(|()| {
+        preflight_program(&program, cfg.machine.axis_mask(), cfg, kinematics)
+            .map_err(|e| e.to_string())
+    }) {
+        tell!("{}: {e}", args.program.display());
+        tell!("{}: 1 error(s); nothing moved", args.program.display());
+        return Ok(None);
+    }
+    Ok(Some(program))
 }
 
 /// The estimator process cycle 451 talks to.

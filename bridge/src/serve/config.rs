@@ -152,7 +152,8 @@ pub struct MachineSection {
     /// iceoryx2 service prefix shared with the estimator process.
     #[serde(default = "default_service")]
     pub service: String,
-    /// The active kinematics file (cycles 450/451); default beside the machine file.
+    /// The active kinematics file (cycles 450/451); default: in the machine's folder of
+    /// the state directory ([`crate::machine_state`]).
     pub kinematics: Option<PathBuf>,
 }
 
@@ -161,7 +162,8 @@ pub struct MachineSection {
 pub struct ProgramsSection {
     /// Folder of the NC programs; number NNN selects `NNN.h`.
     pub folder: PathBuf,
-    /// Where measuring logs go (default: the program folder).
+    /// Where measuring logs go (default: `protocols/` in the machine's folder of the
+    /// state directory).
     pub out: Option<PathBuf>,
 }
 

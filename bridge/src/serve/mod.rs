@@ -86,15 +86,35 @@ const TICK: Duration = Duration::from_millis(50);
 
 /// Runs the service until SIGTERM, SIGINT or SIGHUP. Exit status 0 after a clean stop.
 pub fn run(config_path: &Path) -> Result<u8, String> {
-    let cfg = GatewayConfig::load(config_path).map_err(|e| e.to_string())?;
+    let mut cfg = GatewayConfig::load(config_path).map_err(|e| e.to_string())?;
     init_logging();
     install_signal_handlers();
     let listen = cfg.listen().map_err(|e| e.to_string())?;
     let order = cfg.word_order().map_err(|e| e.to_string())?;
     let (machine_cfg, scenario) =
         crate::session::resolve_machine(&cfg.machine_options()).map_err(|e| e.to_string())?;
-    let cycles = crate::session::cycles_config(&machine_cfg, scenario.as_ref())
-        .map_err(|e| e.to_string())?;
+    // The machine's state (preset table, kinematics, protocols) in the unit's
+    // StateDirectory, seeded from the shipped configuration, as the CLI keeps it.
+    let files = crate::machine_state::machine_files(
+        &machine_cfg,
+        None,
+        None,
+        cfg.machine.kinematics.as_deref(),
+        true,
+    )?;
+    for n in &files.notes {
+        tracing::info!("state: {n}");
+    }
+    cfg.machine.kinematics = Some(files.kinematics.clone());
+    if cfg.programs.out.is_none() {
+        cfg.programs.out = Some(files.protocols_dir());
+    }
+    let cycles = crate::session::cycles_config_with_presets(
+        &machine_cfg,
+        scenario.as_ref(),
+        Some(&files.presets),
+    )
+    .map_err(|e| e.to_string())?;
     let notifier = sd_notify::Notifier::from_env();
     notifier.notify("STATUS=bringing the machine up");
 

@@ -4,8 +4,22 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+/// The binary, with a state directory of its own for each command (a fresh folder:
+/// the machine's state seeded from `configs/` as on a first run), so that tests never
+/// share state with each other or with the user's `~/.local/state`.
 pub fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_probebridge"))
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    static N: AtomicUsize = AtomicUsize::new(0);
+    let state = std::env::temp_dir().join(format!(
+        "pb-cli-state-{}-{}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    ));
+    let _ = std::fs::remove_dir_all(&state);
+    let mut c = Command::new(env!("CARGO_BIN_EXE_probebridge"));
+    c.env("XDG_STATE_HOME", &state)
+        .env_remove("STATE_DIRECTORY");
+    c
 }
 
 pub fn configs() -> PathBuf {
@@ -31,9 +45,9 @@ pub fn run(cmd: &mut Command) -> Output {
 }
 
 /// `probebridge run PROGRAM --scenario SCENARIO --out DIR --json DIR/r.json` on an
-/// iceoryx2 service of its own, with the preset table in DIR (cycle 451 with Q431 != 0
-/// writes it; never the shipped one), plus `extra`: the output and the JSON written
-/// (`None`: none was).
+/// iceoryx2 service of its own, on a fresh machine state of its own ([`bin`]: what
+/// cycle 451 with Q431 != 0 or mode 1 writes goes there, never into `configs/`), plus
+/// `extra`: the output and the JSON written (`None`: none was).
 pub fn run_program(
     program: &Path,
     scenario: &Path,
@@ -52,7 +66,6 @@ pub fn run_program(
         .args(["--out", dir.to_str().unwrap()])
         .args(["--json", json.to_str().unwrap()])
         .args(["--service", &service])
-        .args(["--presets", dir.join("presets.toml").to_str().unwrap()])
         .args(extra));
     let v = std::fs::read_to_string(&json)
         .ok()

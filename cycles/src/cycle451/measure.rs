@@ -177,8 +177,12 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
         if p.preset == 1 || p.preset == 3 {
             self.preset = ball;
             self.note(format!(
-                "Q431={}: preset set to the sphere centre X{:+.4} Y{:+.4} Z{:+.4}",
-                p.preset, ball.x, ball.y, ball.z
+                "Q431={}: {} X{:+.4} Y{:+.4} Z{:+.4}",
+                p.preset,
+                super::preset_words(p.mode.writes()),
+                ball.x,
+                ball.y,
+                ball.z
             ));
         }
         Ok(ball)

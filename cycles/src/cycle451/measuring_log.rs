@@ -74,7 +74,18 @@ pub fn kinematics_log_html(
     );
     row(&mut s, "Estimator", &esc(&r.estimator));
     row(&mut s, "Preset before", &v3(&r.preset_before));
-    row(&mut s, "Preset after", &v3(&r.preset_after));
+    if r.preset_set || !r.preset.contains("preset not set") {
+        row(&mut s, "Preset after", &v3(&r.preset_after));
+    } else {
+        // Q431 = 1..3 in mode 0 (or refused kinematics): measured, not set.
+        let why = if r.mode == 0 {
+            "preset not set (mode 0)"
+        } else {
+            "preset not set (the kinematics were not accepted)"
+        };
+        row(&mut s, "Preset after", why);
+        row(&mut s, "Sphere centre measured", &v3(&r.preset_after));
+    }
     row(&mut s, "Preset shift (all axes)", &v3(&r.preset_shift));
     row(&mut s, "Offset error Q147..Q149", &v3(&r.offset_error));
     row(

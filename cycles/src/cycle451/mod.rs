@@ -113,8 +113,12 @@ impl MeasuringCycle for KinematicsParams {
         if p.preset == 2 || p.preset == 3 {
             preset_after = ev.reference_ball();
             m.note(format!(
-                "Q431={}: preset set to the sphere centre X{:+.4} Y{:+.4} Z{:+.4}",
-                p.preset, preset_after.x, preset_after.y, preset_after.z
+                "Q431={}: {} X{:+.4} Y{:+.4} Z{:+.4}",
+                p.preset,
+                preset_words(p.mode.writes()),
+                preset_after.x,
+                preset_after.y,
+                preset_after.z
             ));
         }
         notes.push(format!("{spheres} sphere(s) measured"));
@@ -149,6 +153,9 @@ impl MeasuringCycle for KinematicsParams {
             preset_before: arr(&preset_before),
             preset_after: arr(&preset_after),
             preset_shift: arr(&(preset_after - preset_before)),
+            restored: None,
+            preset_set: p.preset != 0 && p.mode.writes() && write_back.stop.is_none(),
+            preset: preset_text(p, write_back.stop.is_some(), &preset_after),
             offset_error: arr(&offset),
             errors_before: result.before.to_map(&plan.present),
             errors_after: result.after.to_map(&plan.present),
@@ -165,7 +172,7 @@ impl MeasuringCycle for KinematicsParams {
             ctx.datum.presets.set_active_xyz(row);
             ctx.datum
                 .presets
-                .write()
+                .write_row(ctx.datum.presets.active, &cfg.machine)
                 .map_err(|e| CycleError::Plan(format!("writing the preset table: {e}")))?;
             let file = ctx.datum.presets.path.display().to_string();
             ctx.note(
@@ -184,4 +191,29 @@ impl MeasuringCycle for KinematicsParams {
             logs: vec![log],
         })
     }
+}
+
+/// What Q431 = 1..3 did with the preset: set (modes 1..3, once the cycle succeeded),
+/// or, in mode 0, only measured (mode 0 writes nothing).
+pub(crate) fn preset_words(mode_writes: bool) -> &'static str {
+    if mode_writes {
+        "preset set to the sphere centre"
+    } else {
+        "preset not set (mode 0); the sphere centre measured at"
+    }
+}
+
+/// The preset line of the result: what Q431 did, with the sphere centre.
+fn preset_text(p: &KinematicsParams, refused: bool, at: &nalgebra::Vector3<f64>) -> String {
+    let words = match p.preset {
+        0 => return "Q431=0: the preset is not changed".to_string(),
+        _ if p.mode.writes() && refused => {
+            "preset not set (the kinematics were not accepted); the sphere centre measured at"
+        }
+        _ => preset_words(p.mode.writes()),
+    };
+    format!(
+        "Q431={}: {words} X{:+.4} Y{:+.4} Z{:+.4}",
+        p.preset, at.x, at.y, at.z
+    )
 }

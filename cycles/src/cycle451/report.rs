@@ -84,6 +84,16 @@ pub struct KinematicsReport {
     pub preset_before: [f64; 3],
     pub preset_after: [f64; 3],
     pub preset_shift: [f64; 3],
+    /// The preset row was set (Q431 = 1..3 in modes 1..3); mode 0 sets none.
+    #[serde(default)]
+    pub preset_set: bool,
+    /// What happened to the preset, in words ("Q431=1: preset not set (mode 0); the
+    /// sphere centre measured at X.. Y.. Z..").
+    #[serde(default)]
+    pub preset: String,
+    /// Set when a later cycle 450 restored the kinematics file: what the file is then.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub restored: Option<String>,
     /// Q147..Q149.
     pub offset_error: [f64; 3],
     /// All errors of the machine's rotary axes, by ISO name.
@@ -117,13 +127,14 @@ impl KinematicsReport {
                 ));
             }
         }
+        s.push_str(&format!("  {}\n", self.preset));
         s.push_str(&format!(
             "  kinematics {}: {}\n",
             self.kinematics_file.display(),
-            if self.written {
-                "corrected errors written"
-            } else {
-                "not changed"
+            match (&self.restored, self.written) {
+                (Some(r), _) => format!("corrected errors written, then {r}"),
+                (None, true) => "corrected errors written".to_string(),
+                (None, false) => "not changed".to_string(),
             }
         ));
         s

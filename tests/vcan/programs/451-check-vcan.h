@@ -6,14 +6,19 @@
 1 ; Cycle 451 MEASURE KINEMATICS, mode 0 (check), on configs/scenarios/demo-sphere.toml:
 2 ; the calibration sphere R12.5 at X+50 Y-30 Z+80 on the A/C tilting table.
 3 ; The probe goes over the sphere, 5 mm above Q320 + SET_UP over its pole; cycle 451
-4 ; finds the sphere from there (Q431=1: the preset at its centre, not written in
-5 ; mode 0, so Q147..Q149 are 0). Mode 0 reports the dispersion and what a
+4 ; finds the sphere from there (Q431=1: the preset at its centre; mode 0 writes
+5 ; nothing, so the preset is not set). Mode 0 reports the dispersion and what a
 6 ; position optimisation would give, and leaves the kinematics file alone.
-7 TOOL CALL "TOUCH_PROBE" Z
-8 L Z+150 R0 FMAX
-9 L X+50 Y-30 R0 FMAX
-10 L Z+102.5 R0 FMAX
-11 TCH PROBE 451 MEASURE KINEMATICS ~
+7 ; The probe is put over the sphere in machine coordinates (M91), whatever the
+8 ; active preset; cycle 247 makes row 1, the sphere centre, the row Q431 sets,
+9 ; so the program runs again and again, and row 0 stays at the machine origin.
+10 TOOL CALL "TOUCH_PROBE" Z
+11 CYCL DEF 247 DATUM SETTING ~
+    Q339=+1        ;DATUM NUMBER
+12 L Z+150 R0 FMAX M91
+13 L X+50 Y-30 R0 FMAX M91
+14 L Z+102.5 R0 FMAX M91
+15 TCH PROBE 451 MEASURE KINEMATICS ~
     Q406=+0        ;MODE ~
     Q407=+12.5     ;SPHERE RADIUS ~
     Q320=+0        ;SET-UP CLEARANCE ~
@@ -35,5 +40,5 @@
     Q423=+4        ;NO. OF PROBE POINTS ~
     Q431=+1        ;PRESET ~
     Q432=+0        ;BACKLASH, ANG. RANGE
-12 L Z+150 R0 FMAX
-13 END PGM 451-check-vcan MM
+16 L Z+150 R0 FMAX M91
+17 END PGM 451-check-vcan MM

@@ -6,14 +6,19 @@
 1 ; Cycle 451 MEASURE KINEMATICS, mode 1 (optimise position), on
 2 ; configs/scenarios/demo-sphere.toml, with Q431=3: the probe is put roughly over the
 3 ; sphere (R12.5 at X+50 Y-30 Z+80); the cycle locates it, sets the active preset to
-4 ; its centre before measuring and again after. In modes 1..3 the active row of the
-5 ; preset table and the kinematics file are written once the cycle succeeded: give
-6 ; --presets FILE and --kinematics FILE to keep the shipped ones as they are.
-7 TOOL CALL "TOUCH_PROBE" Z
-8 L Z+150 R0 FMAX
-9 L X+50 Y-30 R0 FMAX
-10 L Z+102.5 R0 FMAX
-11 TCH PROBE 451 MEASURE KINEMATICS ~
+4 ; its centre before measuring and again after. In modes 1..3 the preset row and the
+5 ; kinematics file are written, in the machine's state directory (never configs/)
+6 ; once the cycle succeeded.
+7 ; The probe is put over the sphere in machine coordinates (M91), whatever the
+8 ; active preset; cycle 247 makes row 1, the sphere centre, the row Q431 sets,
+9 ; so the program runs again and again, and row 0 stays at the machine origin.
+10 TOOL CALL "TOUCH_PROBE" Z
+11 CYCL DEF 247 DATUM SETTING ~
+    Q339=+1        ;DATUM NUMBER
+12 L Z+150 R0 FMAX M91
+13 L X+50 Y-30 R0 FMAX M91
+14 L Z+102.5 R0 FMAX M91
+15 TCH PROBE 451 MEASURE KINEMATICS ~
     Q406=+1        ;MODE ~
     Q407=+12.5     ;SPHERE RADIUS ~
     Q320=+0        ;SET-UP CLEARANCE ~
@@ -35,5 +40,5 @@
     Q423=+4        ;NO. OF PROBE POINTS ~
     Q431=+3        ;PRESET ~
     Q432=+0        ;BACKLASH, ANG. RANGE
-12 L Z+50 R0 FMAX
-13 END PGM 451-preset-set-vcan MM
+16 L Z+50 R0 FMAX
+17 END PGM 451-preset-set-vcan MM
