@@ -34,13 +34,8 @@ pub fn run(
     let mut opts = cfg.machine_options();
     // A move under way brakes on the PLC's abort, a stale heartbeat or SIGTERM.
     opts.abort = Some(lock(shared).abort_flag());
-    let session = match Session::open(&opts) {
-        Ok(s) => s,
-        Err(e) => {
-            let _ = ready.send(Err(format!("cannot open the machine: {e}")));
-            return;
-        }
-    };
+    // The history before the machine: one that cannot open is found at once, before
+    // a CANopen start-up.
     let history = cfg
         .history()
         .map(|t| open_history(&t, &cycles.machine.name))
@@ -49,6 +44,13 @@ pub fn run(
         Ok(h) => h,
         Err(e) => {
             let _ = ready.send(Err(e));
+            return;
+        }
+    };
+    let session = match Session::open(&opts) {
+        Ok(s) => s,
+        Err(e) => {
+            let _ = ready.send(Err(format!("cannot open the machine: {e}")));
             return;
         }
     };
