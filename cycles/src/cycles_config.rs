@@ -48,10 +48,11 @@ impl CyclesConfig {
     /// The cycles' sections for a machine configuration already read (from the file
     /// it was read from, [`MachineConfig::path`]).
     pub fn of(machine: MachineConfig) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(&machine.path).map_err(|source| ConfigError::Read {
-            path: machine.path.clone(),
-            source,
-        })?;
+        let text =
+            hal::config::read_config_text(&machine.path).map_err(|source| ConfigError::Read {
+                path: machine.path.clone(),
+                source,
+            })?;
         Self::with_machine(machine, &text)
     }
 

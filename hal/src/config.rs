@@ -52,6 +52,32 @@ impl ConfigError {
     }
 }
 
+/// The largest configuration file read (bytes): a machine, scenario or gateway file is
+/// a few kB; more is the wrong file (`/dev/zero`, a log), refused at once instead of
+/// read forever.
+pub const MAX_CONFIG_BYTES: u64 = 1 << 20;
+
+/// Reads a configuration file as text: at most [`MAX_CONFIG_BYTES`], UTF-8.
+pub fn read_config_text(path: &Path) -> std::io::Result<String> {
+    use std::io::Read;
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)?
+        .take(MAX_CONFIG_BYTES + 1)
+        .read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > MAX_CONFIG_BYTES {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("larger than {MAX_CONFIG_BYTES} bytes: not a configuration file"),
+        ));
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("not UTF-8 text (byte {})", e.utf8_error().valid_up_to()),
+        )
+    })
+}
+
 /// The plausible ranges of the machine values, as the README's configuration section
 /// names them: a value outside is a typing error (a unit slip, a stray exponent) and is
 /// refused with the file, the key and the range before anything moves.
@@ -281,7 +307,7 @@ pub struct MachineConfig {
 
 impl MachineConfig {
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        let text = read_config_text(path).map_err(|source| ConfigError::Read {
             path: path.to_path_buf(),
             source,
         })?;
@@ -583,6 +609,17 @@ impl MachineConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn oversized_and_endless_files_are_refused_at_once() {
+        let e = read_config_text(Path::new("/dev/zero")).unwrap_err();
+        assert!(e.to_string().contains("larger than 1048576 bytes"), "{e}");
+        let big = std::env::temp_dir().join(format!("hal-big-{}.toml", std::process::id()));
+        std::fs::write(&big, "# comment\n".repeat(120_000)).unwrap();
+        let e = MachineConfig::load(&big).unwrap_err().to_string();
+        let _ = std::fs::remove_file(&big);
+        assert!(e.contains("hal-big") && e.contains("larger than"), "{e}");
+    }
 
     const MINI: &str = r#"
 name = "mini"

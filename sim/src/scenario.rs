@@ -357,7 +357,7 @@ impl Scenario {
     /// `<machines_dir>/machines/NAME.toml` (so either the machines folder or the
     /// configs folder may be passed).
     pub fn load(path: &Path, machines_dir: Option<&Path>) -> Result<Self, ScenarioError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        let text = hal::config::read_config_text(path).map_err(|source| ConfigError::Read {
             path: path.to_path_buf(),
             source,
         })?;

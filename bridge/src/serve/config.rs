@@ -182,6 +182,17 @@ pub struct PlcSection {
     /// Scale of the 32-bit integer copies of the results (value x scale, rounded).
     #[serde(default = "default_int_scale")]
     pub int_scale: f64,
+    /// Connections served at once; more are refused at accept (unless the oldest
+    /// silent one has been silent for `owner_timeout_ms`: it is closed for the new).
+    #[serde(default = "default_max_connections")]
+    pub max_connections: u64,
+    /// A connection that owns the request block and says nothing for this long loses
+    /// it to the next writer.
+    #[serde(default = "default_owner_timeout_ms")]
+    pub owner_timeout_ms: u64,
+    /// Only these peers (addresses, CIDR networks) are served; absent: any peer.
+    #[serde(default)]
+    pub allow: Option<Vec<String>>,
 }
 
 impl Default for PlcSection {
@@ -191,6 +202,9 @@ impl Default for PlcSection {
             word_order: default_word_order(),
             heartbeat_timeout_ms: default_heartbeat_timeout_ms(),
             int_scale: default_int_scale(),
+            max_connections: default_max_connections(),
+            owner_timeout_ms: default_owner_timeout_ms(),
+            allow: None,
         }
     }
 }
@@ -210,6 +224,18 @@ fn default_heartbeat_timeout_ms() -> u64 {
 fn default_int_scale() -> f64 {
     10_000.0
 }
+fn default_max_connections() -> u64 {
+    8
+}
+fn default_owner_timeout_ms() -> u64 {
+    10_000
+}
+
+/// `plc.max_connections` at most (each one a file descriptor and a task).
+pub const MAX_CONNECTIONS: u64 = 256;
+/// `plc.owner_timeout_ms` range: at least a few PLC cycles, at most 10 min.
+pub const MIN_OWNER_TIMEOUT_MS: u64 = 500;
+pub const MAX_OWNER_TIMEOUT_MS: u64 = 600_000;
 
 #[derive(Debug, thiserror::Error)]
 pub enum GatewayConfigError {
@@ -229,11 +255,14 @@ pub enum GatewayConfigError {
 }
 
 impl GatewayConfig {
+    /// Reads (at most `hal::config::MAX_CONFIG_BYTES`: `/dev/zero` is refused at once)
+    /// and validates.
     pub fn load(path: &Path) -> Result<Self, GatewayConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| GatewayConfigError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text =
+            hal::config::read_config_text(path).map_err(|source| GatewayConfigError::Read {
+                path: path.to_path_buf(),
+                source,
+            })?;
         Self::parse(&text, path)
     }
 
@@ -357,6 +386,22 @@ impl GatewayConfig {
         if !(p.int_scale.is_finite() && p.int_scale >= 1.0 && p.int_scale <= 1e9) {
             return Err(self.invalid("plc.int_scale", "must be a number in 1..1e9"));
         }
+        if !(1..=MAX_CONNECTIONS).contains(&p.max_connections) {
+            return Err(self.invalid(
+                "plc.max_connections",
+                format!("{} is outside 1..{MAX_CONNECTIONS}", p.max_connections),
+            ));
+        }
+        if !(MIN_OWNER_TIMEOUT_MS..=MAX_OWNER_TIMEOUT_MS).contains(&p.owner_timeout_ms) {
+            return Err(self.invalid(
+                "plc.owner_timeout_ms",
+                format!(
+                    "{} is outside {MIN_OWNER_TIMEOUT_MS}..{MAX_OWNER_TIMEOUT_MS}",
+                    p.owner_timeout_ms
+                ),
+            ));
+        }
+        self.allow()?;
         Ok(())
     }
 
@@ -426,6 +471,19 @@ impl GatewayConfig {
             .or_else(|| std::env::var_os("HOME").map(|h| Path::new(&h).join(".local/state")))
             .unwrap_or_else(|| PathBuf::from("/var/lib"));
         xdg.join("probebridge").join("history.spool")
+    }
+
+    /// The peers the PLC face serves.
+    pub fn allow(&self) -> Result<super::peer_allow::AllowList, GatewayConfigError> {
+        match &self.plc.allow {
+            None => Ok(super::peer_allow::AllowList::any()),
+            Some(entries) => super::peer_allow::AllowList::parse(entries)
+                .map_err(|e| self.invalid("plc.allow", e)),
+        }
+    }
+
+    pub fn owner_timeout(&self) -> Duration {
+        Duration::from_millis(self.plc.owner_timeout_ms)
     }
 
     pub fn listen(&self) -> Result<SocketAddr, GatewayConfigError> {
@@ -535,6 +593,9 @@ mod tests {
             None,
             "the web face is off by default"
         );
+        assert_eq!(c.plc.max_connections, 8);
+        assert_eq!(c.owner_timeout(), Duration::from_secs(10));
+        assert!(c.allow().unwrap().permits("192.0.2.1".parse().unwrap()));
         assert_eq!(c.heartbeat_timeout(), Some(Duration::from_secs(2)));
         assert!(c.machine.scenario.unwrap().is_absolute());
     }
@@ -640,10 +701,32 @@ mod tests {
                 "web.max_connections",
             ),
             ("[web]\nrequest_timeout_ms = 5\n", "web.request_timeout_ms"),
+            (
+                "[plc]\nmax_connections = 0\n",
+                "plc.max_connections: 0 is outside 1..256",
+            ),
+            ("[plc]\nmax_connections = 257\n", "plc.max_connections: 257"),
+            (
+                "[plc]\nowner_timeout_ms = 10\n",
+                "plc.owner_timeout_ms: 10 is outside 500..600000",
+            ),
+            ("[plc]\nallow = []\n", "plc.allow: an empty list"),
+            (
+                "[plc]\nallow = [\"10.0.0.0/8\", \"plc\"]\n",
+                "plc.allow: \"plc\" is not an address",
+            ),
+            ("[plc]\nallow = \"10.0.0.5\"\n", "allow"),
         ] {
             let e = parse(&format!("{base}{extra}")).unwrap_err().to_string();
-            assert!(e.contains(key), "{e}");
+            assert!(e.contains(key) && e.contains("gateway.toml"), "{e}");
         }
+        let c = parse(&format!(
+            "{base}[plc]\nallow = [\"10.0.1.0/24\"]\nmax_connections = 2\nowner_timeout_ms = 500\n"
+        ))
+        .unwrap();
+        assert!(c.allow().unwrap().permits("10.0.1.7".parse().unwrap()));
+        assert!(!c.allow().unwrap().permits("127.0.0.1".parse().unwrap()));
+        assert_eq!(c.owner_timeout(), Duration::from_millis(500));
         let e = parse("[machine]\n[programs]\nfolder = \".\"\n")
             .unwrap_err()
             .to_string();

@@ -2,6 +2,7 @@
 //! the connection that owns the writes, and the queue of one job to the machine thread.
 
 use super::handshake::{AbortReason, Action, Handshake, Outcome, Refusal, State};
+use super::ownership::{Ownership, Takeover};
 use super::register_map::{MapException, RegisterMap};
 use crate::history::recorder::Recorder;
 use crate::history::NewRun;
@@ -9,6 +10,7 @@ use cycles::program::{Program, ProgramError};
 use cycles::CyclesConfig;
 use hal::AbortFlag;
 use std::collections::BTreeMap;
+use std::net::IpAddr;
 use std::path::PathBuf;
 use std::sync::mpsc::Sender;
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -53,7 +55,7 @@ pub struct Core {
     /// The flag's generation of the running measurement: a late abort of a finished
     /// one does not hit the next.
     job_generation: u64,
-    owner: Option<u64>,
+    owner: Ownership,
     heartbeat: u16,
     /// Where runs are recorded (none: history off).
     history: Option<Recorder>,
@@ -69,6 +71,7 @@ impl Core {
     pub fn new(
         map: RegisterMap,
         hs: Handshake,
+        owner: Ownership,
         programs: PathBuf,
         cycles: CyclesConfig,
         jobs: Sender<ToMachine>,
@@ -82,7 +85,7 @@ impl Core {
             abort: AbortFlag::fresh(),
             abort_reason: None,
             job_generation: 0,
-            owner: None,
+            owner,
             heartbeat: 0,
             history: None,
         };
@@ -102,22 +105,48 @@ impl Core {
         self.map.set_state(self.hs.view());
     }
 
-    /// A write of connection `conn`: the first connection that writes owns the
-    /// request block until it disconnects.
-    pub fn write(&mut self, conn: u64, addr: u16, values: &[u16]) -> Result<(), WriteRefusal> {
-        if self.owner.is_some_and(|o| o != conn) {
-            return Err(WriteRefusal::Busy);
-        }
+    /// A write of connection `conn` from `ip`: the first connection that writes owns
+    /// the request block while it talks (see [`Ownership`]). A refused write changes
+    /// nothing, the owner included.
+    pub fn write(
+        &mut self,
+        conn: u64,
+        ip: IpAddr,
+        addr: u16,
+        values: &[u16],
+    ) -> Result<(), WriteRefusal> {
+        let now = Instant::now();
+        let mut claim = self.owner.clone();
+        let takeover = claim.claim(conn, ip, now).map_err(|_| WriteRefusal::Busy)?;
         self.map.write(addr, values).map_err(WriteRefusal::Map)?;
-        self.owner = Some(conn);
-        self.on_request(Instant::now());
+        self.owner = claim;
+        match takeover {
+            Some(Takeover::Silent { from, silent }) => tracing::info!(
+                connection = conn,
+                %ip,
+                "PLC face: connection {conn} takes the request block over from connection \
+                 {from}, silent for {} ms",
+                silent.as_millis()
+            ),
+            Some(Takeover::SameAddress { from }) => tracing::info!(
+                connection = conn,
+                %ip,
+                "PLC face: connection {conn} takes the request block over from connection \
+                 {from} of the same address (the PLC connected again)"
+            ),
+            None => {}
+        }
+        self.on_request(now);
         Ok(())
     }
 
+    /// Connection `conn` sent a request (any): an owner stays the owner.
+    pub fn heard(&mut self, conn: u64) {
+        self.owner.heard(conn, Instant::now());
+    }
+
     pub fn disconnected(&mut self, conn: u64) {
-        if self.owner == Some(conn) {
-            self.owner = None;
-        }
+        self.owner.disconnected(conn);
     }
 
     fn on_request(&mut self, now: Instant) {
@@ -300,9 +329,15 @@ pub fn resolve_program(
             }
             Err(Refusal::InvalidProgram)
         }
+        // There but unreadable (not UTF-8, over 1 MiB, no permission): not a program
+        // this gateway can run, which is reason 4, not "no such program".
+        Err(ProgramError::Read { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
+            tracing::warn!("no program {}", path.display());
+            Err(Refusal::UnknownProgram)
+        }
         Err(e) => {
             tracing::warn!("{e}");
-            Err(Refusal::UnknownProgram)
+            Err(Refusal::InvalidProgram)
         }
     }
 }

@@ -5,11 +5,14 @@
 //! second one during a slow stop exits at once (128 + signal), as `run` does.
 
 pub mod config;
+pub mod face_log;
 pub mod gateway;
 pub mod handshake;
 pub mod machine_link;
 pub mod machine_thread;
 pub mod modbus_face;
+pub mod ownership;
+pub mod peer_allow;
 pub mod register_map;
 pub mod sd_notify;
 pub mod web_face;
@@ -72,17 +75,30 @@ fn signal_name(sig: i32) -> &'static str {
     }
 }
 
+/// `PROBEBRIDGE_LOG=debug` shows each PLC connection (default: info).
+pub const LOG_ENV: &str = "PROBEBRIDGE_LOG";
+
 fn init_logging() {
+    let level = match std::env::var(LOG_ENV).as_deref() {
+        Ok("debug") => tracing::Level::DEBUG,
+        Ok("trace") => tracing::Level::TRACE,
+        Ok("warn") => tracing::Level::WARN,
+        Ok("error") => tracing::Level::ERROR,
+        _ => tracing::Level::INFO,
+    };
     // The journal stamps every line itself: no time, no colours, level and message.
     let _ = tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
         .without_time()
         .with_target(false)
-        .with_max_level(tracing::Level::INFO)
+        .with_max_level(level)
         .try_init();
 }
 
 const TICK: Duration = Duration::from_millis(50);
+/// A PLC face stalled this long ends the service (the watchdog is no longer fed from
+/// the moment the stall is seen).
+const FACE_DEAD: Duration = Duration::from_secs(5);
 
 /// Runs the service until SIGTERM, SIGINT or SIGHUP. Exit status 0 after a clean stop.
 pub fn run(config_path: &Path) -> Result<u8, String> {
@@ -91,6 +107,19 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     install_signal_handlers();
     let listen = cfg.listen().map_err(|e| e.to_string())?;
     let order = cfg.word_order().map_err(|e| e.to_string())?;
+    let face_opts = modbus_face::FaceOptions {
+        max_connections: cfg.plc.max_connections as usize,
+        silence: cfg.owner_timeout(),
+        allow: cfg.allow().map_err(|e| e.to_string())?,
+    };
+    // The PLC face's port before the machine: a port in use is found at once, not
+    // after a CANopen start-up that Restart= would repeat every 2 s.
+    let listener = modbus_face::bind(listen).map_err(|e| {
+        format!(
+            "{}: plc.listen: cannot bind {listen}: {e}",
+            config_path.display()
+        )
+    })?;
     let (machine_cfg, scenario) =
         crate::session::resolve_machine(&cfg.machine_options()).map_err(|e| e.to_string())?;
     // The machine's state (preset table, kinematics, protocols) in the unit's
@@ -122,6 +151,7 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     let core = Core::new(
         RegisterMap::new(order, cfg.plc.int_scale),
         Handshake::new(cfg.heartbeat_timeout(), Instant::now()),
+        ownership::Ownership::new(cfg.owner_timeout()),
         cfg.programs.folder.clone(),
         cycles.clone(),
         jobs_tx.clone(),
@@ -162,12 +192,8 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     for n in &notes {
         tracing::info!("{n}");
     }
-    let face = modbus_face::PlcFace::start(shared.clone(), listen).map_err(|e| {
-        format!(
-            "{}: plc.listen: cannot bind {listen}: {e}",
-            config_path.display()
-        )
-    })?;
+    let mut face = modbus_face::PlcFace::start(shared.clone(), listener, face_opts)
+        .map_err(|e| format!("PLC face on {listen}: {e}"))?;
     lock(&shared).set_machine_ok(true);
     tracing::info!(listen = %face.local_addr, machine = %machine_cfg.name, "gateway ready");
     // Tests and scripts read the bound address (port 0 takes any) from this line.
@@ -179,12 +205,19 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
         face.local_addr
     ));
 
-    let signal = supervise(&shared, &notifier);
-    tracing::info!(
-        signal,
-        "stopping on {}: aborting a running measurement, closing the machine",
-        signal_name(signal)
-    );
+    let end = supervise(&shared, &notifier, &mut face);
+    match &end {
+        End::Signal(signal) => tracing::info!(
+            signal,
+            "stopping on {}: aborting a running measurement, closing the machine",
+            signal_name(*signal)
+        ),
+        End::FaceDied(why) => {
+            tracing::error!(
+                "the PLC face is dead ({why}): stopping, for systemd to restart the service"
+            )
+        }
+    }
     notifier.notify("STOPPING=1\nSTATUS=stopping");
     {
         let mut core = lock(&shared);
@@ -193,13 +226,20 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     }
     let _ = jobs_tx.send(ToMachine::Quit);
     let _ = machine.join();
-    drop(face);
+    match &end {
+        // A stalled face's thread may never return: leave it.
+        End::FaceDied(_) => face.abandon(),
+        End::Signal(_) => drop(face),
+    }
     if let Some(h) = &history {
         h.stop();
     }
     drop(web);
     tracing::info!(state = lock(&shared).state().name(), "stopped");
-    Ok(0)
+    match end {
+        End::Signal(_) => Ok(0),
+        End::FaceDied(why) => Err(format!("the PLC face is dead: {why}")),
+    }
 }
 
 /// The history of the gateway, opened before the machine (a history that is down is
@@ -232,17 +272,50 @@ fn open_history(
     Ok(Some(r))
 }
 
-/// The service loop: ticks the handshake, keeps systemd's watchdog fed, says the state
-/// in STATUS. Returns the signal that ends the service.
-fn supervise(shared: &gateway::Shared, notifier: &sd_notify::Notifier) -> i32 {
+/// Why the service loop ended.
+enum End {
+    Signal(i32),
+    /// The PLC face ended or stalled: the service must not live on deaf.
+    FaceDied(String),
+}
+
+/// The service loop: ticks the handshake, keeps systemd's watchdog fed while the PLC
+/// face serves, says the state in STATUS. Returns why the service ends.
+fn supervise(
+    shared: &gateway::Shared,
+    notifier: &sd_notify::Notifier,
+    face: &mut modbus_face::PlcFace,
+) -> End {
     let watchdog = sd_notify::Notifier::watchdog_interval();
     let mut last_watchdog = Instant::now();
     let mut last = (State::Idle, true);
+    let mut stall_said = false;
     loop {
         let sig = STOP_SIGNAL.load(Ordering::Acquire);
         if sig != 0 {
-            return sig;
+            return End::Signal(sig);
         }
+        let face_ok = match face.health() {
+            modbus_face::FaceHealth::Serving => {
+                stall_said = false;
+                true
+            }
+            modbus_face::FaceHealth::Stalled(d) if d >= FACE_DEAD => {
+                return End::FaceDied(format!("it has not run for {} ms", d.as_millis()))
+            }
+            modbus_face::FaceHealth::Stalled(d) => {
+                if !stall_said {
+                    tracing::error!(
+                        "the PLC face has not run for {} ms: no longer feeding the watchdog",
+                        d.as_millis()
+                    );
+                    notifier.notify("STATUS=PLC face not answering");
+                    stall_said = true;
+                }
+                false
+            }
+            modbus_face::FaceHealth::Ended(why) => return End::FaceDied(why),
+        };
         let now = Instant::now();
         let (state, machine_ok) = {
             let mut core = lock(shared);
@@ -258,7 +331,7 @@ fn supervise(shared: &gateway::Shared, notifier: &sd_notify::Notifier) -> i32 {
             notifier.notify(&format!("STATUS={}{machine}", state.name()));
             last = (state, machine_ok);
         }
-        if let Some(w) = watchdog {
+        if let Some(w) = watchdog.filter(|_| face_ok) {
             if now.duration_since(last_watchdog) >= w {
                 notifier.notify("WATCHDOG=1");
                 last_watchdog = now;

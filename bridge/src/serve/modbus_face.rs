@@ -1,62 +1,173 @@
-//! The Modbus TCP server of the PLC face: a thin loop around [`super::gateway::Core`].
-//! Holding registers only (FC3, FC6, FC16); other functions get IllegalFunction.
+//! The Modbus TCP server of the PLC face: an accept loop and one task per connection
+//! around [`super::gateway::Core`]. Holding registers only (FC3, FC6, FC16); other
+//! functions get IllegalFunction.
+//!
+//! The face must stay reachable for its PLC whatever else is on the network:
+//! - peers outside `plc.allow` are refused at accept;
+//! - at most `plc.max_connections` are served; one more is refused at accept, unless
+//!   the connection silent longest has been silent for the owner timeout: that one is
+//!   closed for the new (a PLC that rebooted gets back in past idle squatters);
+//! - an accept error (EMFILE, ENFILE, ENOBUFS, ...) is logged and retried after a
+//!   short wait: it never ends the server;
+//! - accepted sockets have TCP keepalive (a dead peer is noticed in about 10 s) and a
+//!   user timeout for unacknowledged answers;
+//! - the face ticks a heartbeat the service loop watches ([`PlcFace::health`]): a face
+//!   that stalls or ends stops the service, so systemd restarts it.
 
+use super::face_log::{Event, FaceLog, SUMMARY_EVERY};
 use super::gateway::{lock, Shared, WriteRefusal};
+use super::peer_allow::AllowList;
 use super::register_map::MapException;
-use std::future::Future;
+use std::collections::BTreeMap;
 use std::io;
-use std::net::SocketAddr;
-use std::pin::Pin;
+use std::net::{IpAddr, SocketAddr};
+use std::os::fd::AsRawFd;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
-use tokio_modbus::server::Service;
-use tokio_modbus::{ExceptionCode, Request, Response, SlaveRequest};
+use tokio::sync::Notify;
+
+/// MBAP header: transaction, protocol, length, unit.
+const MBAP_LEN: usize = 7;
+/// The longest length field taken: FC16 with a byte count of 255 (a frame beyond the
+/// standard's 253-byte PDU is still read, to answer IllegalDataValue, not to close).
+const MAX_LENGTH_FIELD: usize = 1 + 6 + 255;
+/// First wait after a failed accept; doubled up to [`ACCEPT_RETRY_MAX`].
+const ACCEPT_RETRY_FIRST: Duration = Duration::from_millis(50);
+const ACCEPT_RETRY_MAX: Duration = Duration::from_secs(1);
+/// An answer the peer does not take within this long ends its connection.
+const WRITE_TIMEOUT: Duration = Duration::from_secs(10);
+/// TCP keepalive: probes after 5 s of silence, every 1 s, 5 unanswered end it.
+const KEEPALIVE_IDLE_S: libc::c_int = 5;
+const KEEPALIVE_INTERVAL_S: libc::c_int = 1;
+const KEEPALIVE_PROBES: libc::c_int = 5;
+const USER_TIMEOUT_MS: libc::c_uint = 10_000;
+/// How often the face ticks its heartbeat.
+const BEAT: Duration = Duration::from_millis(100);
+
+const EXC_ILLEGAL_FUNCTION: u8 = 1;
+const EXC_ILLEGAL_DATA_ADDRESS: u8 = 2;
+const EXC_ILLEGAL_DATA_VALUE: u8 = 3;
+const EXC_SERVER_DEVICE_BUSY: u8 = 6;
+
+/// The PLC face's limits (from `[plc]`).
+#[derive(Clone, Debug)]
+pub struct FaceOptions {
+    pub max_connections: usize,
+    /// A connection silent this long may be closed for a new one at the limit.
+    pub silence: Duration,
+    pub allow: AllowList,
+}
+
+/// Binds the face's address (before the machine is opened: a port in use is found at
+/// once).
+pub fn bind(addr: SocketAddr) -> io::Result<std::net::TcpListener> {
+    let listener = std::net::TcpListener::bind(addr)?;
+    listener.set_nonblocking(true)?;
+    Ok(listener)
+}
+
+/// How the face is doing, as the service loop sees it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum FaceHealth {
+    Serving,
+    /// Its heartbeat has not moved for this long.
+    Stalled(Duration),
+    /// Its thread has ended (why).
+    Ended(String),
+}
 
 pub struct PlcFace {
     pub local_addr: SocketAddr,
     stop: Option<tokio::sync::oneshot::Sender<()>>,
-    thread: Option<JoinHandle<io::Result<()>>>,
+    thread: Option<JoinHandle<Result<(), String>>>,
+    epoch: Instant,
+    /// Milliseconds since `epoch` at the face's last tick.
+    beat: Arc<AtomicU64>,
 }
 
+/// Fault injection for the tests of the service's supervision (never set in
+/// production): `stall` blocks the face's thread, `end` ends it, 1 s after start.
+pub const FAULT_ENV: &str = "PROBEBRIDGE_FAULT_PLC_FACE";
+
 impl PlcFace {
-    pub fn start(shared: Shared, bind: SocketAddr) -> io::Result<Self> {
-        let listener = std::net::TcpListener::bind(bind)?;
-        listener.set_nonblocking(true)?;
+    pub fn start(
+        shared: Shared,
+        listener: std::net::TcpListener,
+        opts: FaceOptions,
+    ) -> io::Result<Self> {
         let local_addr = listener.local_addr()?;
         let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-        let next_id = std::sync::Arc::new(AtomicU64::new(1));
-        let thread = std::thread::Builder::new()
-            .name("probebridge-plc-face".into())
-            .spawn(move || {
-                tokio::runtime::Builder::new_current_thread()
-                    .enable_all()
-                    .build()?
-                    .block_on(async move {
-                        let listener = tokio::net::TcpListener::from_std(listener)?;
-                        let server = tokio_modbus::server::tcp::Server::new(listener);
-                        let on_connected = |stream: TcpStream, addr: SocketAddr| {
-                            let shared = shared.clone();
-                            let id = next_id.fetch_add(1, Ordering::Relaxed);
-                            async move {
-                                tracing::info!(%addr, connection = id, "PLC face: connected");
-                                Ok(Some((Connection { shared, id, addr }, stream)))
+        let epoch = Instant::now();
+        let beat = Arc::new(AtomicU64::new(0));
+        let fault = std::env::var(FAULT_ENV).unwrap_or_default();
+        let thread = {
+            let beat = beat.clone();
+            std::thread::Builder::new()
+                .name("probebridge-plc-face".into())
+                .spawn(move || -> Result<(), String> {
+                    let rt = tokio::runtime::Builder::new_current_thread()
+                        .enable_all()
+                        .build()
+                        .map_err(|e| format!("cannot start its runtime: {e}"))?;
+                    rt.block_on(async move {
+                        let listener = tokio::net::TcpListener::from_std(listener)
+                            .map_err(|e| format!("cannot listen: {e}"))?;
+                        tokio::spawn(tick(beat, epoch));
+                        if !fault.is_empty() {
+                            tokio::time::sleep(Duration::from_secs(1)).await;
+                            tracing::warn!("{FAULT_ENV}={fault}: injecting the fault");
+                            match fault.as_str() {
+                                // Blocks the runtime: no accept, no answer, no tick.
+                                "stall" => loop {
+                                    std::thread::park();
+                                },
+                                _ => return Err(format!("ended by {FAULT_ENV}={fault}")),
                             }
-                        };
-                        let abort = async move {
-                            let _ = rx.await;
-                        };
-                        server
-                            .serve_until(&on_connected, |e| tracing::warn!("PLC face: {e}"), abort)
-                            .await
-                            .map(|_| ())
+                        }
+                        accept_loop(listener, shared, opts, rx).await;
+                        Ok(())
                     })
-            })?;
+                })?
+        };
         Ok(Self {
             local_addr,
             stop: Some(tx),
             thread: Some(thread),
+            epoch,
+            beat,
         })
+    }
+
+    pub fn health(&mut self) -> FaceHealth {
+        if self.thread.as_ref().is_some_and(|t| t.is_finished()) {
+            let why = match self.thread.take().map(JoinHandle::join) {
+                Some(Ok(Err(e))) => e,
+                Some(Ok(Ok(()))) => "its loop returned".into(),
+                Some(Err(_)) => "its thread panicked".into(),
+                None => "gone".into(),
+            };
+            return FaceHealth::Ended(why);
+        }
+        if self.thread.is_none() {
+            return FaceHealth::Ended("gone".into());
+        }
+        let last = Duration::from_millis(self.beat.load(Ordering::Acquire));
+        let silent = self.epoch.elapsed().saturating_sub(last);
+        if silent > BEAT * 10 {
+            FaceHealth::Stalled(silent)
+        } else {
+            FaceHealth::Serving
+        }
+    }
+
+    /// Leaves a stalled face's thread behind instead of waiting for it on drop.
+    pub fn abandon(mut self) {
+        self.stop.take();
+        self.thread.take();
     }
 }
 
@@ -71,60 +182,334 @@ impl Drop for PlcFace {
     }
 }
 
-/// One client connection.
-struct Connection {
+async fn tick(beat: Arc<AtomicU64>, epoch: Instant) {
+    let mut every = tokio::time::interval(BEAT);
+    loop {
+        every.tick().await;
+        beat.store(epoch.elapsed().as_millis() as u64, Ordering::Release);
+    }
+}
+
+/// The open connections, shared by the accept loop and the connection tasks.
+struct Registry {
+    conns: BTreeMap<u64, Entry>,
+    log: FaceLog,
+}
+
+struct Entry {
+    peer: SocketAddr,
+    heard: Instant,
+    close: Arc<Notify>,
+}
+
+type SharedRegistry = Arc<Mutex<Registry>>;
+
+fn registry(r: &SharedRegistry) -> std::sync::MutexGuard<'_, Registry> {
+    r.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+async fn accept_loop(
+    listener: tokio::net::TcpListener,
     shared: Shared,
+    opts: FaceOptions,
+    mut stop: tokio::sync::oneshot::Receiver<()>,
+) {
+    let reg: SharedRegistry = Arc::new(Mutex::new(Registry {
+        conns: BTreeMap::new(),
+        log: FaceLog::new(Instant::now()),
+    }));
+    let mut next_id = 1u64;
+    let mut retry = ACCEPT_RETRY_FIRST;
+    let mut summary = tokio::time::interval(SUMMARY_EVERY / 4);
+    loop {
+        let accepted = tokio::select! {
+            _ = &mut stop => return,
+            _ = summary.tick() => {
+                let mut r = registry(&reg);
+                let open = r.conns.len();
+                if let Some(line) = r.log.summary(Instant::now(), open, opts.max_connections) {
+                    tracing::info!("{line}");
+                }
+                continue;
+            }
+            a = listener.accept() => a,
+        };
+        match accepted {
+            Ok((stream, peer)) => {
+                retry = ACCEPT_RETRY_FIRST;
+                if let Some((close, id)) = admit(&reg, &opts, peer, &mut next_id) {
+                    keepalive(&stream, peer);
+                    tokio::spawn(connection(
+                        stream,
+                        peer,
+                        id,
+                        shared.clone(),
+                        reg.clone(),
+                        close,
+                    ));
+                }
+            }
+            Err(e) => {
+                let held = registry(&reg).log.count(Event::AcceptError, Instant::now());
+                if let Some(held) = held {
+                    tracing::warn!(
+                        retry_in_ms = retry.as_millis() as u64,
+                        "PLC face: accept failed: {e}; retrying ({held} more since the last \
+                         such line; open connections keep being served)"
+                    );
+                }
+                // Out of descriptors or memory: wait for some to be freed instead of
+                // spinning on a listener that stays readable.
+                tokio::select! {
+                    _ = &mut stop => return,
+                    _ = tokio::time::sleep(retry) => {}
+                }
+                retry = (retry * 2).min(ACCEPT_RETRY_MAX);
+            }
+        }
+    }
+}
+
+/// Takes or refuses a new connection; `Some` with its close signal and id if taken.
+fn admit(
+    reg: &SharedRegistry,
+    opts: &FaceOptions,
+    peer: SocketAddr,
+    next_id: &mut u64,
+) -> Option<(Arc<Notify>, u64)> {
+    let now = Instant::now();
+    let mut r = registry(reg);
+    if !opts.allow.permits(peer.ip()) {
+        if let Some(held) = r.log.count(Event::RefusedPeer, now) {
+            tracing::warn!(
+                %peer,
+                "PLC face: refused {peer}: not in plc.allow ({held} more refused since the \
+                 last such line)"
+            );
+        }
+        return None;
+    }
+    if r.conns.len() >= opts.max_connections {
+        let quietest = r
+            .conns
+            .iter()
+            .map(|(id, e)| (*id, now.saturating_duration_since(e.heard)))
+            .max_by_key(|(_, silent)| *silent);
+        match quietest {
+            Some((id, silent)) if silent >= opts.silence => {
+                if let Some(e) = r.conns.remove(&id) {
+                    e.close.notify_one();
+                    r.log.count(Event::Evicted, now);
+                    tracing::debug!(
+                        "PLC face: closing connection {id} of {}, silent for {} ms, for a new \
+                         one from {peer}",
+                        e.peer,
+                        silent.as_millis()
+                    );
+                }
+            }
+            _ => {
+                let max = opts.max_connections;
+                if let Some(held) = r.log.count(Event::RefusedFull, now) {
+                    tracing::warn!(
+                        %peer,
+                        "PLC face: refused {peer}: {max} connections open (plc.max_connections), \
+                         none silent for the owner timeout ({held} more refused since the last \
+                         such line)"
+                    );
+                }
+                return None;
+            }
+        }
+    }
+    let id = *next_id;
+    *next_id += 1;
+    let close = Arc::new(Notify::new());
+    r.conns.insert(
+        id,
+        Entry {
+            peer,
+            heard: now,
+            close: close.clone(),
+        },
+    );
+    r.log.count(Event::Accepted, now);
+    tracing::debug!("PLC face: connection {id} of {peer} accepted");
+    Some((close, id))
+}
+
+/// TCP keepalive and a user timeout: a peer that lost power is found dead in about
+/// 10 s instead of holding its socket ESTABLISHED for hours.
+fn keepalive(stream: &TcpStream, peer: SocketAddr) {
+    let fd = stream.as_raw_fd();
+    let set = |level, name, value: libc::c_int| {
+        // SAFETY: setsockopt on a socket we own, with a c_int of the right size.
+        let rc = unsafe {
+            libc::setsockopt(
+                fd,
+                level,
+                name,
+                (&value as *const libc::c_int).cast(),
+                std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+            )
+        };
+        if rc != 0 {
+            tracing::debug!(%peer, "PLC face: setsockopt {name}: {}", io::Error::last_os_error());
+        }
+    };
+    set(libc::SOL_SOCKET, libc::SO_KEEPALIVE, 1);
+    set(libc::IPPROTO_TCP, libc::TCP_KEEPIDLE, KEEPALIVE_IDLE_S);
+    set(libc::IPPROTO_TCP, libc::TCP_KEEPINTVL, KEEPALIVE_INTERVAL_S);
+    set(libc::IPPROTO_TCP, libc::TCP_KEEPCNT, KEEPALIVE_PROBES);
+    set(
+        libc::IPPROTO_TCP,
+        libc::TCP_USER_TIMEOUT,
+        USER_TIMEOUT_MS as libc::c_int,
+    );
+}
+
+/// Ends a connection's part in the registry and the ownership, however it ends.
+struct Closing {
     id: u64,
-    addr: SocketAddr,
+    peer: SocketAddr,
+    shared: Shared,
+    reg: SharedRegistry,
+    why: String,
 }
 
-impl Drop for Connection {
+impl Drop for Closing {
     fn drop(&mut self) {
-        tracing::info!(addr = %self.addr, connection = self.id, "PLC face: disconnected");
         lock(&self.shared).disconnected(self.id);
+        let mut r = registry(&self.reg);
+        r.conns.remove(&self.id);
+        r.log.count(Event::Closed, Instant::now());
+        tracing::debug!(
+            "PLC face: connection {} of {} closed ({})",
+            self.id,
+            self.peer,
+            self.why
+        );
     }
 }
 
-fn exception(e: MapException) -> ExceptionCode {
+async fn connection(
+    mut stream: TcpStream,
+    peer: SocketAddr,
+    id: u64,
+    shared: Shared,
+    reg: SharedRegistry,
+    close: Arc<Notify>,
+) {
+    let mut closing = Closing {
+        id,
+        peer,
+        shared,
+        reg,
+        why: String::new(),
+    };
+    let mut frame = vec![0u8; MBAP_LEN + MAX_LENGTH_FIELD];
+    closing.why = loop {
+        let read = async {
+            stream.read_exact(&mut frame[..MBAP_LEN]).await?;
+            let length = usize::from(u16::from_be_bytes([frame[4], frame[5]]));
+            let protocol = u16::from_be_bytes([frame[2], frame[3]]);
+            if protocol != 0 || !(2..=MAX_LENGTH_FIELD).contains(&length) {
+                return Err(io::Error::new(
+                    io::ErrorKind::InvalidData,
+                    format!("not a Modbus TCP frame (protocol {protocol}, length {length})"),
+                ));
+            }
+            stream
+                .read_exact(&mut frame[MBAP_LEN..MBAP_LEN + length - 1])
+                .await?;
+            Ok::<usize, io::Error>(length - 1)
+        };
+        let pdu_len = tokio::select! {
+            _ = close.notified() => break "closed for a new connection".to_string(),
+            r = read => match r {
+                Ok(n) => n,
+                Err(e) if e.kind() == io::ErrorKind::UnexpectedEof => break "closed by the peer".into(),
+                Err(e) => break e.to_string(),
+            },
+        };
+        if let Some(e) = registry(&closing.reg).conns.get_mut(&id) {
+            e.heard = Instant::now();
+        }
+        let answer = {
+            let mut core = lock(&closing.shared);
+            core.heard(id);
+            answer(
+                &mut core,
+                id,
+                peer.ip(),
+                &frame[MBAP_LEN..MBAP_LEN + pdu_len],
+            )
+        };
+        let mut out = Vec::with_capacity(MBAP_LEN + answer.len());
+        out.extend_from_slice(&frame[..4]);
+        out.extend_from_slice(&(answer.len() as u16 + 1).to_be_bytes());
+        out.push(frame[6]);
+        out.extend_from_slice(&answer);
+        match tokio::time::timeout(WRITE_TIMEOUT, stream.write_all(&out)).await {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => break e.to_string(),
+            Err(_) => break "the peer takes no answers".into(),
+        }
+    };
+}
+
+fn exception(e: MapException) -> u8 {
     match e {
-        MapException::IllegalDataAddress => ExceptionCode::IllegalDataAddress,
-        MapException::IllegalDataValue => ExceptionCode::IllegalDataValue,
+        MapException::IllegalDataAddress => EXC_ILLEGAL_DATA_ADDRESS,
+        MapException::IllegalDataValue => EXC_ILLEGAL_DATA_VALUE,
     }
 }
 
-fn write_refusal(e: WriteRefusal) -> ExceptionCode {
+fn write_refusal(e: WriteRefusal) -> u8 {
     match e {
-        WriteRefusal::Busy => ExceptionCode::ServerDeviceBusy,
+        WriteRefusal::Busy => EXC_SERVER_DEVICE_BUSY,
         WriteRefusal::Map(m) => exception(m),
     }
 }
 
-type Answer = Result<Option<Response>, ExceptionCode>;
+fn word(pdu: &[u8], at: usize) -> u16 {
+    u16::from_be_bytes([pdu[at], pdu[at + 1]])
+}
 
-impl Service for Connection {
-    type Request = SlaveRequest<'static>;
-    type Response = Option<Response>;
-    type Exception = ExceptionCode;
-    type Future = Pin<Box<dyn Future<Output = Answer> + Send>>;
-
-    fn call(&self, req: Self::Request) -> Self::Future {
-        let mut core = lock(&self.shared);
-        let answer: Answer = match req.request {
-            Request::ReadHoldingRegisters(addr, count) => core
-                .map
-                .read(addr, count)
-                .map(|r| Some(Response::ReadHoldingRegisters(r)))
-                .map_err(exception),
-            Request::WriteMultipleRegisters(addr, values) => core
-                .write(self.id, addr, &values)
-                .map(|()| Some(Response::WriteMultipleRegisters(addr, values.len() as u16)))
-                .map_err(write_refusal),
-            Request::WriteSingleRegister(addr, value) => core
-                .write(self.id, addr, &[value])
-                .map(|()| Some(Response::WriteSingleRegister(addr, value)))
-                .map_err(write_refusal),
-            _ => Err(ExceptionCode::IllegalFunction),
-        };
-        Box::pin(std::future::ready(answer))
-    }
+/// The answer PDU to a request PDU (at least the function code).
+fn answer(core: &mut super::gateway::Core, conn: u64, ip: IpAddr, pdu: &[u8]) -> Vec<u8> {
+    let fc = pdu[0];
+    let result: Result<Vec<u8>, u8> = match fc {
+        0x03 if pdu.len() == 5 => core
+            .map
+            .read(word(pdu, 1), word(pdu, 3))
+            .map(|regs| {
+                let mut a = vec![fc, (regs.len() * 2) as u8];
+                regs.iter()
+                    .for_each(|r| a.extend_from_slice(&r.to_be_bytes()));
+                a
+            })
+            .map_err(exception),
+        0x06 if pdu.len() == 5 => core
+            .write(conn, ip, word(pdu, 1), &[word(pdu, 3)])
+            .map(|()| pdu.to_vec())
+            .map_err(write_refusal),
+        0x10 if pdu.len() >= 6 => {
+            let (addr, count, bytes) = (word(pdu, 1), word(pdu, 3), usize::from(pdu[5]));
+            if pdu.len() != 6 + bytes || bytes != 2 * usize::from(count) {
+                Err(EXC_ILLEGAL_DATA_VALUE)
+            } else {
+                let values: Vec<u16> = (0..usize::from(count))
+                    .map(|i| word(pdu, 6 + 2 * i))
+                    .collect();
+                core.write(conn, ip, addr, &values)
+                    .map(|()| pdu[..5].to_vec())
+                    .map_err(write_refusal)
+            }
+        }
+        // The right function with the wrong length.
+        0x03 | 0x06 | 0x10 => Err(EXC_ILLEGAL_DATA_VALUE),
+        _ => Err(EXC_ILLEGAL_FUNCTION),
+    };
+    result.unwrap_or_else(|code| vec![fc | 0x80, code])
 }

@@ -24,6 +24,8 @@ pub const REQ_FLAGS: u16 = 3;
 pub const REQ_PARAMS: u16 = 4;
 pub const REQ_PARAM_COUNT: usize = 8;
 pub const REQ_PLC_HEARTBEAT: u16 = 20;
+/// A write that changes the sequence covers at least `REQUEST_BASE..REQ_REQUEST_END`.
+pub const REQ_REQUEST_END: u16 = REQ_PARAMS + 2 * REQ_PARAM_COUNT as u16;
 pub const REQUEST_LEN: u16 = 21;
 
 pub const STATE_BASE: u16 = 32;
@@ -179,6 +181,9 @@ impl RegisterMap {
     }
 
     /// FC6/FC16 into the request block; anything else is refused and changes nothing.
+    /// A write that changes the request sequence must also write the code, the
+    /// program, the flags and the parameters (registers 0..19): a new sequence never
+    /// re-runs whatever an earlier write left there (IllegalDataValue otherwise).
     pub fn write(&mut self, addr: u16, values: &[u16]) -> Result<(), MapException> {
         let count = u16::try_from(values.len()).map_err(|_| MapException::IllegalDataValue)?;
         if count == 0 || count > MAX_WRITE {
@@ -187,6 +192,12 @@ impl RegisterMap {
         match Self::block_of(addr, count) {
             Some((REQUEST_BASE, _)) => {
                 let a = usize::from(addr);
+                let end = a + values.len();
+                let seq = usize::from(REQ_SEQ);
+                let new_seq = (a..end).contains(&seq) && values[seq - a] != self.regs[seq];
+                if new_seq && (a > usize::from(REQ_CODE) || end < usize::from(REQ_REQUEST_END)) {
+                    return Err(MapException::IllegalDataValue);
+                }
                 self.regs[a..a + values.len()].copy_from_slice(values);
                 Ok(())
             }
@@ -376,5 +387,33 @@ mod tests {
         assert_eq!(m.request().code, 0, "a refused write changes nothing");
         assert!(m.write(REQ_PLC_HEARTBEAT, &[5]).is_ok());
         assert_eq!(m.request().plc_heartbeat, 5);
+    }
+
+    #[test]
+    fn a_new_sequence_comes_only_with_the_whole_request() {
+        use MapException::*;
+        let mut m = RegisterMap::new(WordOrder::HighFirst, 1e4);
+        let mut block = [0u16; REQUEST_LEN as usize];
+        block[usize::from(REQ_CODE)] = 1;
+        block[usize::from(REQ_SEQ)] = 1;
+        block[usize::from(REQ_PROGRAM)] = 431;
+        assert!(m.write(REQUEST_BASE, &block).is_ok());
+        // FC6 to the sequence alone: refused, the sequence stays.
+        assert_eq!(m.write(REQ_SEQ, &[2]), Err(IllegalDataValue));
+        assert_eq!(m.request().seq, 1);
+        // Code and sequence without the parameters: refused too.
+        assert_eq!(m.write(REQ_CODE, &[1, 2]), Err(IllegalDataValue));
+        let mut next = block;
+        next[usize::from(REQ_SEQ)] = 2;
+        assert_eq!(m.write(REQ_SEQ, &next[1..]), Err(IllegalDataValue));
+        assert_eq!(m.request().seq, 1);
+        // The same sequence again, alone, changes nothing and is taken.
+        assert!(m.write(REQ_SEQ, &[1]).is_ok());
+        // Registers 0..19 with a new sequence, without the heartbeat: taken.
+        block[usize::from(REQ_SEQ)] = 2;
+        assert!(m
+            .write(REQUEST_BASE, &block[..usize::from(REQ_REQUEST_END)])
+            .is_ok());
+        assert_eq!(m.request().seq, 2);
     }
 }

@@ -9,6 +9,7 @@ import sys
 import time
 
 from pymodbus.client import ModbusTcpClient
+from pymodbus.exceptions import ModbusException
 
 REQ, SEQ, PROGRAM, FLAGS, PARAMS, HEARTBEAT = 0, 1, 2, 3, 4, 20
 ACK_SEQ, ACK_CODE, REASON, STATE, BITS, PROGRESS, ERR_KIND, ERR_CODE, POINT = range(32, 41)
@@ -192,6 +193,54 @@ def start_busy(plc, program):
     return {}
 
 
+def connect_patiently(host, port, deadline):
+    """Connects until a connection answers a read (the gateway may close new connections
+    while its limit is reached); the PLC and the number of attempts."""
+    attempts = 0
+    while time.monotonic() < deadline:
+        attempts += 1
+        c = ModbusTcpClient(host, port=port, retries=0, timeout=2)
+        if c.connect():
+            try:
+                r = c.read_holding_registers(ACK_SEQ, count=1)
+            except (ModbusException, OSError):
+                r = None
+            if r is not None and not r.isError():
+                plc = Plc.__new__(Plc)
+                plc.c, plc.seq, plc.hb = c, r.registers[0], 0
+                return plc, attempts
+        c.close()
+        time.sleep(0.2)
+    check(False, f"no connection answered within the deadline ({attempts} attempts)")
+
+
+def patient_run(host, port, program):
+    """A PLC that retries: connects until served, repeats its start while the request
+    block is another connection's (ServerDeviceBusy), then runs `program`."""
+    deadline = time.monotonic() + 60
+    plc, attempts = connect_patiently(host, port, deadline)
+    busy = 0
+    seq = plc.seq = plc.seq % 65535 + 1
+    words = []
+    for p in PARAMS:
+        words += struct.unpack(">HH", struct.pack(">f", p))
+    while True:
+        r = plc.c.write_registers(REQ, [START, seq, program, 1] + words + [plc.hb])
+        if not r.isError():
+            break
+        check(r.exception_code == 6, f"start refused with exception {r.exception_code}")
+        check(time.monotonic() < deadline, f"still busy after {busy} refusals")
+        busy += 1
+        time.sleep(0.2)
+    st = plc.wait(lambda s: s[0] == seq)
+    check(st[1] == START, f"start accepted: {st}")
+    st = plc.wait(lambda s: s[3] != BUSY)
+    check(st[3] == DONE, f"program {program} done: {st}")
+    real, dint = plc.results(seq)
+    return {"cycle": plc.read(43, 1)[0], "real": real, "connect_attempts": attempts,
+            "busy_refusals": busy}
+
+
 def machine_lost(plc, program):
     """The gateway lost its machine: "machine ok" and "ready" drop, a start is refused
     with the reason "machine not ok" (8)."""
@@ -211,6 +260,9 @@ def machine_back(plc, program):
 def main():
     host, port, scenario = sys.argv[1], int(sys.argv[2]), sys.argv[3]
     args = [int(a) for a in sys.argv[4:]]
+    if scenario == "patient_run":
+        print(json.dumps(patient_run(host, port, args[0])))
+        return
     plc = Plc(host, port)
     if scenario == "run":
         out = run(plc, args[0])
