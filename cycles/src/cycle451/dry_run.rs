@@ -147,7 +147,7 @@ pub struct PlannedRun {
     pub moves: Vec<AxisPositions>,
 }
 
-/// Plans every move of a 451 block: the plan of [`super::plan`], then the cycle's
+/// Plans every move of a 451 block: the plan of [`super::plan()`], then the cycle's
 /// own sequence (locating or approaching, every position, the way back) on a
 /// [`DryRunMachine`] that starts at `start` (every axis where the program leaves it)
 /// with the datum `datum`. The sphere is where the block expects it: Q431 = 1/3
