@@ -398,6 +398,20 @@ fn check_derived(case: &Case, root: &Path, r: &mut Report) {
     }
 }
 
+/// A second run in a row (again=FIRST): on the machine state the first run left.
+fn check_again(case: &Case, results: &Path, r: &mut Report) {
+    if let Some(first) = &case.expect.again {
+        let state = results.join(format!("{first}.state"));
+        r.check(state.is_dir(), || {
+            format!(
+                "{}: again={first}: no machine state {} to run on",
+                case.name,
+                state.display()
+            )
+        });
+    }
+}
+
 fn check_case(case: &Case, results: &Path, reference: &Path, r: &mut Report) {
     let name = &case.name;
     let exit_file = results.join(format!("{name}.exit"));
@@ -416,16 +430,7 @@ fn check_case(case: &Case, results: &Path, reference: &Path, r: &mut Report) {
             tail(&results.join(format!("{name}.stderr")), 8)
         )
     });
-    if let Some(first) = &case.expect.again {
-        // A second run in a row: on the machine state the first left.
-        let state = results.join(format!("{first}.state"));
-        r.check(state.is_dir(), || {
-            format!(
-                "{name}: again={first}: no machine state {} to run on",
-                state.display()
-            )
-        });
-    }
+    check_again(case, results, r);
     if !case.moves() {
         return; // `check`: the exit status is all it has
     }
