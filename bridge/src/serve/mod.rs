@@ -122,28 +122,7 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     })?;
     let (machine_cfg, scenario) =
         crate::session::resolve_machine(&cfg.machine_options()).map_err(|e| e.to_string())?;
-    // The machine's state (preset table, kinematics, protocols) in the unit's
-    // StateDirectory, seeded from the shipped configuration, as the CLI keeps it.
-    let files = crate::machine_state::machine_files(
-        &machine_cfg,
-        None,
-        None,
-        cfg.machine.kinematics.as_deref(),
-        true,
-    )?;
-    for n in &files.notes {
-        tracing::info!("state: {n}");
-    }
-    cfg.machine.kinematics = Some(files.kinematics.clone());
-    if cfg.programs.out.is_none() {
-        cfg.programs.out = Some(files.protocols_dir());
-    }
-    let cycles = crate::session::cycles_config_with_presets(
-        &machine_cfg,
-        scenario.as_ref(),
-        Some(&files.presets),
-    )
-    .map_err(|e| e.to_string())?;
+    let cycles = machine_state(&mut cfg, &machine_cfg, scenario.as_ref())?;
     let notifier = sd_notify::Notifier::from_env();
     notifier.notify("STATUS=bringing the machine up");
 
@@ -206,18 +185,7 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     ));
 
     let end = supervise(&shared, &notifier, &mut face);
-    match &end {
-        End::Signal(signal) => tracing::info!(
-            signal,
-            "stopping on {}: aborting a running measurement, closing the machine",
-            signal_name(*signal)
-        ),
-        End::FaceDied(why) => {
-            tracing::error!(
-                "the PLC face is dead ({why}): stopping, for systemd to restart the service"
-            )
-        }
-    }
+    end.log();
     notifier.notify("STOPPING=1\nSTATUS=stopping");
     {
         let mut core = lock(&shared);
@@ -240,6 +208,32 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
         End::Signal(_) => Ok(0),
         End::FaceDied(why) => Err(format!("the PLC face is dead: {why}")),
     }
+}
+
+/// The machine's state (preset table, kinematics, protocols) in the unit's
+/// StateDirectory, seeded from the shipped configuration, as the CLI keeps it; the
+/// cycles' configuration with that preset table.
+fn machine_state(
+    cfg: &mut GatewayConfig,
+    machine_cfg: &hal::config::MachineConfig,
+    scenario: Option<&sim::scenario::Scenario>,
+) -> Result<cycles::CyclesConfig, String> {
+    let files = crate::machine_state::machine_files(
+        machine_cfg,
+        None,
+        None,
+        cfg.machine.kinematics.as_deref(),
+        true,
+    )?;
+    for n in &files.notes {
+        tracing::info!("state: {n}");
+    }
+    cfg.machine.kinematics = Some(files.kinematics.clone());
+    if cfg.programs.out.is_none() {
+        cfg.programs.out = Some(files.protocols_dir());
+    }
+    crate::session::cycles_config_with_presets(machine_cfg, scenario, Some(&files.presets))
+        .map_err(|e| e.to_string())
 }
 
 /// The history of the gateway, opened before the machine (a history that is down is
@@ -277,6 +271,21 @@ enum End {
     Signal(i32),
     /// The PLC face ended or stalled: the service must not live on deaf.
     FaceDied(String),
+}
+
+impl End {
+    fn log(&self) {
+        match self {
+            End::Signal(signal) => tracing::info!(
+                signal,
+                "stopping on {}: aborting a running measurement, closing the machine",
+                signal_name(*signal)
+            ),
+            End::FaceDied(why) => tracing::error!(
+                "the PLC face is dead ({why}): stopping, for systemd to restart the service"
+            ),
+        }
+    }
 }
 
 /// The service loop: ticks the handshake, keeps systemd's watchdog fed while the PLC
