@@ -4,7 +4,7 @@
 
 use super::config::GatewayConfig;
 use super::gateway::{lock, Job, Shared, ToMachine};
-use super::handshake::{machine_error_kind, Outcome, ERROR_KIND_CYCLE};
+use super::handshake::{machine_error_kind, Outcome, ERROR_KIND_CYCLE, ERROR_KIND_PROGRAM};
 use super::machine_link::MachineLink;
 use crate::history::{History, HistoryTarget, RunStart};
 use crate::ipc::{EstimatorChild, IpcEstimator};
@@ -216,6 +216,14 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
     let outcome = match reason {
         Some(r) => Outcome::Aborted(r),
         None if report.completed() => Outcome::Done,
+        // FN 14: the program's own error number.
+        None if report.error.is_some() => Outcome::Error {
+            kind: ERROR_KIND_PROGRAM,
+            code: report
+                .error
+                .as_ref()
+                .map_or(0, |e| u16::try_from(e.number).unwrap_or(u16::MAX)),
+        },
         None => match machine.last_error {
             Some((kind, code)) => Outcome::Error {
                 kind: machine_error_kind(kind),
