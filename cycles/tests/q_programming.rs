@@ -420,3 +420,53 @@ fn parse_errors_name_their_line() {
         );
     }
 }
+
+/// Q parameters as cycle parameter values: resolved when the block runs, validated as
+/// written numbers are (an out-of-range value stops at the cycle's line); a measured
+/// value as the nominal point of the next 444.
+#[test]
+fn q_parameters_as_cycle_parameter_values() {
+    let block = |z: &str| {
+        format!(
+            "2 TCH PROBE 444 PROBING 3D ~\n  Q263=+Q1 ~\n  Q264=-QL2 ~\n  Q294={z} ~\n  Q581=+0 ~\n  Q582=+0 ~\n  Q583=+1 ~\n  Q320=+1 ~\n  Q260=+Q3"
+        )
+    };
+    let body = format!(
+        "1 TOOL CALL \"TOUCH_PROBE\" Z\n3 Q1 = 10\n4 QL2 = 5\n5 Q3 = 100\n{}\n6 Q4 = Q153 + 1\n{}",
+        block("+0.25"),
+        block("+Q4")
+    );
+    let dir = common::temp_dir("q-cycle");
+    let (r, m) = run_in(&dir, &body);
+    assert!(r.completed(), "{:?}", r.stopped);
+    assert_eq!(r.cycles.len(), 2);
+    // The plane is at Z=0: the first point (nominal 0.25) deviates by -0.25...
+    assert!(
+        (r.cycles[0].q["Q164"] + 0.25).abs() < 1e-9,
+        "{:?}",
+        r.cycles[0].q
+    );
+    assert!(
+        (r.cycles[0].q["Q151"] - 10.0).abs() < 1e-9 && (r.cycles[0].q["Q152"] + 5.0).abs() < 1e-9
+    );
+    // ...the second's nominal is Q153 + 1 = 1, measured at run time.
+    assert!((num(&r, "Q4") - 1.0).abs() < 1e-9);
+    assert!(
+        (r.cycles[1].q["Q164"] + 1.0).abs() < 1e-9,
+        "{:?}",
+        r.cycles[1].q
+    );
+    assert!(!m.probes.is_empty());
+    // A value outside the parameter's range stops at the cycle's line, nothing probed.
+    let bad = format!(
+        "1 TOOL CALL \"TOUCH_PROBE\" Z\n3 Q1 = 1000000\n4 QL2 = 5\n5 Q3 = 100\n{}",
+        block("+0")
+    );
+    let (r, m) = run_in(&common::temp_dir("q-cycle-bad"), &bad);
+    let stopped = r.stopped.as_deref().unwrap();
+    assert!(
+        stopped.contains("line 6") && stopped.contains("Q263"),
+        "{stopped}"
+    );
+    assert!(m.probes.is_empty());
+}
