@@ -16,7 +16,10 @@
 //! - [`ProgramReport`]: the results (JSON and text); [`measuring_log`]: the TNC's
 //!   measuring logs (TCHPR431.TXT, TCHPR444.html; TCHPRAUTO.html is
 //!   [`cycle451::measuring_log`]);
-//! - [`geometry`]: sphere and plane fits.
+//! - [`geometry`]: sphere and plane fits;
+//! - Q-parameter programming: [`q_params`] (Q, QL, QR, QS), [`formula`] (expressions
+//!   and string functions), [`flow_block`] and [`program_flow`] (labels, jumps,
+//!   subprograms, FN 14).
 
 pub mod cycle;
 pub mod cycle431;
@@ -28,6 +31,8 @@ pub mod cycles_config;
 pub mod datum;
 pub mod diagnostic;
 pub mod error;
+pub mod flow_block;
+pub mod formula;
 pub mod geometry;
 pub mod iso230_7;
 pub mod kinematics;
@@ -46,7 +51,9 @@ pub mod preset_table;
 pub mod probe_axis;
 pub mod probe_table;
 pub mod program;
+pub mod program_flow;
 pub mod progress;
+pub mod q_params;
 pub mod results;
 pub mod runner;
 pub mod tolerance;

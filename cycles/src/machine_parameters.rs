@@ -29,6 +29,13 @@ pub struct MachineParameters {
     /// position set by the machine builder); none: M92 is refused.
     #[serde(default)]
     pub m92_reference: Option<[f64; 3]>,
+    /// The most jumps (FN 9..12, CALL LBL, repeats) a program may make in one run: a
+    /// program that loops forever is stopped with an error after them.
+    #[serde(default = "default_max_jumps")]
+    pub max_jumps: u64,
+    /// The texts of `FN 14: ERROR = n`, by number (`[cycles.errors]`, `1001 = "..."`).
+    #[serde(default)]
+    pub errors: BTreeMap<String, String>,
 }
 
 fn default_max_dev_cal_ball() -> f64 {
@@ -40,6 +47,9 @@ fn default_max_modification() -> f64 {
 fn default_tool_axes() -> Vec<ProbeAxis> {
     vec![ProbeAxis::Z]
 }
+fn default_max_jumps() -> u64 {
+    100_000
+}
 
 impl Default for MachineParameters {
     fn default() -> Self {
@@ -49,6 +59,8 @@ impl Default for MachineParameters {
             predef: BTreeMap::new(),
             tool_axes: default_tool_axes(),
             m92_reference: None,
+            max_jumps: default_max_jumps(),
+            errors: BTreeMap::new(),
         }
     }
 }
@@ -85,6 +97,20 @@ impl MachineParameters {
                 if !(min..=max).contains(&v) {
                     return Some((key, format!("{v} is outside {min} .. {max}")));
                 }
+            }
+        }
+        if !(1..=100_000_000).contains(&self.max_jumps) {
+            return Some((
+                "cycles.max_jumps".to_string(),
+                format!("{} is outside 1 .. 100000000", self.max_jumps),
+            ));
+        }
+        for key in self.errors.keys() {
+            if !key.parse::<u32>().is_ok_and(|n| n <= 65535) {
+                return Some((
+                    format!("cycles.errors.{key}"),
+                    "not an FN 14 error number 0..65535".to_string(),
+                ));
             }
         }
         if self.tool_axes.is_empty() {

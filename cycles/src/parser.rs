@@ -12,11 +12,14 @@ use crate::cycle_block::{CycleBlock, Origin, Param, ToolCall, Value};
 use crate::cycles_config::CyclesConfig;
 use crate::datum::DatumBlock;
 use crate::diagnostic::{Diagnostic, ProgramErrors};
+use crate::formula::parse_decimal;
 use crate::length_unit::LengthUnit;
 use crate::m_function::{self, FunctionBlock};
 use crate::params::{self, CycleTable, Default as ParamDefault, Kind, ParamSpec};
 use crate::probe_axis::ProbeAxis;
-use crate::program::{Block, CycleCall, CycleKind, Program, ProgramError, Statement};
+use crate::program::{
+    Block, CycleCall, CycleKind, DeferredCycle, Program, ProgramError, Statement,
+};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -239,8 +242,18 @@ fn group<'a>(text: &'a str, diags: &mut Vec<Diagnostic>) -> Vec<RawBlock<'a>> {
                 cur.last_line = line.no;
                 continue;
             }
-            if line.number.is_none() && is_param_line(line.code) && cur.is_cycle {
-                let name = line.code.split('=').next().unwrap_or("").trim();
+            let name = line
+                .code
+                .split('=')
+                .next()
+                .unwrap_or("")
+                .trim()
+                .to_ascii_uppercase();
+            if line.number.is_none()
+                && is_param_line(line.code)
+                && cur.is_cycle
+                && cycle_takes(cur.head.code, &name)
+            {
                 diags.push(Diagnostic {
                     line: cur.last_line,
                     message: format!(
@@ -261,7 +274,11 @@ fn group<'a>(text: &'a str, diags: &mut Vec<Diagnostic>) -> Vec<RawBlock<'a>> {
                 continue;
             }
         }
-        if line.number.is_none() && is_param_line(line.code) {
+        // `Q1 = 5` on its own is an assignment; `Q263=+0 Q264=+0` is a cycle's.
+        if line.number.is_none()
+            && is_param_line(line.code)
+            && !matches!(crate::flow_block::parse_flow(line.code), Some(Ok(_)))
+        {
             diags.push(Diagnostic {
                 line: line.no,
                 message: "parameter line outside a cycle block (expected a TCH PROBE or G4xx block before it, its lines ending with \"~\")".into(),
@@ -358,18 +375,31 @@ fn analyse(text: &str, cfg: &CyclesConfig) -> (Program, Vec<Diagnostic>) {
             });
             continue;
         }
-        let statement = statement(rb, index, &mut st, cfg, &mut diags);
-        if let (Statement::Cycle(call), Some(turn)) = (&statement, st.turn_mode) {
-            if matches!(call.head.cycle, 431 | 444 | 451) {
+        let mut statement = statement(rb, index, &mut st, cfg, &mut diags);
+        let cycle = match &statement {
+            Statement::Cycle(call) => Some(call.head.cycle),
+            Statement::Deferred(d) => Some(d.cycle),
+            _ => None,
+        };
+        if let (Some(cycle), Some(turn)) = (cycle, st.turn_mode) {
+            if matches!(cycle, 431 | 444 | 451) {
                 err(
                     &mut diags,
                     line,
                     format!(
-                        "cycle {}: refused after FUNCTION MODE TURN (line {turn}): the touch-probe cycles run in milling mode only (FUNCTION MODE MILL first)",
-                        call.head.cycle
+                        "cycle {cycle}: refused after FUNCTION MODE TURN (line {turn}): the touch-probe cycles run in milling mode only (FUNCTION MODE MILL first)"
                     ),
                 );
             }
+        }
+        if let Statement::Deferred(d) = &mut statement {
+            // Its text, read again with the parameters' values when it runs.
+            d.source = text
+                .lines()
+                .skip(d.line - 1)
+                .take(d.last_line + 1 - d.line)
+                .collect::<Vec<_>>()
+                .join("\n");
         }
         blocks.push(Block {
             line,
@@ -377,6 +407,7 @@ fn analyse(text: &str, cfg: &CyclesConfig) -> (Program, Vec<Diagnostic>) {
             statement,
         });
     }
+    diags.extend(crate::program_flow::check_labels(&blocks));
     if st.begin_seen && st.end_line.is_none() {
         diags.push(Diagnostic {
             line: text.lines().count().max(1),
@@ -511,8 +542,94 @@ fn statement(
                 return tool_call(rest, true, line, st, cfg, diags)
                     .map_or_else(other, Statement::ToolCall);
             }
+            if let Some(parsed) = flow_block(rb) {
+                return parsed.unwrap_or_else(|e| {
+                    err(diags, line, e);
+                    other()
+                });
+            }
             other_block(code, line, cfg, diags)
         }
+    }
+}
+
+/// `+Q5`, `-QL2`, `QR1`: a numeric parameter as a cycle parameter's value.
+fn is_param_ref(raw: &str) -> bool {
+    let r = raw.strip_prefix(['+', '-']).unwrap_or(raw);
+    crate::q_params::QName::parse(r).is_some_and(|n| !n.is_text())
+}
+
+/// A cycle block whose parameters take Q-parameter values, resolved with `env`: the
+/// block read and validated again as written, each `Qnnn=+Qm` with Qm's value, so that
+/// ranges and the cycle's own checks apply as to any block. `Err` says why (at its
+/// line), or that a value is a measured result `check` does not know.
+pub fn resolve_deferred(
+    d: &DeferredCycle,
+    env: &dyn crate::formula::Env,
+    cfg: &CyclesConfig,
+) -> Result<CycleCall, crate::formula::EvalError> {
+    let text = crate::program_flow::substitute_cycle_values(&d.source, env)?;
+    // Blank lines keep the block's lines where they are in the program.
+    let padded = format!("{}{text}", "\n".repeat(d.line - 1));
+    let mut diags = Vec::new();
+    let blocks = group(&padded, &mut diags);
+    let mut st = State {
+        unit: d.unit,
+        name: None,
+        begin_seen: false,
+        end_line: None,
+        tool: Some(d.tool.clone()),
+        cycle7: false,
+        // The program's own walk refused the cycle after FUNCTION MODE TURN.
+        turn_mode: None,
+    };
+    let statement = blocks
+        .first()
+        .map(|rb| statement(rb, 1, &mut st, cfg, &mut diags));
+    match statement {
+        Some(Statement::Cycle(call)) if diags.is_empty() => Ok(*call),
+        _ => Err(crate::formula::EvalError {
+            kind: crate::formula::EvalErrorKind::Domain,
+            message: diags
+                .iter()
+                .map(|d| d.message.clone())
+                .collect::<Vec<_>>()
+                .join("; "),
+        }),
+    }
+}
+
+/// Q-parameter programming ([`crate::program_flow`]): assignments, labels, jumps,
+/// calls, FN 14; a block continued with `~` is read as one line.
+fn flow_block(rb: &RawBlock) -> Option<Result<Statement, String>> {
+    let parsed = if rb.body.is_empty() {
+        crate::flow_block::parse_flow(rb.head.code)
+    } else {
+        let mut code = rb.head.code.to_string();
+        for pl in &rb.body {
+            code.push(' ');
+            code.push_str(pl.code);
+        }
+        crate::flow_block::parse_flow(&code)
+    };
+    parsed.map(|r| r.map(Statement::from))
+}
+
+/// Whether the cycle block starting with `head` takes parameter `name` (so that a
+/// `Qn=` line after it without `~` is its forgotten continuation, not a formula).
+fn cycle_takes(head: &str, name: &str) -> bool {
+    let w = upper_words(head);
+    let number = match (w.first().map(String::as_str), w.get(1).map(String::as_str)) {
+        (Some("TCH"), Some("PROBE")) | (Some("CYCL"), Some("DEF")) => {
+            w.get(2).and_then(|n| n.parse::<u16>().ok())
+        }
+        (Some("G247"), _) => Some(247),
+        _ => iso_cycle_number(head),
+    };
+    match number {
+        Some(247) => name == "Q339",
+        Some(n) => params::table(n).is_some_and(|t| t.param(name).is_some()),
+        None => false,
     }
 }
 
@@ -778,7 +895,7 @@ fn other_block(
             diags,
             line,
             format!(
-                "{shown}{more}: not a block probebridge can run{hint}; it runs BEGIN/END PGM, TOOL CALL, TCH PROBE {} (or G{}), CYCL DEF 7 and 247 (G54, G247), TRANS DATUM, L positioning blocks, M functions, FUNCTION MODE and comments",
+                "{shown}{more}: not a block probebridge can run{hint}; it runs BEGIN/END PGM, TOOL CALL, TCH PROBE {} (or G{}), CYCL DEF 7 and 247 (G54, G247), TRANS DATUM, L positioning blocks, M functions, FUNCTION MODE, Q-parameter programming (Qn = ..., FN 0..5, 9..12, 14, LBL, CALL LBL) and comments",
                 params::known_cycles(),
                 params::known_cycles().replace(", ", "/G")
             ),
@@ -1076,45 +1193,6 @@ fn assignments<'a>(
     out
 }
 
-/// A signed decimal as the TNC writes it (`+12.5`, `-0.1`, `5`, `.5`), exponent allowed.
-pub(crate) fn parse_decimal(s: &str) -> Option<f64> {
-    let b = s.as_bytes();
-    let mut i = usize::from(matches!(b.first(), Some(b'+' | b'-')));
-    let int_start = i;
-    while b.get(i).is_some_and(u8::is_ascii_digit) {
-        i += 1;
-    }
-    let mut digits = i - int_start;
-    if b.get(i) == Some(&b'.') {
-        i += 1;
-        let frac_start = i;
-        while b.get(i).is_some_and(u8::is_ascii_digit) {
-            i += 1;
-        }
-        digits += i - frac_start;
-    }
-    if digits == 0 {
-        return None;
-    }
-    if matches!(b.get(i), Some(b'e' | b'E')) {
-        i += 1;
-        if matches!(b.get(i), Some(b'+' | b'-')) {
-            i += 1;
-        }
-        let exp_start = i;
-        while b.get(i).is_some_and(u8::is_ascii_digit) {
-            i += 1;
-        }
-        if i == exp_start {
-            return None;
-        }
-    }
-    if i != b.len() {
-        return None;
-    }
-    s.parse().ok().filter(|v: &f64| v.is_finite())
-}
-
 fn cycle(
     rb: &RawBlock,
     table: &'static CycleTable,
@@ -1139,6 +1217,7 @@ fn cycle(
     let mut params: BTreeMap<String, Param> = BTreeMap::new();
     // Written ones, valid or not: an invalid value is not also "missing".
     let mut written: Vec<String> = Vec::new();
+    let mut deferred = false;
     for pl in &lines {
         for a in assignments(pl, &mut written, diags) {
             let Some(spec) = table.param(&a.name) else {
@@ -1166,6 +1245,11 @@ fn cycle(
                 continue;
             }
             written.push(a.name.clone());
+            // `Q407=+Q5`: the value is the parameter's when the block runs.
+            if matches!(spec.kind, Kind::Number { .. }) && is_param_ref(a.raw) {
+                deferred = true;
+                continue;
+            }
             if let Some(value) = resolve(spec, &a, st.unit, cfg, diags) {
                 params.insert(a.name.clone(), value);
             }
@@ -1182,6 +1266,17 @@ fn cycle(
     };
     if diags.len() > before {
         return Statement::Other(rb.head.code.to_string());
+    }
+    if deferred {
+        return Statement::Deferred(Box::new(DeferredCycle {
+            cycle: table.number,
+            line,
+            block: rb.head.number.unwrap_or(line as u32),
+            last_line: rb.last_line,
+            source: String::new(),
+            unit: st.unit,
+            tool,
+        }));
     }
     let kind = match table.number {
         431 => PlaneParams::from_params(&params, st.unit).map(CycleKind::MeasurePlane),

@@ -10,6 +10,7 @@ use crate::cycle451::KinematicsParams;
 pub use crate::cycle_block::{CycleBlock, Origin, Param, ToolCall, Value};
 use crate::datum::DatumBlock;
 pub use crate::diagnostic::{Diagnostic, ProgramErrors};
+pub use crate::flow_block::{Assignment, CallLabel, FlowBlock, Jump, Label};
 pub use crate::length_unit::LengthUnit;
 pub use crate::probe_axis::ProbeAxis;
 use std::path::{Path, PathBuf};
@@ -44,9 +45,49 @@ pub enum Statement {
     Cycle(Box<CycleCall>),
     /// Cycle 247, cycle 7, TRANS DATUM, G247, G54: the datum changes.
     Datum(DatumBlock),
-    /// Any other NC block (moves, comments, FN, M functions, ...): not a measuring
-    /// cycle, accepted and not run.
+    /// A measuring cycle with parameters given as Q parameters (`Q407=+Q5`): resolved
+    /// and validated when it runs ([`crate::parser::resolve_deferred`]).
+    Deferred(Box<DeferredCycle>),
+    /// `Q10 = Q141 * 1000`, `FN 0..5`, `QS0 = SUBSTR ( ... )`.
+    Assign(Assignment),
+    /// `LBL 5`, `LBL "NAME"`, `LBL 0` (end of a subprogram).
+    Label(Label),
+    /// `FN 9..12: IF a EQU|NE|GT|LT b GOTO LBL n`.
+    Jump(Jump),
+    /// `CALL LBL n REP k`.
+    Call(CallLabel),
+    /// `FN 14: ERROR = n`: the program stops with error number n.
+    Stop(u32),
+    /// Any other NC block (`L` moves, comments, M functions): not a measuring cycle;
+    /// `L` blocks move, the rest is accepted and not run.
     Other(String),
+}
+
+/// A cycle block whose values come from Q parameters: what is needed to read it again
+/// with their values.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DeferredCycle {
+    pub cycle: u16,
+    /// 1-based first and last line.
+    pub line: usize,
+    pub last_line: usize,
+    pub block: u32,
+    /// The block's lines as written.
+    pub source: String,
+    pub unit: LengthUnit,
+    pub tool: ToolCall,
+}
+
+impl From<FlowBlock> for Statement {
+    fn from(b: FlowBlock) -> Self {
+        match b {
+            FlowBlock::Assign(a) => Statement::Assign(a),
+            FlowBlock::Label(l) => Statement::Label(l),
+            FlowBlock::Jump(j) => Statement::Jump(j),
+            FlowBlock::Call(c) => Statement::Call(c),
+            FlowBlock::Stop(n) => Statement::Stop(n),
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq)]

@@ -3,6 +3,7 @@
 //! "message": null}]}`.
 
 use crate::cycle451::report::KinematicsReport;
+use crate::q_params::QValue;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -90,6 +91,23 @@ pub struct ProgramReport {
     /// Measuring logs written.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub protocols: Vec<PathBuf>,
+    /// `FN 14: ERROR = n` stopped the program.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error: Option<ErrorStop>,
+    /// The final value of every parameter the run wrote (its assignments and its
+    /// cycles' results), by name: `"Q10": 12.5`, `"QS0": "text"`.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub parameters: BTreeMap<String, QValue>,
+}
+
+/// `FN 14: ERROR = n`: where the program stopped, the number, and the text the
+/// machine configuration gives it (`[cycles.errors]`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ErrorStop {
+    pub line: usize,
+    pub number: u32,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub text: Option<String>,
 }
 
 impl ProgramReport {
@@ -127,6 +145,12 @@ impl ProgramReport {
             }
             if let Some(k) = &c.kinematics {
                 out.push_str(&k.summary());
+            }
+        }
+        if !self.parameters.is_empty() {
+            out.push_str("parameters\n");
+            for (k, v) in &self.parameters {
+                out.push_str(&format!("  {k} = {v}\n"));
             }
         }
         if let Some(s) = &self.stopped {

@@ -8,15 +8,21 @@ use crate::cycle451::PlanErrorKind;
 use crate::cycles_config::CyclesConfig;
 use crate::datum::Datum;
 use crate::error::{CycleError, CycleErrorKind};
+use crate::formula::EvalErrorKind;
 use crate::kinematics::{Estimator, LocalEstimator};
 use crate::kinematics_file::ActiveKinematics;
 use crate::linear::{
     parse_linear, Coordinates, LinearBlockError, LinearBlockErrorKind, LinearMove, MoveFeed,
 };
+use crate::parser::resolve_deferred;
 use crate::planned_move::{check_planned, PlannedMove};
 use crate::program::{CycleCall, CycleKind, Program, Statement};
+use crate::program_flow::{
+    start_params, substitute_params, CheckWalk, Flow, FlowFaultKind, FlowStop, Step,
+};
 use crate::progress::{ProgressEvent, ProgressSink};
-use crate::results::{CycleOutput, CycleResult, ProgramReport, Status};
+use crate::q_params::{load_remanent, remanent_path, save_remanent, QParams};
+use crate::results::{CycleOutput, CycleResult, ErrorStop, ProgramReport, Status};
 use hal::config::MachineConfig;
 use hal::machine::Error as _;
 use hal::motion_guard::MotionGuard;
@@ -62,6 +68,11 @@ pub enum PreflightKind {
     /// A move of a probing cycle (431, 444) the machine would refuse: a point outside
     /// the software limits, a feed the axes cannot run, a safe height below a start.
     Moves,
+    /// A Q-parameter block that cannot be carried out (an undefined parameter, a
+    /// division by zero, a program that loops, ...).
+    Program(FlowFaultKind),
+    /// The QR parameters kept beside the preset table cannot be read.
+    Remanent,
 }
 
 /// Checks, before anything moves, what only the machine and its configuration can
@@ -129,6 +140,13 @@ pub enum Preflight {
         line: usize,
         error: LinearBlockError,
     },
+    /// A Q-parameter block (or the QR file, line 0) that cannot be carried out.
+    #[error("line {line}: {message}")]
+    Program {
+        line: usize,
+        kind: PreflightKind,
+        message: String,
+    },
 }
 
 impl Preflight {
@@ -136,6 +154,7 @@ impl Preflight {
         match self {
             Preflight::Cycle { kind, .. } => *kind,
             Preflight::Positioning { error, .. } => PreflightKind::Positioning(error.kind()),
+            Preflight::Program { kind, .. } => *kind,
         }
     }
 }
@@ -175,32 +194,56 @@ pub fn preflight_program_from(
     start: &AxisPositions,
 ) -> Result<(), Preflight> {
     for call in program.cycles() {
-        preflight(call, machine_axes, cfg, kinematics).map_err(|(kind, message)| {
-            Preflight::Cycle {
-                block: call.head.block,
-                cycle: call.head.cycle,
-                line: call.head.line,
-                kind,
-                message,
-            }
-        })?;
+        preflight_cycle(call, machine_axes, cfg, kinematics)?;
     }
-    // The moves themselves, in program order with the datum as the program changes
-    // it and every axis where the blocks before leave it: `L` targets, the probing
-    // cycles' points, and every move of cycle 451 (planned by running its sequence on
-    // a dry-run machine), in machine coordinates.
+    // The moves themselves, in the order the program runs them (its jumps, calls and
+    // repeats followed, the parameters it computes from constants known) with the
+    // datum as the program changes it and every axis where the blocks before leave it:
+    // `L` targets, the probing cycles' points, and every move of cycle 451 (planned by
+    // running its sequence on a dry-run machine), in machine coordinates.
     let guard = MotionGuard::new(&cfg.machine);
-    let mut datum = Datum::new(cfg.presets.clone());
-    let mut here = assumed_start(&cfg.machine).merged(start);
-    for block in &program.blocks {
+    let params = start_params(
+        &load_remanent(&remanent_path(&cfg.presets.path)).map_err(|e| Preflight::Program {
+            line: 0,
+            kind: PreflightKind::Remanent,
+            message: e.to_string(),
+        })?,
+    );
+    let mut walk = CheckWalk::new(
+        program,
+        params,
+        Datum::new(cfg.presets.clone()),
+        assumed_start(&cfg.machine).merged(start),
+        cfg.parameters.max_jumps,
+    );
+    while let Some(block) = walk.next_block().map_err(|f| Preflight::Program {
+        line: f.line,
+        kind: PreflightKind::Program(f.kind),
+        message: f.message,
+    })? {
+        let (datum, params, here) = walk.state();
+        let mut path_ends = false;
         match &block.statement {
             // `run` stops at a preset row that does not exist, with the same message;
             // nothing after it moves.
-            Statement::Datum(d) if datum.apply(d).is_err() => return Ok(()),
+            Statement::Datum(d) if datum.apply(d).is_err() => path_ends = true,
             Statement::Other(code) => {
-                let checked = parse_linear(code, program.unit).map(|r| {
+                // A value measured by a cycle is known only when the program runs:
+                // `run` checks that move then, before it moves.
+                let code = match substitute_params(code, params) {
+                    Ok(c) => c,
+                    Err(e) if e.kind == EvalErrorKind::Measured => continue,
+                    Err(e) => {
+                        return Err(Preflight::Program {
+                            line: block.line,
+                            kind: PreflightKind::Program(FlowFaultKind::Eval(e.kind)),
+                            message: e.message,
+                        })
+                    }
+                };
+                let checked = parse_linear(&code, program.unit).map(|r| {
                     r.and_then(|mut mv| {
-                        mv.target = mv.machine_target(&datum, cfg.parameters.m92_reference)?;
+                        mv.target = mv.machine_target(datum, cfg.parameters.m92_reference)?;
                         check_linear_move(&mv, &cfg.machine).map(|()| mv)
                     })
                 });
@@ -211,58 +254,109 @@ pub fn preflight_program_from(
                             error,
                         })
                     }
-                    Some(Ok(mv)) => here = here.merged(&mv.target),
+                    Some(Ok(mv)) => *here = here.merged(&mv.target),
                     None => {}
                 }
             }
             Statement::Cycle(call) => {
-                let origin = datum.origin();
-                let refused = |kind: PreflightKind, message: String| Preflight::Cycle {
-                    block: call.head.block,
-                    cycle: call.head.cycle,
-                    line: call.head.line,
-                    kind,
-                    message,
-                };
-                let moves = match &call.kind {
-                    CycleKind::MeasurePlane(p) => p
-                        .planned_moves(&call.head, origin)
-                        .map_err(|e| e.to_string()),
-                    CycleKind::Probing3d(p) => p
-                        .planned_moves(&call.head, origin)
-                        .map_err(|e| e.to_string()),
-                    CycleKind::MeasureKinematics(p) => {
-                        let planned = cycle451::dry_run::plan_moves(
-                            p, &call.head, cfg, kinematics, &datum, &here,
-                        )
-                        .map_err(|e| {
-                            let mut message = e.to_string();
-                            if !message.ends_with("nothing moved") {
-                                message.push_str("; nothing moved");
-                            }
-                            refused(PreflightKind::Plan(e.kind()), message)
-                        })?;
-                        here = planned.end;
-                        // Q431 = 1/3 in modes 1..3: later blocks are relative to the
-                        // preset the cycle writes at the sphere centre.
-                        if (p.preset == 1 || p.preset == 3) && p.mode.writes() {
-                            let row = [0, 1, 2].map(|i| planned.preset[i] - datum.shift[i]);
-                            datum.presets.set_active_xyz(row);
-                        }
-                        Ok(Vec::new())
-                    }
-                    CycleKind::SaveKinematics(_) => Ok(Vec::new()),
-                };
-                let moves = moves
-                    .and_then(|m| check_planned(&m, &guard).map(|()| m))
-                    .map_err(|message| refused(PreflightKind::Moves, message))?;
-                for m in &moves {
-                    if let PlannedMove::Position { target, .. } = m {
-                        here = here.merged(target);
-                    }
-                }
+                check_cycle_moves(call, cfg, kinematics, datum, here, &guard)?;
             }
+            Statement::Deferred(d) => match resolve_deferred(d, params, cfg) {
+                // A value measured by a cycle: `run` resolves and checks the block
+                // then, before it moves.
+                Err(e) if e.kind == EvalErrorKind::Measured => {}
+                Err(e) => {
+                    return Err(Preflight::Program {
+                        line: d.line,
+                        kind: PreflightKind::Program(FlowFaultKind::Eval(e.kind)),
+                        message: e.message,
+                    })
+                }
+                Ok(call) => {
+                    preflight_cycle(&call, machine_axes, cfg, kinematics)?;
+                    check_cycle_moves(&call, cfg, kinematics, datum, here, &guard)?;
+                }
+            },
             _ => {}
+        }
+        if path_ends {
+            walk.end_path();
+        }
+    }
+    Ok(())
+}
+
+/// [`preflight`] of one cycle, as a [`Preflight`] error.
+fn preflight_cycle(
+    call: &CycleCall,
+    machine_axes: u8,
+    cfg: &CyclesConfig,
+    kinematics: &std::path::Path,
+) -> Result<(), Preflight> {
+    preflight(call, machine_axes, cfg, kinematics).map_err(|(kind, message)| Preflight::Cycle {
+        block: call.head.block,
+        cycle: call.head.cycle,
+        line: call.head.line,
+        kind,
+        message,
+    })
+}
+
+/// The moves a cycle plans, from the datum and the axes where the program's path
+/// leaves them, against the motion guard: the probing cycles' points, and every move of
+/// cycle 451 (its sequence run on a dry-run machine). Leaves `here` where the cycle
+/// leaves the axes, and, for 451 with Q431 = 1/3 in modes 1..3, the active preset at
+/// the sphere centre it sets.
+fn check_cycle_moves(
+    call: &CycleCall,
+    cfg: &CyclesConfig,
+    kinematics: &std::path::Path,
+    datum: &mut Datum,
+    here: &mut AxisPositions,
+    guard: &MotionGuard,
+) -> Result<(), Preflight> {
+    let origin = datum.origin();
+    let refused = |kind: PreflightKind, message: String| Preflight::Cycle {
+        block: call.head.block,
+        cycle: call.head.cycle,
+        line: call.head.line,
+        kind,
+        message,
+    };
+    let moves = match &call.kind {
+        CycleKind::MeasurePlane(p) => p
+            .planned_moves(&call.head, origin)
+            .map_err(|e| e.to_string()),
+        CycleKind::Probing3d(p) => p
+            .planned_moves(&call.head, origin)
+            .map_err(|e| e.to_string()),
+        CycleKind::MeasureKinematics(p) => {
+            let planned =
+                cycle451::dry_run::plan_moves(p, &call.head, cfg, kinematics, datum, here)
+                    .map_err(|e| {
+                        let mut message = e.to_string();
+                        if !message.ends_with("nothing moved") {
+                            message.push_str("; nothing moved");
+                        }
+                        refused(PreflightKind::Plan(e.kind()), message)
+                    })?;
+            *here = planned.end;
+            // Q431 = 1/3 in modes 1..3: later blocks are relative to the preset the
+            // cycle writes at the sphere centre.
+            if (p.preset == 1 || p.preset == 3) && p.mode.writes() {
+                let row = [0, 1, 2].map(|i| planned.preset[i] - datum.shift[i]);
+                datum.presets.set_active_xyz(row);
+            }
+            Ok(Vec::new())
+        }
+        CycleKind::SaveKinematics(_) => Ok(Vec::new()),
+    };
+    let moves = moves
+        .and_then(|m| check_planned(&m, guard).map(|()| m))
+        .map_err(|message| refused(PreflightKind::Moves, message))?;
+    for m in &moves {
+        if let PlannedMove::Position { target, .. } = m {
+            *here = here.merged(target);
         }
     }
     Ok(())
@@ -319,32 +413,17 @@ pub fn run_program<M: Machine>(
     cfg: &CyclesConfig,
     opts: &mut RunOptions,
 ) -> ProgramReport {
-    let mut report = ProgramReport::default();
     let kinematics = opts.kinematics_path(&cfg.machine);
     // Planned from where the machine stands (as `check` plans from where it assumes
     // the axes, [`assumed_start`]).
     let start = machine
         .positions()
         .unwrap_or_else(|_| assumed_start(&cfg.machine));
-    match preflight_program_from(program, machine.axes(), cfg, &kinematics, &start) {
-        Ok(()) => {}
-        Err(Preflight::Cycle {
-            block,
-            cycle,
-            message,
-            ..
-        }) => {
-            report.stopped = Some(format!("block {block}: {message}"));
-            report
-                .cycles
-                .push(CycleResult::error(block, cycle, message));
-            return report;
-        }
-        Err(e @ Preflight::Positioning { .. }) => {
-            report.stopped = Some(format!("{e}; nothing moved"));
-            return report;
-        }
-    }
+    let (mut report, mut params, qr_path) =
+        match before_start(program, machine.axes(), cfg, &kinematics, &start) {
+            Ok(started) => started,
+            Err(refused) => return *refused,
+        };
     // Rapid positioning: as fast as the slowest axis on the path allows.
     let rapid = cfg
         .machine
@@ -368,9 +447,39 @@ pub fn run_program<M: Machine>(
         probing3d: Vec::new(),
         datum: Datum::new(cfg.presets.clone()),
     };
-    for block in &program.blocks {
+    let guard = MotionGuard::new(&cfg.machine);
+    let mut flow = Flow::new(cfg.parameters.max_jumps);
+    loop {
+        let index = match flow.advance(program, &mut params) {
+            Ok(Step::Act(i)) => i,
+            Ok(Step::End) => break,
+            Err(stop) => {
+                flow_stopped(stop, program, cfg, &mut report);
+                break;
+            }
+        };
+        let block = &program.blocks[index];
+        let resolved;
         let call = match &block.statement {
             Statement::Cycle(call) => &**call,
+            Statement::Deferred(d) => {
+                // Its values are known now: resolved and checked as `check` checks a
+                // cycle, before it moves.
+                let here = machine
+                    .positions()
+                    .unwrap_or_else(|_| assumed_start(&cfg.machine));
+                let checked = resolve_at_run(d, &params, cfg, machine.axes(), &ctx, &guard, here);
+                match checked {
+                    Ok(call) => {
+                        resolved = call;
+                        &resolved
+                    }
+                    Err(e) => {
+                        report.stopped = Some(e);
+                        break;
+                    }
+                }
+            }
             Statement::Datum(d) => {
                 if let Err(e) = ctx.datum.apply(d) {
                     report.stopped = Some(format!("line {}: {e}", block.line));
@@ -379,42 +488,31 @@ pub fn run_program<M: Machine>(
                 continue;
             }
             Statement::Other(code) => {
-                if let Some(Ok(mut mv)) = parse_linear(code, program.unit) {
-                    // Program coordinates: relative to the active preset plus shift, or
-                    // machine coordinates (M91) / the reference point (M92). The
-                    // preflight refused a block whose target cannot be resolved.
-                    let Ok(target) = mv.machine_target(&ctx.datum, cfg.parameters.m92_reference)
-                    else {
-                        report.stopped = Some(format!(
-                            "line {}: L block: M92 without a reference point",
-                            block.line
-                        ));
-                        break;
-                    };
-                    mv.target = target;
-                    let feed = match mv.feed {
-                        MoveFeed::Rapid => rapid,
-                        MoveFeed::Feed(f) => f,
-                    };
-                    let number = block.number.unwrap_or(block.line as u32);
-                    (ctx.progress)(ProgressEvent::Move {
-                        block: number,
-                        target: mv.target,
-                        feed,
-                    });
-                    if let Err(e) = machine.move_to(&mv.target, feed) {
-                        report.aborted = e.kind() == hal::ErrorKind::Aborted;
-                        let note = if misplaced(CycleErrorKind::Machine(e.kind()))
-                            && mv.coordinates == Coordinates::Datum
-                        {
-                            datum_note(&ctx.datum)
-                        } else {
-                            String::new()
-                        };
-                        report.stopped =
-                            Some(format!("block {number} (line {}): {e}{note}", block.line));
+                let number = block.number.unwrap_or(block.line as u32);
+                let moved = linear_target(code, &params, program, &ctx.datum, cfg);
+                let mv = match moved {
+                    Ok(Some(mv)) => mv,
+                    Ok(None) => continue,
+                    Err(e) => {
+                        report.stopped = Some(format!("block {number} (line {}): {e}", block.line));
                         break;
                     }
+                };
+                let feed = match mv.feed {
+                    MoveFeed::Rapid => rapid,
+                    MoveFeed::Feed(f) => f,
+                };
+                (ctx.progress)(ProgressEvent::Move {
+                    block: number,
+                    target: mv.target,
+                    feed,
+                });
+                if let Err(e) = machine.move_to(&mv.target, feed) {
+                    report.aborted = e.kind() == hal::ErrorKind::Aborted;
+                    let note = misplaced_note(e.kind(), &mv, &ctx.datum);
+                    report.stopped =
+                        Some(format!("block {number} (line {}): {e}{note}", block.line));
+                    break;
                 }
                 continue;
             }
@@ -426,11 +524,17 @@ pub fn run_program<M: Machine>(
                 note_restore(&mut report, &ctx.kinematics, &cfg.machine, call.head.block);
             }
         }
+        if result.status == Status::Ok {
+            // What the cycle measured is the program's to read (Q141.., QS146, ...).
+            params.set_results(&result.q, &result.qs);
+        }
         report.cycles.push(result);
         if report.stopped.is_some() {
             break;
         }
     }
+    report.parameters = params.written();
+    keep_remanent(&params, &qr_path, &mut report);
     report
 }
 
@@ -463,6 +567,60 @@ fn note_restore(
     }
 }
 
+/// What `run` checks before the first move (as `check`), and the parameters it starts
+/// with (the QR values kept beside the preset table): the report so far, the
+/// parameters, the QR file; or the report of the refusal (nothing moved).
+fn before_start(
+    program: &Program,
+    machine_axes: u8,
+    cfg: &CyclesConfig,
+    kinematics: &std::path::Path,
+    start: &AxisPositions,
+) -> Result<(ProgramReport, QParams, PathBuf), Box<ProgramReport>> {
+    let mut report = ProgramReport::default();
+    match preflight_program_from(program, machine_axes, cfg, kinematics, start) {
+        Ok(()) => {}
+        Err(Preflight::Cycle {
+            block,
+            cycle,
+            message,
+            ..
+        }) => {
+            report.stopped = Some(format!("block {block}: {message}"));
+            report
+                .cycles
+                .push(CycleResult::error(block, cycle, message));
+            return Err(Box::new(report));
+        }
+        Err(e @ (Preflight::Positioning { .. } | Preflight::Program { .. })) => {
+            report.stopped = Some(format!("{e}; nothing moved"));
+            return Err(Box::new(report));
+        }
+    }
+    let qr_path = remanent_path(&cfg.presets.path);
+    match load_remanent(&qr_path) {
+        Ok(r) => Ok((report, start_params(&r), qr_path)),
+        Err(e) => {
+            report.stopped = Some(format!("{e}; nothing moved"));
+            Err(Box::new(report))
+        }
+    }
+}
+
+/// Writes the QR values when the run set one; a failure is said in `stopped`.
+fn keep_remanent(params: &QParams, qr_path: &std::path::Path, report: &mut ProgramReport) {
+    if !params.remanent_written() {
+        return;
+    }
+    if let Err(e) = save_remanent(qr_path, &params.remanent()) {
+        let why = format!("{e}");
+        report.stopped = Some(match report.stopped.take() {
+            Some(s) => format!("{s}; {why}"),
+            None => why,
+        });
+    }
+}
+
 /// A failure that says the probe was not where the program assumed: no contact where
 /// one was due, or one where none was.
 fn misplaced(kind: CycleErrorKind) -> bool {
@@ -471,6 +629,16 @@ fn misplaced(kind: CycleErrorKind) -> bool {
         kind,
         CycleErrorKind::Machine(K::NotTriggered | K::AlreadyDeflected | K::ProbeCollision)
     )
+}
+
+/// [`datum_note`] for an `L` move in program coordinates that failed because the probe
+/// was not where the program assumed; empty otherwise.
+fn misplaced_note(kind: hal::ErrorKind, mv: &LinearMove, datum: &Datum) -> String {
+    if misplaced(CycleErrorKind::Machine(kind)) && mv.coordinates == Coordinates::Datum {
+        datum_note(datum)
+    } else {
+        String::new()
+    }
 }
 
 /// "; the active preset is row N (X.. Y.. Z..)": where the program's coordinates
@@ -493,6 +661,75 @@ fn datum_note(datum: &Datum) -> String {
         row.y,
         row.z
     )
+}
+
+/// A cycle block with Q-parameter values, resolved with the values they have now and
+/// checked as `check` checks a cycle, before it moves.
+fn resolve_at_run(
+    d: &crate::program::DeferredCycle,
+    params: &QParams,
+    cfg: &CyclesConfig,
+    machine_axes: u8,
+    ctx: &CycleContext<'_>,
+    guard: &MotionGuard,
+    here: AxisPositions,
+) -> Result<CycleCall, String> {
+    let call = resolve_deferred(d, params, cfg).map_err(|e| format!("line {}: {e}", d.line))?;
+    // The plan's datum and positions are the ones the cycle will start from; what the
+    // cycle itself then changes, it changes when it runs.
+    let (mut datum, mut here) = (ctx.datum.clone(), here);
+    preflight_cycle(&call, machine_axes, cfg, &ctx.kinematics)
+        .and_then(|()| check_cycle_moves(&call, cfg, &ctx.kinematics, &mut datum, &mut here, guard))
+        .map_err(|e| e.to_string())?;
+    Ok(call)
+}
+
+/// Reports why the program flow stopped: FN 14 with its number and text, or a block
+/// that cannot be carried out, at its line.
+fn flow_stopped(stop: FlowStop, program: &Program, cfg: &CyclesConfig, report: &mut ProgramReport) {
+    match stop {
+        FlowStop::Error { line, number } => {
+            let text = cfg.parameters.errors.get(&number.to_string()).cloned();
+            let shown = text.as_ref().map_or(String::new(), |t| format!(": {t}"));
+            report.stopped = Some(format!("line {line}: FN 14: ERROR = {number}{shown}"));
+            report.error = Some(ErrorStop { line, number, text });
+        }
+        FlowStop::Fault { line, message, .. } => {
+            report.stopped = Some(format!("line {line}: {message}"));
+        }
+        // Only `check` has parameters without a value.
+        FlowStop::Undecided { index, .. } => {
+            let line = program.blocks[index].line;
+            report.stopped = Some(format!("line {line}: the condition has no value"));
+        }
+    }
+}
+
+/// The move of an `L` block (`None` for any other block) with its parameters' values,
+/// in machine coordinates, checked as `check` checks constant ones: values from
+/// parameters are known only now, before the move.
+fn linear_target(
+    code: &str,
+    params: &QParams,
+    program: &Program,
+    datum: &Datum,
+    cfg: &CyclesConfig,
+) -> Result<Option<LinearMove>, String> {
+    let code = substitute_params(code, params).map_err(|e| e.to_string())?;
+    match parse_linear(&code, program.unit) {
+        Some(Ok(mut mv)) => {
+            // Program coordinates: relative to the active preset plus shift, or
+            // machine coordinates (M91) / the reference point (M92).
+            mv.target = mv
+                .machine_target(datum, cfg.parameters.m92_reference)
+                .map_err(|e| e.to_string())?;
+            check_linear_move(&mv, &cfg.machine)
+                .map(|()| Some(mv))
+                .map_err(|e| e.to_string())
+        }
+        Some(Err(e)) => Err(e.to_string()),
+        None => Ok(None),
+    }
 }
 
 /// Runs one cycle and reports it: its start, its result, the logs it wrote, why the

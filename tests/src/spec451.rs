@@ -170,13 +170,15 @@ pub fn spec_deviations(ch: &Chain, e: &Errors, m: &Measured) -> Vec<V> {
         .collect()
 }
 
-/// (dispersion sqrt(sum |d|^2 / m), max |d|).
+/// (dispersion sqrt(sum |d|^2 / m), max |d|); with one position besides the reference
+/// the dispersion is that position's spatial error |d_1| (spec.md, the seeds).
 pub fn spec_statistics(d: &[V]) -> (f64, f64) {
     let sum: f64 = d.iter().map(|v| dot(*v, *v)).sum();
-    (
-        (sum / d.len() as f64).sqrt(),
-        d.iter().map(|v| norm(*v)).fold(0.0, f64::max),
-    )
+    let max = d.iter().map(|v| norm(*v)).fold(0.0, f64::max);
+    if d.len() == 2 {
+        return (norm(d[1]), max);
+    }
+    ((sum / d.len() as f64).sqrt(), max)
 }
 
 pub fn spec_objective(ch: &Chain, e: &Errors, ms: &[Measured]) -> f64 {

@@ -460,6 +460,7 @@ mod tests {
             stopped: None,
             aborted: false,
             protocols: vec![PathBuf::from("/tmp/TCHPR431.TXT")],
+            ..ProgramReport::default()
         }
     }
 

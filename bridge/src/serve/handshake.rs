@@ -113,6 +113,8 @@ pub const ERROR_KIND_SHUTDOWN: u16 = 22;
 pub const ERROR_KIND_NOT_KEPT: u16 = 23;
 /// A cycle failed without a machine error (its own checks, tolerance stop, Q309).
 pub const ERROR_KIND_CYCLE: u16 = 30;
+/// The program stopped itself with `FN 14: ERROR = n`; the error code register holds n.
+pub const ERROR_KIND_PROGRAM: u16 = 31;
 
 pub fn machine_error_kind(k: hal::ErrorKind) -> u16 {
     use hal::ErrorKind::*;

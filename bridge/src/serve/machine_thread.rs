@@ -4,7 +4,9 @@
 
 use super::config::GatewayConfig;
 use super::gateway::{lock, Job, Shared, ToMachine};
-use super::handshake::{machine_error_kind, Outcome, ERROR_KIND_CYCLE, ERROR_KIND_NOT_KEPT};
+use super::handshake::{
+    machine_error_kind, Outcome, ERROR_KIND_CYCLE, ERROR_KIND_NOT_KEPT, ERROR_KIND_PROGRAM,
+};
 use super::machine_link::MachineLink;
 use crate::history::recorder::{Kept, Recorder};
 use crate::ipc::{EstimatorChild, IpcEstimator};
@@ -64,10 +66,8 @@ pub fn run(
                     None => {
                         if let (Some(h), Some(id)) = (history, job.record) {
                             let report = ProgramReport {
-                                cycles: Vec::new(),
                                 stopped: Some("the machine was lost before the run began".into()),
-                                aborted: false,
-                                protocols: Vec::new(),
+                                ..ProgramReport::default()
                             };
                             let _ = h.finish(id, "error", &report);
                         }
@@ -189,6 +189,14 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
     let mut outcome = match reason {
         Some(r) => Outcome::Aborted(r),
         None if report.completed() => Outcome::Done,
+        // FN 14: the program's own error number.
+        None if report.error.is_some() => Outcome::Error {
+            kind: ERROR_KIND_PROGRAM,
+            code: report
+                .error
+                .as_ref()
+                .map_or(0, |e| u16::try_from(e.number).unwrap_or(u16::MAX)),
+        },
         None => match machine.last_error {
             Some((kind, code)) => Outcome::Error {
                 kind: machine_error_kind(kind),

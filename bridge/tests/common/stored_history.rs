@@ -57,9 +57,7 @@ fn report(run: &StoredRun) -> ProgramReport {
             message: None,
             kinematics: Some(Box::new(serde_json::from_value(kinematics).unwrap())),
         }],
-        stopped: None,
-        aborted: false,
-        protocols: vec![],
+        ..ProgramReport::default()
     }
 }
 

@@ -254,13 +254,19 @@ pub fn deviations(model: &KinematicModel, m: &AxisMeasurement) -> Vec<Vector3<f6
     d
 }
 
-/// (dispersion, maximum) of deviations: `sqrt(sum |d|^2 / m)`, `max |d|`.
+/// (dispersion, maximum) of deviations (the reference first): `sqrt(sum |d|^2 / m)`,
+/// `max |d|`. With one measuring position besides the reference (Q414 = 1) the seeds
+/// say the dispersion cannot be computed and is that position's spatial error `|d_1|`
+/// (the reference is no second point).
 pub fn statistics(d: &[Vector3<f64>]) -> (f64, f64) {
     if d.is_empty() {
         return (0.0, 0.0);
     }
-    let sum: f64 = d.iter().map(|v| v.norm_squared()).sum();
     let max = d.iter().map(|v| v.norm()).fold(0.0, f64::max);
+    if d.len() == 2 {
+        return (d[1].norm(), max);
+    }
+    let sum: f64 = d.iter().map(|v| v.norm_squared()).sum();
     ((sum / d.len() as f64).sqrt(), max)
 }
 

@@ -15,7 +15,7 @@ pub fn targets() -> Vec<Target> {
     vec![
         Target {
             name: "check",
-            about: "NC program text through `probebridge check` (parser, BEGIN/END PGM, preflight of every cycle and L block) on two machines",
+            about: "NC program text through `probebridge check` (parser, Q-parameter programming, BEGIN/END PGM, preflight of every cycle and L block on every path) on two machines",
             max_len: 16 * 1024,
             prepare: || {
                 machines();
@@ -26,6 +26,16 @@ pub fn targets() -> Vec<Target> {
                 "MM", "INCH", "L ", "~\n", ";", " ~", "QS400=", "Q", "R0", "M99", "IX", "IY",
                 "IZ", "X+", "Y-", "Z+", "A+", "B-", "C+", "PREDEF", "\"", "\r\n", "\u{feff}",
                 "431", "444", "450", "451", "1e308", "nan", "-0",
+                // Q-parameter programming (issue 27).
+                "Q1 = ", "QL0 = ", "QR1 = ", "QS1 = \"", " + ", " - ", " * ", " / ", " ^ ",
+                "( ", " )", "SQ ", "SQRT ", "SIN ", "COS ", "TAN ", "ASIN ", "ACOS ", "ATAN ",
+                "ABS ", "INT ", "FRAC ", "SGN ", "PI", "FN 0: ", "FN 4: Q1 = +1 / +0",
+                "FN 5: Q1 = SQRT -1", "FN 9: IF +Q1 EQU +0 GOTO LBL 1", "FN 10: IF ",
+                "FN 11: IF +Q141 GT +0.01 GOTO LBL \"END\"", "FN 12: IF ", " GOTO LBL ",
+                "LBL 1", "LBL 0", "LBL \"", "CALL LBL 1 REP 3", "FN 14: ERROR = 1001",
+                "FN 16: F-PRINT", " || ", "SUBSTR ( SRC_QS146 BEG0 LEN10 )",
+                "TONUMB ( SRC_QS0 )", "TOCHAR ( DAT+Q1 DECIMALS3 )", "STRLEN ( SRC_QS1 )",
+                "X+Q1", "Y-QL2", "FQ3", "M30", "DECLARE STRING ", "STRING FORMULA ",
             ],
             run: run_check,
         },
@@ -61,8 +71,11 @@ fn machines() -> &'static [Machine] {
             .iter()
             .map(|name| {
                 let path = corpus::configs("machines").join(name);
-                let cfg = CyclesConfig::load(&path)
+                let mut cfg = CyclesConfig::load(&path)
                     .unwrap_or_else(|e| panic!("fuzz target check: {}: {e}", path.display()));
+                // A mutated loop ends after this many jumps, so that one input stays
+                // well under the driver's second (the default is 100000).
+                cfg.parameters.max_jumps = 1000;
                 // A file that is not there: the nominal kinematics, nothing read.
                 let kinematics = ActiveKinematics::default_path(&cfg.machine)
                     .with_file_name("probebridge-fuzz-absent.kinematics.toml");

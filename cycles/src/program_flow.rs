@@ -1,0 +1,519 @@
+//! The program as the TNC runs it: Q-parameter assignments (`Q1 = ...`, `FN 0..5`,
+//! string formulas), labels (`LBL 5`, `LBL "NAME"`, `LBL 0` ends a subprogram), jumps
+//! (`FN 9`..`FN 12`), subprogram calls and program-section repeats
+//! (`CALL LBL 5 REP 3`), and `FN 14: ERROR = n` ([`crate::flow_block`]). [`Flow`] steps through the blocks,
+//! doing what only touches parameters itself and handing every other block (moves,
+//! cycles, datum changes) to its caller: `run` acts on them, `check` checks them.
+
+use crate::datum::Datum;
+use crate::flow_block::{Label, MAX_NESTING};
+use crate::formula::{eval_formula, Env, EvalError, EvalErrorKind, Expr, Lookup};
+use crate::program::{Block, Program, Statement};
+use crate::q_params::{QName, QParams, QValue};
+use std::borrow::Cow;
+use std::collections::BTreeMap;
+
+/// Labels defined twice, and jumps or calls to labels that do not exist, each at its
+/// line.
+pub fn check_labels(blocks: &[Block]) -> Vec<crate::diagnostic::Diagnostic> {
+    let mut out = Vec::new();
+    let mut seen: BTreeMap<&Label, usize> = BTreeMap::new();
+    for b in blocks {
+        if let Statement::Label(l) = &b.statement {
+            if *l == Label::Number(0) {
+                continue;
+            }
+            if let Some(first) = seen.get(l) {
+                out.push(crate::diagnostic::Diagnostic {
+                    line: b.line,
+                    message: format!("{l} is defined twice (first on line {first})"),
+                });
+            } else {
+                seen.insert(l, b.line);
+            }
+        }
+    }
+    for b in blocks {
+        let target = match &b.statement {
+            Statement::Jump(j) => &j.target,
+            Statement::Call(c) => &c.target,
+            _ => continue,
+        };
+        if !seen.contains_key(target) {
+            out.push(crate::diagnostic::Diagnostic {
+                line: b.line,
+                message: format!("{target} is not defined in this program"),
+            });
+        }
+    }
+    out
+}
+
+/// Reads parameters for formulas: `run`'s values, and for `check` the parameters a
+/// cycle will measure ([`QParams::mark_measured`]).
+impl Env for QParams {
+    fn lookup(&self, name: QName) -> Lookup {
+        if self.is_measured(name) {
+            return Lookup::Measured;
+        }
+        self.get(name)
+            .cloned()
+            .map_or(Lookup::Undefined, Lookup::Value)
+    }
+}
+
+/// `L X+Q1 Y-Q2 R0 FQ3`: the block with each parameter replaced by its value (as
+/// written, `-Q2` negated). Other blocks are returned as they are.
+pub fn substitute_params<'a>(code: &'a str, env: &dyn Env) -> Result<Cow<'a, str>, EvalError> {
+    let mut words = code.split_whitespace();
+    if !words.next().is_some_and(|w| w.eq_ignore_ascii_case("L"))
+        || !code.to_ascii_uppercase().contains('Q')
+    {
+        return Ok(Cow::Borrowed(code));
+    }
+    let mut out = String::from("L");
+    for w in words {
+        out.push(' ');
+        let u = w.to_ascii_uppercase();
+        let letter = &u[..u.chars().next().map_or(0, char::len_utf8)];
+        let rest = &u[letter.len()..];
+        let (neg, name) = match rest.as_bytes().first() {
+            Some(b'+') => (false, &rest[1..]),
+            Some(b'-') => (true, &rest[1..]),
+            _ => (false, rest),
+        };
+        match QName::parse(name).filter(|n| !n.is_text() && "XYZABCF".contains(letter)) {
+            Some(n) => {
+                let v = crate::formula::eval(&Expr::Param(n), env)?;
+                let v = if neg { -v } else { v };
+                out.push_str(&format!("{letter}{v:+}"));
+            }
+            None => out.push_str(w),
+        }
+    }
+    Ok(Cow::Owned(out))
+}
+
+/// A cycle block's text with each `Qnnn=+Qm` (`-Qm`, `QLm`, `QRm`) replaced by the
+/// value (`Qnnn=+12.5`).
+pub fn substitute_cycle_values(source: &str, env: &dyn Env) -> Result<String, EvalError> {
+    let mut out = String::with_capacity(source.len());
+    let mut rest = source;
+    while let Some(i) = rest.find('=') {
+        out.push_str(&rest[..=i]);
+        rest = &rest[i + 1..];
+        let trimmed = rest.trim_start();
+        let (neg, after_sign) = match trimmed.as_bytes().first() {
+            Some(b'+') => (false, &trimmed[1..]),
+            Some(b'-') => (true, &trimmed[1..]),
+            _ => (false, trimmed),
+        };
+        if let Some(Ok((name, len))) = QName::parse_prefix(after_sign) {
+            if !name.is_text() {
+                let v = crate::formula::eval(&Expr::Param(name), env)?;
+                let v = if neg { -v } else { v };
+                out.push_str(&format!("{v:+}"));
+                rest = &after_sign[len..];
+            }
+        }
+    }
+    out.push_str(rest);
+    Ok(out)
+}
+
+/// Why the program stops (besides a machine or cycle error).
+#[derive(Clone, Debug, PartialEq)]
+pub enum FlowStop {
+    /// `FN 14: ERROR = n`.
+    Error { line: usize, number: u32 },
+    /// A block that cannot be carried out (an undefined parameter, a division by zero,
+    /// too many jumps, ...).
+    Fault {
+        line: usize,
+        kind: FlowFaultKind,
+        message: String,
+    },
+    /// `check` only: a jump whose condition depends on a measured result.
+    Undecided { index: usize, target: usize },
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum FlowFaultKind {
+    Eval(EvalErrorKind),
+    /// More jumps than `[cycles] max_jumps` allows: the program loops.
+    JumpLimit,
+    /// Subprograms nested deeper than the TNC allows.
+    Nesting,
+    /// A subprogram runs into the program's end without its LBL 0.
+    NoReturn,
+}
+
+/// What the caller does next.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Step {
+    /// Act on the block at this index (a move, a cycle, a datum change, a frame, ...).
+    Act(usize),
+    /// The program ended (END PGM, M2/M30, or its last block).
+    End,
+}
+
+/// Where the program stands: the next block, the subprograms' return points, the
+/// repeats left per CALL block, the jumps made so far.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Flow {
+    pc: usize,
+    returns: Vec<usize>,
+    repeats: BTreeMap<usize, u32>,
+    jumps: u64,
+    max_jumps: u64,
+    ending: bool,
+}
+
+/// Block index of each label (and of each `LBL 0`).
+fn label_index(blocks: &[Block], target: &Label) -> Option<usize> {
+    blocks
+        .iter()
+        .position(|b| matches!(&b.statement, Statement::Label(l) if l == target))
+}
+
+/// M2 or M30 in a block (alone or in an `L` block): the program run ends there.
+fn ends_program(code: &str) -> bool {
+    code.split_whitespace().any(|w| {
+        w.eq_ignore_ascii_case("M2")
+            || w.eq_ignore_ascii_case("M02")
+            || w.eq_ignore_ascii_case("M30")
+    })
+}
+
+impl Flow {
+    pub fn new(max_jumps: u64) -> Self {
+        Self {
+            pc: 0,
+            returns: Vec::new(),
+            repeats: BTreeMap::new(),
+            jumps: 0,
+            max_jumps,
+            ending: false,
+        }
+    }
+
+    pub fn jumps(&self) -> u64 {
+        self.jumps
+    }
+
+    fn jump(&mut self, line: usize, to: usize) -> Result<(), FlowStop> {
+        self.jumps += 1;
+        if self.jumps > self.max_jumps {
+            return Err(FlowStop::Fault {
+                line,
+                kind: FlowFaultKind::JumpLimit,
+                message: format!(
+                    "more than {} jumps: the program loops (the limit is the machine configuration's [cycles] max_jumps)",
+                    self.max_jumps
+                ),
+            });
+        }
+        self.pc = to;
+        Ok(())
+    }
+
+    /// Takes (or not) the jump of the block at `index` whose condition `check` could
+    /// not decide; `target` as [`FlowStop::Undecided`] gave it.
+    pub fn decide(
+        &mut self,
+        program: &Program,
+        index: usize,
+        target: usize,
+        taken: bool,
+    ) -> Result<(), FlowStop> {
+        if taken {
+            self.jump(program.blocks[index].line, target)
+        } else {
+            self.pc = index + 1;
+            Ok(())
+        }
+    }
+
+    /// Runs parameter blocks and jumps until a block for the caller, the end, or a
+    /// stop.
+    pub fn advance(&mut self, program: &Program, params: &mut QParams) -> Result<Step, FlowStop> {
+        let blocks = &program.blocks;
+        loop {
+            if self.ending {
+                return Ok(Step::End);
+            }
+            let index = self.pc;
+            let Some(block) = blocks.get(index) else {
+                return self.end(blocks);
+            };
+            let line = block.line;
+            let fault = |e: EvalError| FlowStop::Fault {
+                line,
+                kind: FlowFaultKind::Eval(e.kind),
+                message: e.message,
+            };
+            self.pc = index + 1;
+            match &block.statement {
+                Statement::EndPgm { .. } => return self.end(blocks),
+                Statement::Assign(a) => match eval_formula(&a.formula, params) {
+                    Ok(v) => params.set(a.target, v),
+                    // check: the value will be known when the program runs.
+                    Err(e) if e.kind == EvalErrorKind::Measured => params.mark_measured(a.target),
+                    Err(e) => return Err(fault(e)),
+                },
+                Statement::Label(Label::Number(0)) => {
+                    if let Some(back) = self.returns.pop() {
+                        self.pc = back;
+                    }
+                }
+                Statement::Label(_) => {}
+                Statement::Jump(j) => {
+                    let target =
+                        label_index(blocks, &j.target).expect("labels checked at parse time");
+                    let l = crate::formula::eval(&j.left, params);
+                    let r = crate::formula::eval(&j.right, params);
+                    match (l, r) {
+                        (Ok(a), Ok(b)) => {
+                            if j.compare.holds(a, b) {
+                                self.jump(line, target)?;
+                            }
+                        }
+                        (Err(e), _) | (_, Err(e)) if e.kind == EvalErrorKind::Measured => {
+                            self.pc = index;
+                            return Err(FlowStop::Undecided { index, target });
+                        }
+                        (Err(e), _) | (_, Err(e)) => return Err(fault(e)),
+                    }
+                }
+                Statement::Call(c) => {
+                    let target =
+                        label_index(blocks, &c.target).expect("labels checked at parse time");
+                    if target < index {
+                        // Program-section repeat: back to the label `rep` more times.
+                        let left = self.repeats.entry(index).or_insert(c.rep);
+                        if *left > 0 {
+                            *left -= 1;
+                            self.jump(line, target)?;
+                        } else {
+                            self.repeats.remove(&index);
+                        }
+                    } else {
+                        // Subprogram, called 1 + rep times: come back to this block
+                        // while repeats are left.
+                        let left = self.repeats.entry(index).or_insert(c.rep + 1);
+                        *left -= 1;
+                        let back = if *left > 0 {
+                            index
+                        } else {
+                            self.repeats.remove(&index);
+                            index + 1
+                        };
+                        if self.returns.len() >= MAX_NESTING {
+                            return Err(FlowStop::Fault {
+                                line,
+                                kind: FlowFaultKind::Nesting,
+                                message: format!(
+                                    "subprograms nested deeper than {MAX_NESTING} levels"
+                                ),
+                            });
+                        }
+                        self.returns.push(back);
+                        self.jump(line, target + 1)?;
+                    }
+                }
+                Statement::Stop(number) => {
+                    return Err(FlowStop::Error {
+                        line,
+                        number: *number,
+                    })
+                }
+                Statement::Other(code) if ends_program(code) => {
+                    self.ending = true;
+                    return Ok(Step::Act(index));
+                }
+                _ => return Ok(Step::Act(index)),
+            }
+        }
+    }
+
+    fn end(&mut self, blocks: &[Block]) -> Result<Step, FlowStop> {
+        if let Some(&back) = self.returns.last() {
+            let line = blocks.get(back.saturating_sub(1)).map_or(0, |b| b.line);
+            return Err(FlowStop::Fault {
+                line,
+                kind: FlowFaultKind::NoReturn,
+                message: "the subprogram called here runs into the end of the program: its LBL 0 is missing".into(),
+            });
+        }
+        self.ending = true;
+        Ok(Step::End)
+    }
+}
+
+/// The remanent parameters of the machine, as `run` and `check` start with them.
+pub fn start_params(remanent: &BTreeMap<QName, f64>) -> QParams {
+    let mut p = QParams::new();
+    for (n, v) in remanent {
+        p.preset(*n, QValue::Number(*v));
+    }
+    p
+}
+
+/// Parameters that a measuring cycle writes, as `check` sees them after the cycle.
+pub fn mark_cycle_results(params: &mut QParams, cycle: u16) {
+    for n in crate::q_params::results_of(cycle) {
+        params.mark_measured(n);
+    }
+}
+
+/// A fingerprint of a `check` path's state, so that a loop around a measured
+/// condition is walked once.
+pub fn fingerprint(flow: &Flow, params: &QParams, extra: &str) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    // Not the jump count: a loop comes back to the same state with more jumps.
+    (flow.pc, &flow.returns, &flow.repeats, flow.ending).hash(&mut h);
+    format!("{params:?}").hash(&mut h);
+    extra.hash(&mut h);
+    h.finish()
+}
+
+/// The most paths `check` follows beyond the first (each a condition on a measured
+/// result, both ways); what lies beyond is checked when the program runs.
+pub const MAX_CHECK_PATHS: usize = 64;
+
+/// One way through the program as `check` follows it.
+#[derive(Clone, Debug)]
+struct CheckPath {
+    flow: Flow,
+    params: QParams,
+    datum: Datum,
+    /// Where the blocks before leave the axes on this path (cycle 451 plans its moves
+    /// from there).
+    here: hal::AxisPositions,
+}
+
+/// `check`'s walk over the program: every block as `run` would reach it, with the
+/// parameters known before anything moves (constants, values computed from them, the
+/// QR values); a jump on a measured result is followed both ways.
+pub struct CheckWalk<'p> {
+    program: &'p Program,
+    current: Option<CheckPath>,
+    pending: Vec<CheckPath>,
+    seen: std::collections::HashSet<u64>,
+    paths: usize,
+}
+
+/// A block `check` refuses while walking: its line, kind and why.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CheckFault {
+    pub line: usize,
+    pub kind: FlowFaultKind,
+    pub message: String,
+}
+
+impl<'p> CheckWalk<'p> {
+    pub fn new(
+        program: &'p Program,
+        params: QParams,
+        datum: Datum,
+        here: hal::AxisPositions,
+        max_jumps: u64,
+    ) -> Self {
+        Self {
+            program,
+            current: Some(CheckPath {
+                flow: Flow::new(max_jumps),
+                params,
+                datum,
+                here,
+            }),
+            pending: Vec::new(),
+            seen: std::collections::HashSet::new(),
+            paths: 0,
+        }
+    }
+
+    /// The next block to check (a move, a cycle, a datum change, ...), `None` when
+    /// every path is walked.
+    pub fn next_block(&mut self) -> Result<Option<&'p Block>, CheckFault> {
+        let program = self.program;
+        loop {
+            let Some(cur) = self.current.as_mut() else {
+                match self.pending.pop() {
+                    Some(p) => {
+                        self.current = Some(p);
+                        continue;
+                    }
+                    None => return Ok(None),
+                }
+            };
+            let fault = |stop: FlowStop| match stop {
+                FlowStop::Fault {
+                    line,
+                    kind,
+                    message,
+                } => Some(CheckFault {
+                    line,
+                    kind,
+                    message,
+                }),
+                _ => None,
+            };
+            match cur.flow.advance(program, &mut cur.params) {
+                Ok(Step::Act(i)) => {
+                    let b = &program.blocks[i];
+                    match &b.statement {
+                        Statement::Cycle(c) => mark_cycle_results(&mut cur.params, c.head.cycle),
+                        Statement::Deferred(d) => mark_cycle_results(&mut cur.params, d.cycle),
+                        _ => {}
+                    }
+                    return Ok(Some(b));
+                }
+                // FN 14 is the program's own stop: this path ends there.
+                Ok(Step::End) | Err(FlowStop::Error { .. }) => self.current = None,
+                Err(FlowStop::Undecided { index, target }) => {
+                    let mut taken = cur.clone();
+                    if let Err(stop) = taken.flow.decide(program, index, target, true) {
+                        if let Some(f) = fault(stop) {
+                            return Err(f);
+                        }
+                    }
+                    cur.flow.decide(program, index, target, false).ok();
+                    let key = |p: &CheckPath| {
+                        fingerprint(&p.flow, &p.params, &format!("{:?}{:?}", p.datum, p.here))
+                    };
+                    if self.seen.insert(key(&taken)) && self.paths < MAX_CHECK_PATHS {
+                        self.paths += 1;
+                        self.pending.push(taken);
+                    }
+                    let fall = key(cur);
+                    if !self.seen.insert(fall) {
+                        self.current = None;
+                    }
+                }
+                Err(stop) => {
+                    if let Some(f) = fault(stop) {
+                        return Err(f);
+                    }
+                    self.current = None;
+                }
+            }
+        }
+    }
+
+    /// The datum, the parameters and the axes' positions of the path being walked.
+    pub fn state(&mut self) -> (&mut Datum, &QParams, &mut hal::AxisPositions) {
+        let cur = self
+            .current
+            .as_mut()
+            .expect("state() is asked after next_block() returned a block");
+        (&mut cur.datum, &cur.params, &mut cur.here)
+    }
+
+    /// This path goes no further (`run` stops there).
+    pub fn end_path(&mut self) {
+        self.current = None;
+    }
+}

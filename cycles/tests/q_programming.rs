@@ -1,0 +1,472 @@
+//! Q-parameter programming as the TNC has it (issue 27): arithmetic and every
+//! function, strings, each jump kind, subprograms and repeats, FN 14, QR kept across
+//! runs, errors at their line, and what `check` evaluates before anything moves.
+
+mod common;
+
+use common::{MockMachine, Surface};
+use nalgebra::Vector3;
+use probebridge_cycles::q_params::QValue;
+use probebridge_cycles::runner::{preflight_program, PreflightKind};
+use probebridge_cycles::{CyclesConfig, Program, ProgramReport};
+use std::path::Path;
+
+/// The mock machine with its preset table (and so its QR file) in `dir`.
+fn cfg_in(dir: &Path) -> CyclesConfig {
+    let mut cfg = common::config();
+    cfg.presets.path = dir.join("mock.presets.toml");
+    cfg
+}
+
+fn program(text: &str, cfg: &CyclesConfig) -> Program {
+    Program::parse(text, cfg).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn wrap(body: &str) -> String {
+    format!("0 BEGIN PGM T MM\n{body}\n99999 END PGM T MM\n")
+}
+
+/// Runs `body` (between BEGIN and END PGM) on a mock over a plane at Z=0.
+fn run_in(dir: &Path, body: &str) -> (ProgramReport, MockMachine) {
+    let cfg = cfg_in(dir);
+    let p = program(&wrap(body), &cfg);
+    let mut m = MockMachine::new(vec![Surface::Plane {
+        point: Vector3::zeros(),
+        normal: Vector3::z(),
+    }]);
+    let (report, _) = common::run_on(&cfg, &p, &mut m, dir, true);
+    (report, m)
+}
+
+fn run(body: &str) -> ProgramReport {
+    run_in(&common::temp_dir("q"), body).0
+}
+
+fn num(r: &ProgramReport, name: &str) -> f64 {
+    match r.parameters.get(name) {
+        Some(QValue::Number(v)) => *v,
+        other => panic!(
+            "{name}: {other:?} in {:?} (stopped: {:?})",
+            r.parameters, r.stopped
+        ),
+    }
+}
+
+fn text(r: &ProgramReport, name: &str) -> String {
+    match r.parameters.get(name) {
+        Some(QValue::Text(t)) => t.clone(),
+        other => panic!("{name}: {other:?} (stopped: {:?})", r.stopped),
+    }
+}
+
+fn close(a: f64, b: f64) -> bool {
+    (a - b).abs() < 1e-9
+}
+
+#[test]
+fn arithmetic_fn_0_to_5_and_formulas() {
+    let r = run("1 FN 0: Q1 = +5
+2 FN 1: Q2 = +Q1 + +3
+3 FN 2: Q3 = +Q1 - +7
+4 FN 3: Q4 = +Q1 * -2
+5 FN 4: Q5 = +Q1 / +4
+6 FN 5: Q6 = SQRT +Q2
+7 Q7 = ( Q1 + Q2 ) / 2
+8 Q8 = 5 * 3 + 2 * 10
+9 QL0 = 2 ^ 3 ^ 2
+10 Q9 = -Q1 + +2 * ( 1 - 3 )");
+    assert!(r.completed(), "{:?}", r.stopped);
+    for (n, v) in [
+        ("Q1", 5.0),
+        ("Q2", 8.0),
+        ("Q3", -2.0),
+        ("Q4", -10.0),
+        ("Q5", 1.25),
+        ("Q6", 8f64.sqrt()),
+        ("Q7", 6.5),
+        ("Q8", 35.0),
+        ("QL0", 64.0),
+        ("Q9", -9.0),
+    ] {
+        assert!(close(num(&r, n), v), "{n} = {} (expected {v})", num(&r, n));
+    }
+}
+
+#[test]
+fn every_function() {
+    let r = run("1 Q1 = SQ 3
+2 Q2 = SQRT 16
+3 Q3 = SIN 30
+4 Q4 = COS 60
+5 Q5 = TAN 45
+6 Q6 = ASIN 0.5
+7 Q7 = ACOS 0.5
+8 Q8 = ATAN 1
+9 Q9 = ABS -2.5
+10 Q10 = INT -2.7
+11 Q11 = FRAC 2.75
+12 Q12 = SGN -0.1
+13 Q13 = SGN 0
+14 Q14 = PI
+15 Q15 = SIN 30 ^ 2
+16 Q16 = SQ 10 - 3 ^ 3");
+    assert!(r.completed(), "{:?}", r.stopped);
+    for (n, v) in [
+        ("Q1", 9.0),
+        ("Q2", 4.0),
+        ("Q3", 0.5),
+        ("Q4", 0.5),
+        ("Q5", 1.0),
+        ("Q6", 30.0),
+        ("Q7", 60.0),
+        ("Q8", 45.0),
+        ("Q9", 2.5),
+        ("Q10", -2.0),
+        ("Q11", 0.75),
+        ("Q12", -1.0),
+        ("Q13", 0.0),
+        ("Q14", std::f64::consts::PI),
+        ("Q15", 0.25),
+        ("Q16", 73.0),
+    ] {
+        assert!(close(num(&r, n), v), "{n} = {} (expected {v})", num(&r, n));
+    }
+}
+
+#[test]
+fn strings() {
+    let r = run("1 QS1 = \"X=\"
+2 Q1 = 12.34567
+3 QS2 = QS1 || TOCHAR ( DAT+Q1 DECIMALS2 ) || \" mm\"
+4 Q2 = STRLEN ( SRC_QS2 )
+5 QS3 = SUBSTR ( SRC_QS2 BEG2 LEN5 )
+6 Q3 = TONUMB ( SRC_QS3 ) * 2
+7 DECLARE STRING QS4 = \"a;b\"
+8 STRING FORMULA QS5 = QS4 || QS4");
+    assert!(r.completed(), "{:?}", r.stopped);
+    assert_eq!(text(&r, "QS2"), "X=12.35 mm");
+    assert_eq!(num(&r, "Q2"), 10.0);
+    assert_eq!(text(&r, "QS3"), "12.35");
+    assert!(close(num(&r, "Q3"), 24.7));
+    assert_eq!(text(&r, "QS5"), "a;ba;b");
+}
+
+#[test]
+fn each_jump_kind() {
+    // FN 9..12 each taken once and not taken once; a taken jump skips Q9x = 1.
+    let r = run("1 Q1 = 2
+2 FN 9: IF +Q1 EQU +2 GOTO LBL 1
+3 Q91 = 1
+4 LBL 1
+5 FN 9: IF +Q1 EQU +3 GOTO LBL 2
+6 Q92 = 1
+7 LBL 2
+8 FN 10: IF +Q1 NE +3 GOTO LBL \"NE\"
+9 Q101 = 1
+10 LBL \"NE\"
+11 FN 10: IF +Q1 NE +2 GOTO LBL 3
+12 Q102 = 1
+13 LBL 3
+14 FN 11: IF +Q1 GT +1 GOTO LBL 4
+15 Q111 = 1
+16 LBL 4
+17 FN 11: IF +Q1 GT +2 GOTO LBL 5
+18 Q112 = 1
+19 LBL 5
+20 FN 12: IF +Q1 LT +3 GOTO LBL 6
+21 Q121 = 1
+22 LBL 6
+23 FN 12: IF +Q1 LT +Q1 GOTO LBL 7
+24 Q122 = 1
+25 LBL 7");
+    assert!(r.completed(), "{:?}", r.stopped);
+    for taken in ["Q91", "Q101", "Q111", "Q121"] {
+        assert!(
+            !r.parameters.contains_key(taken),
+            "{taken} set: the jump was not taken"
+        );
+    }
+    for not_taken in ["Q92", "Q102", "Q112", "Q122"] {
+        assert_eq!(num(&r, not_taken), 1.0, "{not_taken}");
+    }
+}
+
+#[test]
+fn loop_with_a_counter_moves_each_time() {
+    let dir = common::temp_dir("q-loop");
+    let (r, m) = run_in(
+        &dir,
+        "1 Q1 = 0
+2 LBL \"STEP\"
+3 Q1 = Q1 + 1
+4 L X+Q1 Y-Q1 Z+50 R0 F500
+5 FN 12: IF +Q1 LT +4 GOTO LBL \"STEP\"",
+    );
+    assert!(r.completed(), "{:?}", r.stopped);
+    assert_eq!(num(&r, "Q1"), 4.0);
+    let xs: Vec<[f64; 3]> = m.moves.iter().map(|(p, _)| *p).collect();
+    assert_eq!(xs.len(), 4, "{xs:?}");
+    assert_eq!(xs[3], [4.0, -4.0, 50.0]);
+    assert!(m.moves.iter().all(|(_, f)| *f == 500.0));
+}
+
+#[test]
+fn subprograms_and_section_repeats() {
+    let r = run("1 Q1 = 0
+2 Q2 = 0
+3 CALL LBL 10 REP 2
+4 CALL LBL \"ADD\"
+5 LBL 1
+6 Q2 = Q2 + 1
+7 CALL LBL 1 REP 3
+8 M30
+9 LBL 10
+10 Q1 = Q1 + 1
+11 LBL 0
+12 LBL \"ADD\"
+13 Q1 = Q1 + 100
+14 LBL 0");
+    assert!(r.completed(), "{:?}", r.stopped);
+    // LBL 10 called 1 + 2 times, ADD once; the section 5..7 runs 1 + 3 times; M30
+    // ends the program before the subprograms.
+    assert_eq!(num(&r, "Q1"), 103.0);
+    assert_eq!(num(&r, "Q2"), 4.0);
+}
+
+#[test]
+fn fn14_stops_the_program_with_its_number_and_text() {
+    let dir = common::temp_dir("q-fn14");
+    let mut cfg = cfg_in(&dir);
+    cfg.parameters
+        .errors
+        .insert("1001".into(), "dispersion too large".into());
+    let p = program(&wrap("1 Q1 = 1\n2 FN 14: ERROR = 1001\n3 Q2 = 2"), &cfg);
+    let mut m = MockMachine::new(Vec::new());
+    let (r, _) = common::run_on(&cfg, &p, &mut m, &dir, true);
+    assert!(!r.completed());
+    let e = r.error.as_ref().expect("FN 14 reported");
+    assert_eq!((e.line, e.number), (3, 1001));
+    assert_eq!(e.text.as_deref(), Some("dispersion too large"));
+    assert!(
+        r.stopped
+            .as_deref()
+            .unwrap()
+            .contains("ERROR = 1001: dispersion too large"),
+        "{:?}",
+        r.stopped
+    );
+    assert!(!r.parameters.contains_key("Q2"));
+    assert!(r.to_json().contains("\"number\": 1001"));
+}
+
+#[test]
+fn qr_parameters_are_kept_across_two_runs() {
+    let dir = common::temp_dir("q-qr");
+    let body = "1 FN 9: IF +QR1 EQU +QR1 GOTO LBL 1
+2 LBL 1
+3 QR1 = QR1 + 1
+4 QR2 = 0.5";
+    // The first run: QR1 is undefined, an error at line 1 (check says so too).
+    let (r, _) = run_in(&dir, body);
+    assert!(
+        r.stopped.as_deref().unwrap().contains("QR1 is not defined"),
+        "{:?}",
+        r.stopped
+    );
+    let (r, _) = run_in(&dir, "1 QR1 = 10");
+    assert!(r.completed());
+    let (r, _) = run_in(&dir, body);
+    assert!(r.completed(), "{:?}", r.stopped);
+    assert_eq!(num(&r, "QR1"), 11.0);
+    let (r, _) = run_in(&dir, body);
+    assert_eq!(num(&r, "QR1"), 12.0);
+    let kept = std::fs::read_to_string(dir.join("mock.qr.toml")).unwrap();
+    assert!(
+        kept.contains("QR1 = 12.0") && kept.contains("QR2 = 0.5"),
+        "{kept}"
+    );
+    // Q and QL are not kept.
+    let (r, _) = run_in(&dir, "1 Q5 = 1\n2 QL5 = 1");
+    assert!(r.completed());
+    let (r, _) = run_in(&dir, "1 Q6 = Q5");
+    assert!(r.stopped.as_deref().unwrap().contains("Q5 is not defined"));
+}
+
+/// Each error stops the program at its line, before the move after it.
+#[test]
+fn errors_at_their_line() {
+    for (body, line, what) in [
+        ("1 Q1 = Q7 + 1\n2 L Z+10 R0 FMAX", 1, "Q7 is not defined"),
+        (
+            "1 Q1 = 0\n2 Q2 = 5 / Q1\n3 L Z+10 R0 FMAX",
+            2,
+            "division by zero",
+        ),
+        (
+            "1 Q1 = -4\n2 Q2 = SQRT Q1\n3 L Z+10 R0 FMAX",
+            2,
+            "square root of a negative",
+        ),
+        (
+            "1 QS1 = \"abc\"\n2 QS2 = SUBSTR ( SRC_QS1 BEG2 LEN5 )",
+            2,
+            "beyond QS1",
+        ),
+        (
+            "1 QS1 = \"1,5\"\n2 Q1 = TONUMB ( SRC_QS1 )",
+            2,
+            "not a number",
+        ),
+        ("1 Q1 = ASIN 2", 1, "within -1..+1"),
+        ("1 L Z+10 R0 FMAX\n2 L X+Q9 R0 FMAX", 2, "Q9 is not defined"),
+    ] {
+        let dir = common::temp_dir("q-err");
+        let cfg = cfg_in(&dir);
+        let p = program(&wrap(body), &cfg);
+        // check refuses it, at its line...
+        let e = preflight_program(&p, 0b111, &cfg, &dir.join("k.toml")).unwrap_err();
+        assert!(
+            e.to_string().starts_with(&format!("line {}: ", line + 1))
+                && e.to_string().contains(what),
+            "{body}: {e}"
+        );
+        assert!(matches!(e.kind(), PreflightKind::Program(_)), "{e:?}");
+        // ...and run moves nothing.
+        let (r, m) = run_in(&dir, body);
+        assert!(
+            r.stopped.as_deref().unwrap().contains(what),
+            "{:?}",
+            r.stopped
+        );
+        assert!(m.moves.is_empty(), "{body}: moved {:?}", m.moves);
+    }
+}
+
+#[test]
+fn a_loop_forever_is_stopped_after_the_configured_jumps() {
+    let dir = common::temp_dir("q-jumps");
+    let mut cfg = cfg_in(&dir);
+    cfg.parameters.max_jumps = 50;
+    let p = program(
+        &wrap("1 Q1 = 0\n2 LBL 1\n3 Q1 = Q1 + 1\n4 FN 9: IF +0 EQU +0 GOTO LBL 1"),
+        &cfg,
+    );
+    let e = preflight_program(&p, 0b111, &cfg, &dir.join("k.toml")).unwrap_err();
+    assert!(
+        e.to_string().starts_with("line 5: more than 50 jumps"),
+        "{e}"
+    );
+    // run refuses it the same way, before the machine moves.
+    let mut m = MockMachine::new(Vec::new());
+    let (r, _) = common::run_on(&cfg, &p, &mut m, &dir, true);
+    let stopped = r.stopped.as_deref().unwrap();
+    assert!(
+        stopped.contains("more than 50 jumps") && stopped.contains("nothing moved"),
+        "{stopped}"
+    );
+    assert!(m.moves.is_empty());
+}
+
+#[test]
+fn check_refuses_an_l_block_whose_q_value_is_outside_the_limits() {
+    let dir = common::temp_dir("q-limits");
+    let cfg = cfg_in(&dir);
+    let p = program(
+        &wrap("1 Q20 = 400\n2 Q20 = Q20 * 5\n3 L Z+Q20 R0 FMAX"),
+        &cfg,
+    );
+    let e = preflight_program(&p, 0b111, &cfg, &dir.join("k.toml")).unwrap_err();
+    assert!(
+        e.to_string().starts_with("line 4: ") && e.to_string().contains("software limits"),
+        "{e}"
+    );
+    // Within them, the same program is fine; -Q20 negates.
+    let p = program(&wrap("1 Q20 = 100\n2 L Z-Q20 X+Q20 R0 FQ20"), &cfg);
+    preflight_program(&p, 0b111, &cfg, &dir.join("k.toml")).unwrap();
+}
+
+#[test]
+fn parse_errors_name_their_line() {
+    let cfg = common::config();
+    for (body, line, what) in [
+        ("1 Q1 = ( 2 + 3", 2, "expected ')'"),
+        (
+            "1 FN 9: IF +Q1 EQU +2 GOTO LBL 7",
+            2,
+            "LBL 7 is not defined",
+        ),
+        ("1 LBL 3\n2 LBL 3", 3, "LBL 3 is defined twice"),
+        (
+            "1 FN 11: IF +Q1 LT +2 GOTO LBL 1\n2 LBL 1",
+            2,
+            "compares with GT",
+        ),
+        (
+            "1 FN 16: F-PRINT TNC:\\a.A/TNC:\\b.TXT",
+            2,
+            "F-PRINT does not run here",
+        ),
+        ("1 Q1 = QS1 + 1", 2, "QS1 is a string"),
+        ("1 Q2000 = 1", 2, "no such parameter"),
+        ("1 FN 1: Q1 = +2 * +3", 2, "FN 1: expected"),
+        ("1 CALL LBL 0", 2, "label 0"),
+        ("1 Q1 = FOO 3", 2, "FOO: unknown function"),
+    ] {
+        let e = Program::parse(&wrap(body), &cfg).unwrap_err();
+        let shown = e.to_string();
+        assert!(
+            shown.starts_with(&format!("line {line}: ")) && shown.contains(what),
+            "{body}: {shown}"
+        );
+    }
+}
+
+/// Q parameters as cycle parameter values: resolved when the block runs, validated as
+/// written numbers are (an out-of-range value stops at the cycle's line); a measured
+/// value as the nominal point of the next 444.
+#[test]
+fn q_parameters_as_cycle_parameter_values() {
+    let block = |z: &str| {
+        format!(
+            "2 TCH PROBE 444 PROBING 3D ~\n  Q263=+Q1 ~\n  Q264=-QL2 ~\n  Q294={z} ~\n  Q581=+0 ~\n  Q582=+0 ~\n  Q583=+1 ~\n  Q320=+1 ~\n  Q260=+Q3"
+        )
+    };
+    let body = format!(
+        "1 TOOL CALL \"TOUCH_PROBE\" Z\n3 Q1 = 10\n4 QL2 = 5\n5 Q3 = 100\n{}\n6 Q4 = Q153 + 1\n{}",
+        block("+0.25"),
+        block("+Q4")
+    );
+    let dir = common::temp_dir("q-cycle");
+    let (r, m) = run_in(&dir, &body);
+    assert!(r.completed(), "{:?}", r.stopped);
+    assert_eq!(r.cycles.len(), 2);
+    // The plane is at Z=0: the first point (nominal 0.25) deviates by -0.25...
+    assert!(
+        (r.cycles[0].q["Q164"] + 0.25).abs() < 1e-9,
+        "{:?}",
+        r.cycles[0].q
+    );
+    assert!(
+        (r.cycles[0].q["Q151"] - 10.0).abs() < 1e-9 && (r.cycles[0].q["Q152"] + 5.0).abs() < 1e-9
+    );
+    // ...the second's nominal is Q153 + 1 = 1, measured at run time.
+    assert!((num(&r, "Q4") - 1.0).abs() < 1e-9);
+    assert!(
+        (r.cycles[1].q["Q164"] + 1.0).abs() < 1e-9,
+        "{:?}",
+        r.cycles[1].q
+    );
+    assert!(!m.probes.is_empty());
+    // A value outside the parameter's range stops at the cycle's line, nothing probed.
+    let bad = format!(
+        "1 TOOL CALL \"TOUCH_PROBE\" Z\n3 Q1 = 1000000\n4 QL2 = 5\n5 Q3 = 100\n{}",
+        block("+0")
+    );
+    let (r, m) = run_in(&common::temp_dir("q-cycle-bad"), &bad);
+    let stopped = r.stopped.as_deref().unwrap();
+    assert!(
+        stopped.contains("line 6") && stopped.contains("Q263"),
+        "{stopped}"
+    );
+    assert!(m.probes.is_empty());
+}
