@@ -24,6 +24,8 @@
 #    again (the count of iceoryx2 files in /dev/shm before and after is printed).
 # 6. The main process SIGSTOPped (a wedged service, fed no watchdog): systemd's
 #    watchdog (WatchdogSec=) kills it and Restart= brings it back.
+#    A wedged PLC face (its thread blocked): the service ends itself, Restart= brings
+#    it back.
 # 7. `systemctl stop` during a 431: the run ends "aborted" (Aborted(Shutdown)), exit 0.
 # 8. `systemd-analyze security probebridge`, printed.
 set -uo pipefail
@@ -174,6 +176,35 @@ say "SIGSTOP to main pid $pid; WatchdogUSec=$(prop WatchdogUSec)"
 systemctl kill -s SIGSTOP --kill-whom=main probebridge
 check "watchdog-restarted" back_with_new_pid 180 "$pid"
 check "watchdog-in-journal" grep -q "Watchdog timeout" <<<"$(journalctl -u probebridge --no-pager)"
+
+# 6b. A wedged PLC face in a service that is otherwise alive (the face's thread blocked
+#     by the test-only fault switch, set through a runtime drop-in): the watchdog is no
+#     longer fed, the service ends itself ("the PLC face is dead", exit 1) and Restart=
+#     brings it back; with the drop-in gone, it serves a 431 again.
+dropin=/run/systemd/system/probebridge.service.d
+mkdir -p "$dropin"
+printf '[Service]\nEnvironment=PROBEBRIDGE_FAULT_PLC_FACE=stall\n' >"$dropin/wedge.conf"
+systemctl daemon-reload
+systemctl restart probebridge
+n0=$(prop NRestarts)
+face_died_and_restarted() {
+    local i
+    for ((i = 0; i < 240; i++)); do
+        if [ "$(prop NRestarts)" -gt "$n0" ] \
+            && journalctl -u probebridge --no-pager | grep -q "the PLC face is dead"; then
+            say "wedged face: restarted by systemd, NRestarts $n0 -> $(prop NRestarts)"
+            return 0
+        fi
+        sleep 0.5
+    done
+    journalctl -u probebridge --no-pager | tail -20
+    return 1
+}
+check "wedged-face-restarted" face_died_and_restarted
+rm -f "$dropin/wedge.conf"
+systemctl daemon-reload
+systemctl restart probebridge
+check "plc-runs-431-after-wedge" run431
 
 # 7. systemctl stop mid-measurement.
 check "plc-start-busy" plc start_busy 431
