@@ -439,7 +439,7 @@ fn a_plc_that_lost_power_gets_its_block_back_at_once() {
     let Some(py) = python() else { return };
     let usable = Command::new("unshare")
         .args([
-            "-rn", "ip", "link", "add", "a", "type", "veth", "peer", "name", "b",
+            "-rn", "ip", "link", "add", "name", "probe0", "type", "veth", "peer", "name", "probe1",
         ])
         .output()
         .is_ok_and(|o| o.status.success());
@@ -609,15 +609,20 @@ fn a_port_in_use_and_a_broken_history_are_found_before_the_machine_opens() {
         err.contains("plc.listen: cannot bind") && !err.contains("cannot open the machine"),
         "{err}"
     );
-    // The port free, a history that cannot open (its path is a folder).
+    // The port free, a history that cannot open (its path is a folder): it is tried,
+    // and said, before the machine. (A gateway whose history is down still starts: it
+    // refuses starts with reason 9 and opens the history again in the background; see
+    // history_faults.rs.)
     drop(taken);
     std::fs::create_dir_all(dir.join("history.sqlite")).unwrap();
     let text = text.replace(&plc, "listen = \"127.0.0.1:0\"\n");
     std::fs::write(&config, text).unwrap();
     let (status, err) = serve_fails(&config);
     assert!(!status.success());
+    let history = err.find("history.sqlite: unable to open");
+    let machine = err.find("cannot open the machine");
     assert!(
-        err.contains("history.sqlite") && !err.contains("cannot open the machine"),
+        matches!((history, machine), (Some(h), Some(m)) if h < m),
         "{err}"
     );
 }
