@@ -179,7 +179,7 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
             self.note(format!(
                 "Q431={}: {} X{:+.4} Y{:+.4} Z{:+.4}",
                 p.preset,
-                super::preset_words(p.mode.writes()),
+                super::report::preset_words(p.mode.writes()),
                 ball.x,
                 ball.y,
                 ball.z

@@ -61,6 +61,7 @@ use crate::results::CycleOutput;
 use evaluate::Evaluation;
 use hal::Machine;
 use measure::{arr, axis_map, Measure};
+use report::preset_words;
 use write_back::WriteBack;
 
 impl MeasuringCycle for KinematicsParams {
@@ -190,16 +191,6 @@ impl MeasuringCycle for KinematicsParams {
             kinematics: Some(Box::new(report)),
             logs: vec![log],
         })
-    }
-}
-
-/// What Q431 = 1..3 did with the preset: set (modes 1..3, once the cycle succeeded),
-/// or, in mode 0, only measured (mode 0 writes nothing).
-pub(crate) fn preset_words(mode_writes: bool) -> &'static str {
-    if mode_writes {
-        "preset set to the sphere centre"
-    } else {
-        "preset not set (mode 0); the sphere centre measured at"
     }
 }
 

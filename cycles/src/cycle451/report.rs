@@ -140,3 +140,13 @@ impl KinematicsReport {
         s
     }
 }
+
+/// What Q431 = 1..3 did with the preset: set (modes 1..3, once the cycle succeeded),
+/// or, in mode 0, only measured (mode 0 writes nothing).
+pub(crate) fn preset_words(mode_writes: bool) -> &'static str {
+    if mode_writes {
+        "preset set to the sphere centre"
+    } else {
+        "preset not set (mode 0); the sphere centre measured at"
+    }
+}
