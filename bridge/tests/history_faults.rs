@@ -18,6 +18,9 @@
 // `run_program` is for the CLI tests.
 #[allow(dead_code)]
 mod common;
+#[path = "common/pymodbus_venv.rs"]
+mod pymodbus_venv;
+use pymodbus_venv::python;
 #[path = "common/postgres_server.rs"]
 mod postgres_server;
 
@@ -39,29 +42,6 @@ const BIT_NOT_RECORDED: u64 = 1 << 6;
 
 fn in_ci() -> bool {
     std::env::var("CI").ok().as_deref() == Some("true")
-}
-
-fn python() -> Option<PathBuf> {
-    let p = std::env::var_os("PROBEBRIDGE_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("/opt/probebridge-venv/bin/python"));
-    let ok = Command::new(&p)
-        .args(["-c", "import pymodbus, sqlite3"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if ok {
-        return Some(p);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "{}: no pymodbus in CI; scripts/install-test-peers should have made the venv",
-        p.display()
-    );
-    eprintln!(
-        "SKIPPED: {} has no pymodbus (run scripts/install-test-peers)",
-        p.display()
-    );
-    None
 }
 
 /// `probebridge serve` on the tilted plane, program 431, history as `history` says.

@@ -15,6 +15,9 @@
     reason = "each test binary uses a part of the shared helpers"
 )]
 mod common;
+#[path = "common/pymodbus_venv.rs"]
+mod pymodbus_venv;
+use pymodbus_venv::python;
 
 use common::*;
 use std::io::{BufRead, BufReader, Read, Write};
@@ -22,29 +25,6 @@ use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
-
-fn python() -> Option<PathBuf> {
-    let p = std::env::var_os("PROBEBRIDGE_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("/opt/probebridge-venv/bin/python"));
-    let ok = Command::new(&p)
-        .args(["-c", "import pymodbus"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if ok {
-        return Some(p);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "{}: no pymodbus in CI; scripts/install-test-peers should have made the venv",
-        p.display()
-    );
-    eprintln!(
-        "SKIPPED: {} has no pymodbus (run scripts/install-test-peers)",
-        p.display()
-    );
-    None
-}
 
 /// Writes a gateway configuration in `dir` serving `scenario` with the programs
 /// `(number, shipped program)`; `plc` adds keys to `[plc]` (after `listen`).

@@ -11,35 +11,15 @@
 //! there, never in CI.
 
 mod common;
+#[path = "common/pymodbus_venv.rs"]
+mod pymodbus_venv;
+use pymodbus_venv::python;
 
 use common::*;
 use std::ffi::OsStr;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-
-fn python() -> Option<PathBuf> {
-    let p = std::env::var_os("PROBEBRIDGE_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("/opt/probebridge-venv/bin/python"));
-    let ok = Command::new(&p)
-        .args(["-c", "import pymodbus"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if ok {
-        return Some(p);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "{}: no pymodbus in CI; scripts/install-test-peers should have made the venv",
-        p.display()
-    );
-    eprintln!(
-        "SKIPPED: {} has no pymodbus (run scripts/install-test-peers)",
-        p.display()
-    );
-    None
-}
 
 /// A running `probebridge serve`; SIGTERM on drop.
 struct Serve {
