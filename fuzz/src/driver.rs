@@ -13,7 +13,7 @@
 
 use crate::mutate::{self, Context};
 use crate::rng::Rng;
-use crate::sig::Sig;
+use crate::sig::{fnv, Sig};
 use std::cell::{Cell, RefCell};
 use std::collections::{HashMap, HashSet};
 use std::ffi::CString;
@@ -257,13 +257,6 @@ fn watchdog(watch: Arc<Watch>, hang: Duration, target: &'static str, dir: Option
         eprintln!("RESULT target={target} hang=1 findings=1");
         std::process::exit(1);
     }
-}
-
-/// FNV-1a, for file names and signatures.
-pub fn fnv(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
-        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
-    })
 }
 
 /// Writes a finding's input (and a note beside it); the input's path.

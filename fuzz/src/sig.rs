@@ -6,8 +6,6 @@
 //! dropped, so "line 3: Q263 = 1e308 ..." and "line 9: Q263 = 7 ..." are one feature
 //! and the corpus grows by kinds of errors, not by values.
 
-use crate::driver::fnv;
-
 /// The features of one run.
 #[derive(Clone, Debug, Default)]
 pub struct Sig {
@@ -90,6 +88,13 @@ impl Sig {
 fn is_snippet(line: &str) -> bool {
     let t = line.trim_start_matches(|c: char| c.is_ascii_digit() || c == ' ');
     t.starts_with('|')
+}
+
+/// FNV-1a, for file names and signatures.
+pub fn fnv(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    })
 }
 
 #[cfg(test)]
