@@ -4,6 +4,7 @@
 //! never 40001-style). Validated before anything is opened.
 
 use super::mailbox::{Layout, COMMAND_LEN, SLOT_LEN, STATUS_LEN};
+use super::named_values::named_values;
 use super::word_order::WordOrder;
 use serde::Deserialize;
 
@@ -11,26 +12,6 @@ use serde::Deserialize;
 pub const MODBUS_MAX_READ: u16 = 125;
 /// ... and 123 in one write (FC16).
 pub const MODBUS_MAX_WRITE: u16 = 123;
-
-/// Implements `Deserialize` for a value chosen by name, with an error that names the
-/// key (serde's internally tagged `[bus]` would otherwise lose it).
-macro_rules! named_values {
-    ($ty:ty, $key:literal, { $($name:literal => $value:expr),* $(,)? }) => {
-        impl<'de> serde::Deserialize<'de> for $ty {
-            fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-                let s = <std::borrow::Cow<'de, str> as serde::Deserialize>::deserialize(d)?;
-                match s.as_ref() {
-                    $($name => Ok($value),)*
-                    other => Err(serde::de::Error::custom(format!(
-                        concat!($key, ": {:?} is not one of ", $(stringify!($name), " "),*),
-                        other
-                    ))),
-                }
-            }
-        }
-    };
-}
-pub(crate) use named_values;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Transport {

@@ -15,6 +15,7 @@ pub mod exception;
 pub mod latch_ring;
 pub mod machine;
 pub mod mailbox;
+mod named_values;
 pub mod word_order;
 
 pub use config::{CaptureKind, ModbusBusConfig, Transport};

@@ -64,7 +64,7 @@ impl WordOrder {
     }
 }
 
-crate::modbus::config::named_values!(WordOrder, "word_order", {
+crate::modbus::named_values::named_values!(WordOrder, "word_order", {
     "ABCD" => WordOrder::ABCD,
     "CDAB" => WordOrder::CDAB,
     "BADC" => WordOrder::BADC,
