@@ -69,7 +69,7 @@ impl CyclesConfig {
         };
         // The motion guard's range: a feed outside it would be refused mid-program.
         let fastest = machine.axes.iter().map(|a| a.max_feed).fold(0.0, f64::max);
-        let feeds = hal::motion_guard::MIN_FEED..=fastest;
+        let feeds = hal::config::bounds::MIN_FEED..=fastest;
         for (i, p) in s.probes.iter().enumerate() {
             let key = |f: &str| format!("probe[{i}] ({}).{f}", p.name);
             if let Some((f, why)) = p.invalid_field() {

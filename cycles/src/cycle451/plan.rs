@@ -140,7 +140,7 @@ pub fn plan(
     // The motion guard refuses a feed below its minimum (the move would look like a
     // hang) or above the fastest axis: refused here, before the first move.
     let fastest = cfg.axes.iter().map(|a| a.max_feed).fold(0.0, f64::max);
-    let feed_range = hal::motion_guard::MIN_FEED..=fastest;
+    let feed_range = hal::config::bounds::MIN_FEED..=fastest;
     for (what, feed) in [
         (
             "the linear pre-positioning feed min(Q253, FMAX)",
@@ -153,7 +153,7 @@ pub fn plan(
                 PlanErrorKind::Feed,
                 format!(
                     "Q253: {what} {feed} must be between {} and the machine's fastest max_feed {fastest} (mm/min, deg/min); nothing moved",
-                    hal::motion_guard::MIN_FEED
+                    hal::config::bounds::MIN_FEED
                 ),
             ));
         }
