@@ -1,7 +1,8 @@
-//! The PLC as a [`Machine`]: each call writes one command into the mailbox and polls
+//! The PLC as a [`Machine`](crate::Machine): each call writes one command into the mailbox and polls
 //! the status block until the PLC reports it done; a probing move's contact comes out
 //! of the latch ring (see [`super::latch_ring`]) and is published as a
-//! [`ContactSample`] through the same [`SampleSink`] the CANopen backend uses.
+//! [`ContactSample`](crate::ContactSample) through the same [`SampleSink`] the CANopen
+//! backend uses.
 //!
 //! The PLC owns motion and stops on the latch in its own real-time task; nothing
 //! here is on the trigger path. Reads are idempotent and a command is identified by
@@ -11,20 +12,21 @@
 use super::client::{Answer, ClientStats, ModbusClient};
 use super::config::{CaptureKind, ModbusBusConfig};
 use super::exception::{describe, exception_kind};
-use super::latch_ring::{LatchTracker, RingEvent};
+use super::latch_ring::LatchTracker;
 use super::mailbox::{
-    bits, CommandBlock, CommandCode, LatchSlot, Layout, ResultCode, Scale, StatusBlock, STATUS_LEN,
+    CommandBlock, CommandCode, LatchSlot, Layout, ResultCode, Scale, StatusBlock, STATUS_LEN,
 };
 use crate::abort::{aborted_error, AbortFlag};
-use crate::axis::{Axis, AxisPositions, MAX_AXES};
+use crate::axis::{AxisPositions, MAX_AXES};
 use crate::clock::monotonic_ns;
 use crate::config::MachineConfig;
-use crate::contact_sample::{ContactSample, SampleSink, FLAG_HW_LATCH};
-use crate::machine::{Contact, ErrorKind, Machine, MachineError, ProbeMove};
-use crate::motion_guard::{
-    deflected_before_move, deflected_before_probing, may_start_deflected, MotionGuard,
-};
+use crate::contact_sample::SampleSink;
+use crate::machine::{ErrorKind, MachineError};
+use crate::motion_guard::MotionGuard;
 use std::time::{Duration, Instant};
+
+mod commands;
+mod latch;
 
 /// Attempts of an idempotent request that timed out or lost its connection.
 const ATTEMPTS: u32 = 3;
@@ -239,95 +241,6 @@ impl ModbusMachine {
         }
     }
 
-    fn acknowledge(&mut self, n: u16) -> Result<(), MachineError> {
-        self.heartbeat = self.heartbeat.wrapping_add(1);
-        let mut attempt = 1;
-        loop {
-            match self
-                .client
-                .write(self.layout.latch_ack_address(), &[n, self.heartbeat])
-            {
-                Ok(Ok(())) => {
-                    self.tracker.acknowledged(n);
-                    return Ok(());
-                }
-                Ok(Err(e)) => return Err(exception_error("acknowledging a latch", e)),
-                Err(e)
-                    if attempt < ATTEMPTS
-                        && matches!(e.kind, ErrorKind::Timeout | ErrorKind::Bus) =>
-                {
-                    attempt += 1;
-                }
-                Err(e) => return Err(e),
-            }
-        }
-    }
-
-    /// Reads the ring and takes every latch past the acknowledge: the first of
-    /// command `sequence` is returned; the others are acknowledged unused. An overflow
-    /// fails with the number of contacts lost.
-    fn take_latches(&mut self, sequence: u16) -> Result<Option<LatchSlot>, MachineError> {
-        let mut found = None;
-        for _ in 0..ATTEMPTS {
-            let count = self.status.latch_count;
-            if self.tracker.pending(count) == 0 {
-                break;
-            }
-            let ring = self
-                .read(self.layout.ring_base, self.layout.ring_len())?
-                .map_err(|e| exception_error("reading the latch ring", e))?;
-            let mut last = None;
-            let mut torn = false;
-            let mut probe = self.tracker;
-            loop {
-                match probe.examine(count, &ring, sequence) {
-                    RingEvent::Empty => break,
-                    RingEvent::Torn { .. } => {
-                        torn = true;
-                        break;
-                    }
-                    RingEvent::Contact { n, slot } => {
-                        if found.is_none() {
-                            found = Some(slot);
-                        } else {
-                            self.latches.discarded += 1;
-                        }
-                        probe.acknowledged(n);
-                        last = Some(n);
-                    }
-                    RingEvent::Foreign { n, .. } => {
-                        self.latches.discarded += 1;
-                        probe.acknowledged(n);
-                        last = Some(n);
-                    }
-                    RingEvent::Overflow { lost, count } => {
-                        self.latches.lost += lost as u64;
-                        self.acknowledge(count)?;
-                        return Err(MachineError::new(
-                            ErrorKind::Other,
-                            format!(
-                                "{lost} contact(s) lost: the PLC latched more than the ring's {} slots before they were read; \
-                                 nothing is guessed, repeat the measurement",
-                                self.layout.ring_slots
-                            ),
-                        ));
-                    }
-                }
-            }
-            if let Some(n) = last {
-                self.acknowledge(n)?;
-            }
-            if !torn {
-                break;
-            }
-            self.read_status()?;
-        }
-        if found.is_some() {
-            self.latches.contacts += 1;
-        }
-        Ok(found)
-    }
-
     /// Writes a command and polls until the PLC reports it done. While probing, the
     /// ring is read as soon as the PLC counts a latch.
     fn run(
@@ -489,184 +402,5 @@ impl ModbusMachine {
                 format!("{what}: unexpected result code {}", s.result),
             ),
         }
-    }
-
-    /// The contact of `slot`, on the bridge's clock, corrected for the capture kind;
-    /// published to the sink.
-    fn contact(&mut self, slot: &LatchSlot, dir: [f64; 3], feed: f64) -> Contact {
-        let mask = slot.axis_mask as u8 & self.config.axis_mask();
-        let mut positions = self.scale.positions(&slot.positions);
-        // PLC time runs on its own clock: the latch was (status time - latch time) before
-        // the status was read, which is mapped onto our clock at the middle of that read.
-        let age_us = self.status.plc_time_us.wrapping_sub(slot.latch_time_us) as u64;
-        let mut trigger_ns = self.status_ns.saturating_sub(age_us * 1000);
-        let v = feed / 60.0;
-        let cycle_s = self.bus.plc_cycle_us as f64 * 1e-6;
-        let kind = self.bus.capture;
-        let (flags, uncertainty_mm) = match kind {
-            CaptureKind::HwLatch => (FLAG_HW_LATCH, 0.0),
-            CaptureKind::PlcCycle => {
-                // Sampled at the end of the cycle that saw the input: on average half a
-                // cycle of travel past the edge along the probing direction.
-                for (i, d) in dir.iter().enumerate() {
-                    positions[i] -= d * v * cycle_s / 2.0;
-                }
-                trigger_ns = trigger_ns.saturating_sub((cycle_s / 2.0 * 1e9) as u64);
-                (0, v * cycle_s / 2.0)
-            }
-            CaptureKind::Poll => (0, v * self.bus.poll_ms as f64 * 1e-3),
-        };
-        self.last_capture = Some(CaptureInfo {
-            kind,
-            uncertainty_mm,
-        });
-        for (i, p) in positions.iter_mut().enumerate() {
-            if mask & (1 << i) == 0 {
-                *p = 0.0;
-            }
-        }
-        self.samples += 1;
-        let sample = ContactSample {
-            sequence: self.samples,
-            run_id: self.run_id,
-            trigger_ns,
-            receive_ns: monotonic_ns(),
-            positions,
-            direction: dir,
-            feed,
-            axis_mask: mask as u32,
-            flags,
-        };
-        // A lost IPC sample must not fail the measurement: the contact is returned.
-        let _ = self.sink.publish(&sample);
-        Contact {
-            positions: sample.axis_positions(),
-            trigger_ns,
-            sequence: self.samples,
-            direction: dir,
-        }
-    }
-}
-
-impl Machine for ModbusMachine {
-    type Error = MachineError;
-
-    fn axes(&self) -> u8 {
-        self.config.axis_mask()
-    }
-
-    fn positions(&mut self) -> Result<AxisPositions, MachineError> {
-        let s = self.read_status()?;
-        Ok(AxisPositions::from_raw(
-            self.scale.positions(&s.actual),
-            self.config.axis_mask(),
-        ))
-    }
-
-    fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), MachineError> {
-        // From where the last status read saw the axes (every command ends with one):
-        // the same checks as every backend, the move's duration included.
-        let here = AxisPositions::from_raw(
-            self.scale.positions(&self.status.actual),
-            self.config.axis_mask(),
-        );
-        self.guard.check_move_from(&here, target, feed)?;
-        let mut linear = [0.0; 3];
-        let mut rotary = false;
-        for (axis, v) in target.iter() {
-            let d = v - here.get(axis).unwrap_or(v);
-            match axis.index() {
-                i @ 0..=2 => linear[i] = d,
-                _ => rotary |= d != 0.0,
-            }
-        }
-        // A stylus already in contact from this bridge's last contact or collision
-        // gives no rising edge: the PLC would not see a collision, only the broken
-        // stylus. (A contact from before this bridge started, whose direction is
-        // unknown, is left to the PLC.)
-        if self.status.has(bits::DEFLECTED)
-            && self.contact_along.is_some()
-            && !may_start_deflected(self.contact_along, linear, rotary)
-        {
-            return Err(MachineError::new(
-                ErrorKind::AlreadyDeflected,
-                deflected_before_move(here.xyz()),
-            ));
-        }
-        let (s, _) = self.run(CommandCode::Move, target, feed)?;
-        match ResultCode::from_u16(s.result) {
-            Some(ResultCode::Ok) => {
-                if !s.has(bits::DEFLECTED) {
-                    self.contact_along = None;
-                }
-                Ok(())
-            }
-            Some(ResultCode::Collision) => {
-                self.contact_along = Some(linear);
-                Err(self.result_error(&s, "move", 0.0))
-            }
-            _ => Err(self.result_error(&s, "move", 0.0)),
-        }
-    }
-
-    fn probe(&mut self, mv: &ProbeMove) -> Result<Contact, MachineError> {
-        if self.bus.capture == CaptureKind::Poll && !self.bus.allow_poll {
-            return Err(MachineError::new(
-                ErrorKind::InvalidRequest,
-                format!(
-                    "{}: bus.capture = \"poll\" is for set-up only: polled positions are not a latch; \
-                     set bus.allow_poll = true to measure with it anyway; nothing moved",
-                    self.config.path.display()
-                ),
-            ));
-        }
-        let here = self.positions()?;
-        let dir = self.guard.check_probe(&here, mv)?.direction;
-        let mut end = here;
-        for (i, a) in Axis::LINEAR.iter().enumerate() {
-            end.set(*a, here.get(*a).unwrap_or(0.0) + dir[i] * mv.max_distance);
-        }
-        // Latches left from before (a stray edge) are acknowledged first, so the PLC
-        // re-arms; a deflected probe refuses before anything is written.
-        if self.tracker.pending(self.status.latch_count) != 0 {
-            self.take_latches(0)?;
-        }
-        if self.status.has(bits::DEFLECTED) {
-            return Err(MachineError::new(
-                ErrorKind::AlreadyDeflected,
-                deflected_before_probing(here.xyz()),
-            ));
-        }
-        self.contact_along = Some(dir);
-        let (s, latch) = self.run(CommandCode::Probe, &end, mv.feed)?;
-        match (ResultCode::from_u16(s.result), latch) {
-            (Some(ResultCode::Contact), None) => {
-                // Counted after the status was read: one more look at the ring.
-                let s = self.read_status()?;
-                match self.take_latches(s.acked)? {
-                    Some(slot) => Ok(self.contact(&slot, dir, mv.feed)),
-                    None => Err(self.result_error(&s, "probing move", mv.max_distance)),
-                }
-            }
-            (Some(ResultCode::Contact), Some(slot)) => Ok(self.contact(&slot, dir, mv.feed)),
-            _ => Err(self.result_error(&s, "probing move", mv.max_distance)),
-        }
-    }
-
-    fn set_run(&mut self, run_id: u64) {
-        self.run_id = run_id;
-    }
-
-    /// One status read: the connection (after the client's retries and reconnects),
-    /// and the PLC's fault bit.
-    fn health(&mut self) -> Result<(), MachineError> {
-        let s = self.read_status()?;
-        if s.has(bits::FAULT) {
-            return Err(MachineError::new(
-                ErrorKind::DriveFault,
-                "the PLC reports a fault (acknowledge it at the PLC)",
-            ));
-        }
-        Ok(())
     }
 }
