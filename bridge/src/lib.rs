@@ -1,6 +1,8 @@
 //! probebridge: the gateway between HEIDENHAIN-style touch-probe measuring cycles and
 //! fieldbus drives. This library holds what the `probebridge` binary is made of, so the
 //! integration tests can drive the same code.
+//!
+//! See `ARCHITECTURE.md#bridge` in the repository root.
 
 /// A line on stdout that never panics: a closed pipe (`| head`) or a full device ends
 /// the output, not the command (the measurement goes on and its files are written).
@@ -37,7 +39,6 @@ pub mod estimator;
 pub mod history;
 pub mod ipc;
 pub mod machine_state;
-pub mod modbus_session;
 pub mod output;
 pub mod serve;
 pub mod session;

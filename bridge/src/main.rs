@@ -2,7 +2,7 @@
 
 use clap::{Args, Parser, Subcommand};
 use probebridge::commands::{self, parse_vec3};
-use probebridge::session::MachineOptions;
+use probebridge::session::options::MachineOptions;
 use probebridge::tell;
 use std::path::PathBuf;
 use std::process::ExitCode;

@@ -5,7 +5,8 @@
 //! and no bus is opened.
 
 use crate::machine_state::machine_files;
-use crate::session::{cycles_config_with_presets, resolve_machine, MachineOptions};
+use crate::session::options::MachineOptions;
+use crate::session::{cycles_config_with_presets, resolve_machine};
 use cycles::parser::parse_program;
 use cycles::runner::{assumed_start, check_complete, preflight_program_from};
 use cycles::CyclesConfig;

@@ -9,7 +9,8 @@
 //! the protocol is.
 
 use crate::ipc::{EstimatorChild, IpcEstimator};
-use crate::session::{cycles_config, MachineOptions, Session};
+use crate::session::options::MachineOptions;
+use crate::session::{cycles_config, Session};
 use cycles::kinematics_file::ActiveKinematics;
 use cycles::program::Program;
 use cycles::progress::ProgressEvent;

@@ -1,7 +1,8 @@
 //! `probebridge probe`: one probing move, reported with the latched positions of all
 //! axes.
 
-use crate::session::{cycles_config, resolve_machine, MachineOptions, Session};
+use crate::session::options::MachineOptions;
+use crate::session::{cycles_config, resolve_machine, Session};
 use hal::{AxisPositions, Machine, ProbeMove};
 use std::path::PathBuf;
 

@@ -6,7 +6,8 @@
 use crate::ipc::{EstimatorChild, EstimatorClient, IpcEstimator};
 use crate::machine_state::machine_files;
 use crate::output::write_atomic;
-use crate::session::{cycles_config_with_presets, resolve_machine, MachineOptions, Session};
+use crate::session::options::MachineOptions;
+use crate::session::{cycles_config_with_presets, resolve_machine, Session};
 use cycles::program::{Program, ProgramError};
 use cycles::progress::ProgressEvent;
 use cycles::runner::{check_complete, preflight_program, run_program, RunOptions};

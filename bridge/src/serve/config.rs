@@ -547,8 +547,8 @@ impl GatewayConfig {
     }
 
     /// How `Session::open` reaches the machine.
-    pub fn machine_options(&self) -> crate::session::MachineOptions {
-        crate::session::MachineOptions {
+    pub fn machine_options(&self) -> crate::session::options::MachineOptions {
+        crate::session::options::MachineOptions {
             scenario: self.machine.scenario.clone(),
             machine: self.machine.config.clone(),
             can: self.machine.can.clone(),

@@ -4,7 +4,8 @@
 //! refused with the reason "machine not ok".
 
 use super::gateway::{lock, Shared};
-use crate::session::{MachineOptions, Session};
+use crate::session::options::MachineOptions;
+use crate::session::Session;
 use std::time::{Duration, Instant};
 
 /// The wait before the first reopen attempt; doubled after every failed one.

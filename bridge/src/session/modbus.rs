@@ -2,7 +2,7 @@
 //! on loopback (port 0), a PLC (or `probebridge sim --modbus`) at `--modbus ADDR`, or
 //! the PLC a machine configuration with `[bus] kind = "modbus"` names.
 
-use crate::session::{MachineOptions, SessionError};
+use super::options::{MachineOptions, SessionError};
 use hal::config::{BusConfig, MachineConfig};
 use hal::modbus::{ModbusBusConfig, ModbusMachine, ModbusOptions, Transport};
 use hal::{MachineError, SampleSink};

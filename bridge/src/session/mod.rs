@@ -1,8 +1,9 @@
 //! Opening "the machine" for a command: the built-in simulator on the in-process bus,
-//! or real drives (or `probebridge sim` in another process) on a SocketCAN interface.
+//! or real drives (or `probebridge sim` in another process) on a SocketCAN interface;
+//! or, over Modbus, a PLC that moves the axes ([`modbus`]).
 
 use crate::configs;
-use crate::ipc::{ForwardingSink, ServiceLock, ServiceLockError};
+use crate::ipc::{ForwardingSink, ServiceLock};
 use cycles::CyclesConfig;
 use hal::can::inproc::{InprocBus, WireClock};
 use hal::can::record::RecordHealth;
@@ -17,32 +18,10 @@ use sim::scenario::Scenario;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-/// How to reach the machine.
-#[derive(Clone, Debug, Default)]
-pub struct MachineOptions {
-    /// Simulation scenario (default: the demo scenario). With `can`, it only names the
-    /// machine configuration and the probe table radius.
-    pub scenario: Option<PathBuf>,
-    /// Machine configuration (TOML) for real drives on `can`; without it the
-    /// scenario's machine is used.
-    pub machine: Option<PathBuf>,
-    /// SocketCAN interface; `None` = built-in simulator on the in-process bus.
-    pub can: Option<String>,
-    /// Modbus: `Some("")` = the built-in simulated PLC on loopback, `Some(ADDR)` = a
-    /// PLC at host:port; `None` = Modbus only when the machine's bus kind says so.
-    pub modbus: Option<String>,
-    /// Pace the built-in simulator in real time instead of a virtual clock.
-    pub realtime: bool,
-    /// iceoryx2 service prefix for contact samples.
-    pub service: String,
-    /// Record the master's CAN traffic in candump's log format.
-    pub candump: Option<PathBuf>,
-    /// The operator's stop (the signal handler's flag): brakes a move under way.
-    pub abort: Option<hal::AbortFlag>,
-    /// Seeded faults injected between the CANopen master and the bus (drop,
-    /// duplicate, delay, reorder), to show how it copes.
-    pub bus_faults: Option<hal::can::fault_injection::BusFaults>,
-}
+pub mod modbus;
+pub mod options;
+
+use options::{MachineOptions, SessionError};
 
 /// Any backend, as the commands drive it.
 pub type DynMachine = Box<dyn Machine<Error = MachineError> + Send>;
@@ -65,19 +44,6 @@ pub struct Session {
     /// This session's claim on its iceoryx2 service prefix; declared last, so freed
     /// after the machine is closed.
     _service: ServiceLock,
-}
-
-#[derive(Debug, thiserror::Error)]
-pub enum SessionError {
-    #[error("{0}")]
-    Scenario(String),
-    #[error(transparent)]
-    Machine(#[from] MachineError),
-    #[error("iceoryx2: {0}")]
-    Ipc(String),
-    /// Another session holds the `--service` prefix.
-    #[error(transparent)]
-    ServiceInUse(#[from] ServiceLockError),
 }
 
 pub fn load_scenario(path: Option<&Path>) -> Result<Scenario, SessionError> {
@@ -161,9 +127,9 @@ impl Session {
         let sink =
             ForwardingSink::spawn(&opts.service).map_err(|e| SessionError::Ipc(e.to_string()))?;
         let run_id = hal::clock::monotonic_ns();
-        if crate::modbus_session::wanted(opts, &config) {
+        if modbus::wanted(opts, &config) {
             let (machine, plc, notes) =
-                crate::modbus_session::open(opts, &mut config, scenario.as_ref(), sink, run_id)?;
+                modbus::open(opts, &mut config, scenario.as_ref(), sink, run_id)?;
             return Ok(Self {
                 machine: Box::new(machine),
                 config,
