@@ -2,6 +2,8 @@
 //! tables and validation, the cycles run over [`hal::Machine`], geometry fits, results
 //! and measuring logs.
 //!
+//! See `ARCHITECTURE.md#cycles` in the repository root.
+//!
 //! - [`Program::parse`] / [`Program::load`] / [`parser::check_program`]: read and
 //!   validate a program against a machine's probe table and PREDEF values
 //!   ([`cycles_config::CyclesConfig`]: hal's [`hal::config::MachineConfig`] with the

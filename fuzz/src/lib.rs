@@ -2,6 +2,8 @@
 //! as a [`driver::Target`], and a driver that mutates a corpus seeded from the
 //! project's own files within a time or iteration budget (see the README's
 //! "Fuzzing" section and `probebridge-fuzz --help`).
+//!
+//! See `ARCHITECTURE.md#fuzz` in the repository root.
 
 pub mod corpus;
 pub mod driver;

@@ -1,6 +1,8 @@
 //! probebridge-hal: what the measuring cycles need from a machine, and the fieldbus
 //! side that provides it.
 //!
+//! See `ARCHITECTURE.md#hal` in the repository root.
+//!
 //! - [`machine`]: the [`Machine`] trait the cycles call (blocking axis moves and
 //!   probing moves that stop on the hardware latch), its error kinds.
 //! - [`contact_sample`]: the `#[repr(C)]` sample every latched contact becomes.

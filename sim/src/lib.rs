@@ -1,5 +1,7 @@
 //! probebridge-sim: the simulated machine.
 //!
+//! See `ARCHITECTURE.md#sim` in the repository root.
+//!
 //! - [`scenario`]: the TOML file that adds the truth (errors, probe, artefacts,
 //!   faults) to a machine configuration.
 //! - [`kinematics`]: the kinematic chain with the true ISO 230-7 errors (its module

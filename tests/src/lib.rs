@@ -1,5 +1,7 @@
 //! Software-in-the-loop test support: the `Machine` conformance suite (written once,
 //! run against every backend), scenario helpers and a synchronous loopback bus.
+//!
+//! See `ARCHITECTURE.md#tests` in the repository root.
 
 pub mod alloc_count;
 pub mod conformance;
