@@ -1,4 +1,4 @@
-//! The shipped examples as a user runs them from the README, each twice in a row, on
+//! The shipped examples as a user runs them from docs/cycles.md, each twice in a row, on
 //! one machine state (a temporary XDG state directory, as a fresh user's): every run
 //! succeeds with the same results, the machine's state (preset table, kinematics,
 //! saves, protocols) lands in the state directory, and `configs/` is left byte for
@@ -55,7 +55,7 @@ fn q_values(v: &serde_json::Value) -> Vec<BTreeMap<String, f64>> {
         .collect()
 }
 
-/// (program, scenario) as the README's table of examples lists them.
+/// (program, scenario) as the table of examples in docs/cycles.md lists them.
 const EXAMPLES: [(&str, &str); 9] = [
     ("431-plane.h", "tilted-plane.toml"),
     ("431-plane-y.h", "tilted-plane-y.toml"),

@@ -1,6 +1,6 @@
 //! "Nothing reported that was not kept": `probebridge serve` (simulator, real-time
 //! pace) with a PLC (`tests/gateway/history_plc.py`) while the history fails under it.
-//! Each test breaks the history the way a plant does and checks the README's promise:
+//! Each test breaks the history the way a plant does and checks docs/history.md's promise:
 //! a start whose `running` row cannot be written is refused (reason 9, nothing moves);
 //! a run that ends while the history fails is kept in the spool, the PLC sees "results
 //! not yet recorded" (bit 6), and the spool is replayed into the history once it works

@@ -1,5 +1,5 @@
 //! `probebridge serve` on the simulator with a pymodbus "PLC" (`tests/gateway/plc.py`,
-//! written from the README's register table): programs 431, 444 and 451 started by
+//! written from the register map in docs/gateway.md): programs 431, 444 and 451 started by
 //! number give the results of `probebridge run --json` to the registers' precision;
 //! refusal while busy, abort mid-cycle, acknowledge after an error, a second
 //! connection refused, PLC heartbeat loss, SIGTERM and SIGHUP mid-cycle, a second

@@ -253,7 +253,7 @@ fn parse_fn(number: &str, body: &str) -> Result<FlowBlock, String> {
                 _ => Err(format!("FN 14: ERROR = {v}: expected an error number 0..65535")),
             }
         }
-        16 => Err("FN 16: F-PRINT does not run here (probebridge writes its own protocols and --json; see the README, Q-parameter programming)".into()),
+        16 => Err("FN 16: F-PRINT does not run here (probebridge writes its own protocols and --json; see docs/q-parameters.md)".into()),
         _ => Err(format!(
             "FN {n}: not a function probebridge runs (it runs FN 0..5, FN 9..12 and FN 14, and formulas Qn = ...)"
         )),

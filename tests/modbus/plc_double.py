@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """An independent PLC double for probebridge's Modbus backend, written from the
-README's register table ("Modbus: a PLC owns the axes"), not from the Rust code.
+mailbox tables of docs/modbus.md ("The mailbox"), not from the Rust code.
 
 A pymodbus TCP server (127.0.0.1, port 0; the first stdout line is
 "modbus tcp 127.0.0.1:PORT") holding the mailbox at the default layout: command
@@ -27,7 +27,7 @@ COUNTS = 1_000_000.0  # counts per mm and per degree
 CYCLE_S = 0.001
 SPEEDUP = 50.0
 
-# result codes and status bits as the README's table gives them
+# result codes and status bits as the tables of docs/modbus.md give them
 OK, CONTACT, NOT_TRIGGERED, ALREADY_DEFLECTED, COLLISION = 0, 1, 2, 3, 4
 READY, BUSY, IN_POSITION, DEFLECTED, ARMED = 1, 2, 4, 8, 16
 

@@ -7,7 +7,7 @@
 #
 # 1. A local user (mallory) squats the shared /tmp first: she holds the lock file the
 #    gateway used to take there and owns /tmp/iceoryx2.
-# 2. The README's "Deploy on a gateway" block, extracted from README.md and run line
+# 2. The "Deploy on a gateway" block of docs/deploy.md, extracted from it and run line
 #    by line as written (the block is the test: the docs cannot drift). Two lines
 #    cannot run as written in a VM without a toolchain or a terminal: `cargo build` is
 #    a shim that checks its arguments and that the host built target/release/
@@ -15,7 +15,7 @@
 # 3. `systemctl enable --now` returned after READY=1 (Type=notify): the unit is
 #    active, its STATUS is the gateway's, the lock and the iceoryx2 root are in
 #    /run/probebridge, gateway.toml is 640 root:probebridge.
-# 4. gateway.toml edited as the README says ([machine]: the tilted-plane simulator in
+# 4. gateway.toml edited as docs/deploy.md says ([machine]: the tilted-plane simulator in
 #    real time, so a stop lands mid-measurement; [plc]: heartbeat off, so only the
 #    stop ends it), a 431 program added, the machine's SYNC and heartbeat timing
 #    relaxed as in the vcan step (emulated CPUs); the PLC client (bridge/tests/gateway/plc.py,
@@ -87,13 +87,13 @@ runuser -u mallory -- touch /tmp/probebridge-service-probebridge.lock
 runuser -u mallory -- flock /tmp/probebridge-service-probebridge.lock sleep 100000 &
 squatter=$!
 
-# 2. The README's block.
+# 2. The deploy block of docs/deploy.md.
 cd "$CLONE"
-block=$(awk '/^## Deploy on a gateway/ {s = 1; next}
-    s && /^## / {exit}
+block=$(awk '/^# Deploy on a gateway/ {s = 1; next}
+    s && /^#/ {exit}
     s && /^    / {print substr($0, 5); b = 1; next}
-    s && b {exit}' README.md)
-say "the README's deploy block:"
+    s && b {exit}' docs/deploy.md)
+say "the deploy block of docs/deploy.md:"
 printf '%s\n' "$block" | sed 's/^/    /'
 check "readme-block-found" grep -q 'systemctl enable --now probebridge' <<<"$block"
 deploy_ok=true

@@ -1,5 +1,5 @@
 //! mbpoll (a third-party Modbus master) reads the simulated PLC's status block at the
-//! README's addresses (zero-based, `-0`) and word order: 16-bit fields, and the actual
+//! addresses of docs/modbus.md (zero-based, `-0`) and word order: 16-bit fields, and the actual
 //! positions as 32-bit integers, CDAB (mbpoll's default word order) and ABCD (`-B`).
 //! Skipped with a line saying why where mbpoll is missing, never in CI
 //! (`scripts/install-test-peers` installs it).

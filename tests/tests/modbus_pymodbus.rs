@@ -1,5 +1,5 @@
 //! Our Modbus backend against an independent PLC double (`tests/modbus/plc_double.py`,
-//! pymodbus), written from the README's register table, not from our code: a probing
+//! pymodbus), written from docs/modbus.md's mailbox tables, not from our code: a probing
 //! move onto its plane, and cycle 431 on the tilted plane of
 //! `configs/scenarios/tilted-plane.toml`, with the double's word order CDAB.
 //!

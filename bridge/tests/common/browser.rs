@@ -76,7 +76,7 @@ impl Browser {
     }
 
     /// A PNG of the page at `size` ("W,H"); copied to the file the environment
-    /// variable `keep` names, if set (the README's screenshots).
+    /// variable `keep` names, if set (the screenshots in docs/).
     pub fn screenshot(&self, url: &str, shot: &Path, size: &str, keep: &str) {
         let out = self
             .command()

@@ -1,5 +1,5 @@
-"""A machine PLC playing against `probebridge serve`, written from the README's
-"Gateway service" register table. Usage: plc.py HOST PORT SCENARIO [ARGS]; prints one
+"""A machine PLC playing against `probebridge serve`, written from the
+register map of docs/gateway.md ("The PLC face: register map"). Usage: plc.py HOST PORT SCENARIO [ARGS]; prints one
 JSON object on stdout; exits 1 with the failed check on stderr."""
 
 import json
