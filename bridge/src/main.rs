@@ -222,7 +222,7 @@ enum Cmd {
 enum BenchCmd {
     /// Latency from the drives' latch to the contact sample in the estimator process,
     /// with the bare iceoryx2 hop between the same processes as the floor.
-    Trigger(commands::bench::BenchArgs),
+    Trigger(commands::bench::trigger::BenchArgs),
 }
 
 /// `check`'s arguments.
@@ -330,7 +330,7 @@ fn main() -> ExitCode {
             record_capacity,
         } => commands::estimator::run(&service, verbose, record_times, record_capacity).map(|()| 0),
         Cmd::Bench(BenchCmd::Trigger(args)) if args.modbus => {
-            commands::bench_modbus::run(&commands::bench_modbus::ModbusBenchArgs {
+            commands::bench::modbus::run(&commands::bench::modbus::ModbusBenchArgs {
                 triggers: args.triggers,
                 warmup: args.warmup,
                 plc_cycle_us: args.period_us.unwrap_or(250),
@@ -360,7 +360,7 @@ fn main() -> ExitCode {
         })
         .map(|()| 0),
         Cmd::Serve { config } => probebridge::serve::run(&config),
-        Cmd::Bench(BenchCmd::Trigger(args)) => commands::bench::run(&args).map(|()| 0),
+        Cmd::Bench(BenchCmd::Trigger(args)) => commands::bench::trigger::run(&args).map(|()| 0),
     };
     // After a stop signal the session is closed (axes braked, drives disabled) and
     // the results written: exit as the signal says.

@@ -1,7 +1,6 @@
 //! One module per `probebridge` subcommand.
 
 pub mod bench;
-pub mod bench_modbus;
 pub mod check;
 pub mod demo;
 pub mod estimator;

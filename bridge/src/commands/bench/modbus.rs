@@ -61,8 +61,7 @@ pub fn run(args: &ModbusBenchArgs) -> Result<(), String> {
     }
     let warmup = args.warmup.unwrap_or((args.triggers / 10).clamp(1, 100));
     let total = warmup + args.triggers;
-    let ws =
-        super::bench::Workspace::new(format!("probebridge-bench-modbus-{}", std::process::id()))?;
+    let ws = super::Workspace::new(format!("probebridge-bench-modbus-{}", std::process::id()))?;
 
     let mut scenario = Scenario::parse(
         bench::SCENARIO,
@@ -120,7 +119,7 @@ pub fn run(args: &ModbusBenchArgs) -> Result<(), String> {
     drop(machine);
     drop(plc);
 
-    let records = super::bench::collect_records(estimator, &ws)?;
+    let records = super::collect_records(estimator, &ws)?;
     let by_key: HashMap<(u64, u64), ReceiveTime> = records
         .iter()
         .map(|r| ((r.run_id, r.sequence), *r))

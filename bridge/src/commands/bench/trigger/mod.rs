@@ -1,0 +1,137 @@
+//! `probebridge bench trigger`: the latency of the hot trigger path across processes.
+//!
+//! ```text
+//!  simulated drives ──latch frame──> real-time loop ──ContactSample──> estimator process
+//!  (t0: CLOCK_MONOTONIC  (CAN: in-process   decodes, starts the stop,   (t1: CLOCK_MONOTONIC
+//!   when the drives       bus or --can)     publishes over iceoryx2)     when it has it)
+//!   latch)
+//! ```
+//!
+//! The bridge side is the real one: `CanMachine` with its real-time thread (SCHED_FIFO
+//! and locked memory where permitted), the sink the bridge uses (`ForwardingSink`, or
+//! with `--direct` a `ContactPublisher` called in the real-time thread), the estimator
+//! as a child process (`probebridge estimator --record-times FILE`) woken by the
+//! iceoryx2 event. The drives are the simulator in this process (the in-process bus, or
+//! a second socket on `--can IFACE`), which records t0 in a lock-free ring
+//! (`sim::machine::LatchLog`).
+//!
+//! In the same run, after every trigger, the floor: one `ContactSample` published by
+//! this process with `ContactPublisher` straight to the same estimator (same services,
+//! same payload, same event wake-up), t0 taken right before the send. After the
+//! triggers, the host's own floor: a bare eventfd wake-up of a forked process on the
+//! other CPU ([`crate::bench::wakeup`]).
+//!
+//! The in-process bus has the machine's bit rate (wire time, arbitration by id), and
+//! the bench refuses a SYNC period whose traffic would load it above the limit. So the
+//! report gives the path end to end (latch to estimator, wire time included) and the
+//! software path alone (from the last bit of the latch frame, when the real-time loop
+//! could first have it, to the estimator), each against both floors, and the stop
+//! latency in SYNC cycles.
+
+mod measure;
+mod report;
+mod rig;
+mod stats;
+
+use super::{collect_records, Workspace};
+use measure::{match_records, measure};
+use report::Report;
+use rig::{bench_machine, start_rig};
+use std::path::PathBuf;
+
+/// Run IDs that tell the estimator's records apart.
+pub(super) const TRIGGER_RUN: u64 = 1;
+pub(super) const FLOOR_RUN: u64 = 2;
+
+/// The options of `probebridge bench trigger`, parsed by clap straight into this.
+#[derive(clap::Args, Clone, Debug)]
+pub struct BenchArgs {
+    /// Measured triggers (plus a warm-up of 10 %, at most 100).
+    #[arg(long, default_value_t = 10_000)]
+    pub triggers: u64,
+    /// SYNC period of the real-time loop, µs (default: the machine's, 2000). Refused
+    /// when the cyclic traffic would load the bus above its limit (70 % of the bit
+    /// rate). Modbus: the simulated PLC's task cycle (default 250).
+    #[arg(long)]
+    pub period_us: Option<u32>,
+    /// Run the latch over this SocketCAN interface (simulated drives on a second
+    /// socket in this process) instead of the in-process bus.
+    #[arg(long)]
+    pub can: Option<String>,
+    /// Write all figures as JSON.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Publish from the real-time thread with ContactPublisher (one heap allocation
+    /// per sample inside iceoryx2 0.10) instead of the ForwardingSink.
+    #[arg(long)]
+    pub direct: bool,
+    /// Warm-up triggers, not counted.
+    #[arg(long)]
+    pub warmup: Option<u64>,
+    /// SCHED_FIFO priority of the real-time thread (0: do not ask); the simulated
+    /// drives get one less, the forwarder two less.
+    #[arg(long, default_value_t = 80)]
+    pub rt_priority: i32,
+    /// Run the estimator process under SCHED_FIFO at this priority (0: an
+    /// ordinary process, as the bridge starts it). Every thread on the measured
+    /// path runs under SCHED_FIFO by default, so other load on the machine does
+    /// not decide the result.
+    #[arg(long, default_value_t = 70)]
+    pub estimator_priority: i32,
+    /// SCHED_FIFO priority of the simulated drives' thread (default: the real-time
+    /// loop's minus one; 0: ordinary).
+    #[arg(long)]
+    pub drives_priority: Option<i32>,
+    /// Over Modbus TCP on loopback instead: the simulated PLC (its task cycle
+    /// --period-us) latches, the bridge polls its status every --poll-ms.
+    #[arg(long, conflicts_with_all = ["can", "direct"])]
+    pub modbus: bool,
+    /// Modbus: status poll period, ms.
+    #[arg(long, default_value_t = 1, requires = "modbus")]
+    pub poll_ms: u32,
+}
+
+impl BenchArgs {
+    /// The SYNC period once resolved (see `run`).
+    pub(super) fn period(&self) -> u32 {
+        self.period_us.unwrap_or(0)
+    }
+}
+
+pub fn run(args: &BenchArgs) -> Result<(), String> {
+    if args.triggers == 0 {
+        return Err("--triggers must be at least 1".into());
+    }
+    crate::output::check_output(args.json.as_deref())?;
+    let (scenario, cfg, mut notes) = bench_machine(args)?;
+    // From here on the period is the one the machine runs.
+    let args = &BenchArgs {
+        period_us: cfg.canopen_bus().map(|b| b.sync_period_us),
+        ..args.clone()
+    };
+    let warmup = args.warmup.unwrap_or((args.triggers / 10).clamp(1, 100));
+    let total = warmup + args.triggers;
+    let pid = std::process::id();
+    let ws = Workspace::new(format!("probebridge-bench-{pid}"))?;
+    let rig = start_rig(args, &ws, &scenario, &cfg, total)?;
+    notes.extend(rig.startup.notes.iter().cloned());
+    let (measured, rig) = measure(args, rig, warmup, total)?;
+    let records = collect_records(rig.estimator, &ws)?;
+    let latencies = match_records(&measured, &records);
+    let _ = std::fs::remove_dir_all(&ws.dir);
+    let report = Report {
+        args,
+        warmup,
+        notes,
+        startup: rig.startup,
+        sim_fifo: rig.sim_fifo,
+        drive_priority: rig.drive_priority,
+        forwarder_priority: rig.forwarder_priority,
+        forwarder_fifo: rig.forwarder_fifo,
+        estimator_fifo: rig.estimator_fifo,
+        main_fifo: rig.main_fifo,
+        measured,
+        latencies,
+    };
+    report.print_and_write()
+}

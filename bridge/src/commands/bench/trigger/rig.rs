@@ -1,0 +1,238 @@
+//! The rig of a run: the bench machine, the estimator process, the simulated drives,
+//! the bridge's `CanMachine` with its sink, and the floor's publisher.
+
+use super::{BenchArgs, TRIGGER_RUN};
+use crate::bench::{self};
+use crate::commands::bench::Workspace;
+use crate::commands::estimator::DEFAULT_RECORD_CAPACITY;
+use crate::configs;
+use crate::ipc::{ContactPublisher, EstimatorChild, ForwardingSink};
+use hal::can::inproc::{InprocBus, WireClock};
+use hal::can::socketcan::SocketCanTransport;
+use hal::can::CanTransport;
+use hal::config::MachineConfig;
+use hal::master::{BusLoad, CanMachine, MasterOptions, Pacing, StartupReport};
+use hal::SampleSink;
+use sim::machine::{LatchLog, SimClock, SimMachine, SimRunner};
+use sim::Scenario;
+use std::process::{Command, Stdio};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// Whether process `pid` runs under SCHED_FIFO (field 41 of /proc/PID/stat).
+pub(super) fn is_fifo(pid: u32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat"))
+        .ok()
+        .and_then(|s| {
+            // The command name (field 2) may hold spaces: count after its ')'.
+            let rest = &s[s.rfind(')')? + 2..];
+            rest.split_whitespace().nth(38)?.parse::<u32>().ok()
+        })
+        == Some(1)
+}
+
+/// The processes and threads of one run, and which real-time settings they got.
+pub(super) struct Rig {
+    pub(super) estimator: EstimatorChild,
+    pub(super) estimator_fifo: bool,
+    /// The simulated drives; taken and stopped once the machine has shut down.
+    pub(super) sim: Option<SimRunner>,
+    pub(super) sim_fifo: bool,
+    pub(super) drive_priority: i32,
+    pub(super) forwarder_priority: i32,
+    pub(super) forwarder_fifo: bool,
+    pub(super) machine: CanMachine,
+    pub(super) startup: StartupReport,
+    pub(super) floor: ContactPublisher,
+    /// This thread (the floor's sender) under SCHED_FIFO.
+    pub(super) main_fifo: bool,
+    pub(super) latches: Arc<LatchLog>,
+}
+
+/// The machine: table-ac with a flat face, SYNC at the requested period; notes for
+/// the report.
+pub(super) fn bench_machine(
+    args: &BenchArgs,
+) -> Result<(Scenario, MachineConfig, Vec<String>), String> {
+    let scenario_path = configs::configs_dir().join("scenarios/bench-trigger.toml");
+    let scenario = Scenario::parse(
+        bench::SCENARIO,
+        &scenario_path,
+        Some(&configs::machines_dir()),
+    )
+    .map_err(|e| e.to_string())?;
+    let mut cfg = crate::session::machine_config(&scenario);
+    let bus = cfg
+        .canopen_bus_mut()
+        .ok_or("the bench scenario's machine is not on CANopen")?;
+    let period_us = args.period_us.unwrap_or(bus.sync_period_us);
+    if !(50..=100_000).contains(&period_us) {
+        return Err(format!("--period-us {period_us}: must be 50 .. 100000"));
+    }
+    bus.sync_period_us = period_us;
+    let limit = bus.max_load_percent;
+    // Short moves of a few µm are acceleration-bound: a stiffer machine brings a
+    // trigger (probe, stop, retract) down to about a dozen SYNC periods. The hot path
+    // does not depend on it.
+    for a in &mut cfg.axes {
+        a.max_acceleration = a.max_acceleration.max(bench::ACCELERATION);
+    }
+    // A bus that exists: the traffic must fit the bit rate, in-process as on SocketCAN.
+    let load = BusLoad::of(&cfg);
+    if load.percent > limit {
+        let fits = BusLoad::shortest_period_us(&cfg, limit)
+            .map_or("no period fits".to_string(), |p| {
+                format!("the shortest period that fits is {p} us")
+            });
+        return Err(format!(
+            "--period-us {period_us}: {load}, above the bus-load limit of {limit:.0} % ({}: bus.max_load_percent); {fits}",
+            cfg.path.display()
+        ));
+    }
+    let notes = vec![format!("bus: {load}; limit {limit:.0} %")];
+    Ok((scenario, cfg, notes))
+}
+
+/// The estimator process (under SCHED_FIFO when asked) recording receive times;
+/// whether it got SCHED_FIFO.
+pub(super) fn spawn_estimator(
+    args: &BenchArgs,
+    ws: &Workspace,
+    total: u64,
+) -> Result<(EstimatorChild, bool), String> {
+    let (prefix, times_file, estimator_log) =
+        (ws.prefix.as_str(), &ws.times_file, &ws.estimator_log);
+    tell!("bench: starting the estimator process ...");
+    let mut command = Command::new(std::env::current_exe().map_err(|e| e.to_string())?);
+    command.args([
+        "estimator",
+        "--service",
+        prefix,
+        "--record-times",
+        &times_file.to_string_lossy(),
+        "--record-capacity",
+        &(2 * total + 64)
+            .max(DEFAULT_RECORD_CAPACITY as u64)
+            .to_string(),
+    ]);
+    let log = std::fs::File::create(estimator_log)
+        .map_err(|e| format!("{}: {e}", estimator_log.display()))?;
+    command.stderr(Stdio::from(log));
+    if args.estimator_priority > 0 {
+        use std::os::unix::process::CommandExt;
+        let priority = args.estimator_priority;
+        // SAFETY: runs in the forked child before exec; sched_setscheduler is a plain
+        // syscall (async-signal-safe) and SCHED_FIFO is kept across exec. Failure is
+        // detected below through the child's scheduling policy.
+        unsafe {
+            command.pre_exec(move || {
+                hal::rt::set_fifo_priority(priority);
+                Ok(())
+            });
+        }
+    }
+    let estimator = EstimatorChild::spawn_command(command, prefix, Duration::from_secs(10))
+        .map_err(|e| format!("cannot start the estimator: {e}"))?;
+    let estimator_fifo = args.estimator_priority > 0 && is_fifo(estimator.id());
+
+    Ok((estimator, estimator_fifo))
+}
+
+/// The bus between the bridge and the simulated drives: the in-process bus, or two
+/// sockets on `--can`.
+/// The bridge's end and the drives' end of the bench's bus.
+type Ends = (Box<dyn CanTransport>, Box<dyn CanTransport>);
+
+pub(super) fn bench_transports(args: &BenchArgs, bitrate: u32) -> Result<Ends, String> {
+    Ok(match &args.can {
+        None => {
+            // The machine's bit rate, wire time in real time; the drives arbitrate as
+            // separate devices.
+            let bus = InprocBus::with_wire_time(bitrate, WireClock::Monotonic);
+            (
+                Box::new(bus.endpoint()),
+                Box::new(bus.endpoint_for_devices()),
+            )
+        }
+        Some(iface) => {
+            let open =
+                |who: &str| SocketCanTransport::open(iface).map_err(|e| format!("{who}: {e}"));
+            (
+                Box::new(open("bridge")?),
+                Box::new(open("simulated drives")?),
+            )
+        }
+    })
+}
+
+/// The estimator, the simulated drives, the bridge's sink and `CanMachine`, the floor
+/// publisher; every thread on the measured path under SCHED_FIFO where permitted.
+pub(super) fn start_rig(
+    args: &BenchArgs,
+    ws: &Workspace,
+    scenario: &Scenario,
+    cfg: &MachineConfig,
+    total: u64,
+) -> Result<Rig, String> {
+    let prefix = ws.prefix.as_str();
+    let (estimator, estimator_fifo) = spawn_estimator(args, ws, total)?;
+    let latches = LatchLog::new();
+    let mut sim_machine = SimMachine::new(scenario);
+    sim_machine.set_latch_log(latches.clone());
+    sim_machine.set_clock(SimClock::Monotonic);
+    let bitrate = cfg.canopen_bus().map_or(1_000_000, |b| b.bitrate);
+    let (master_transport, sim_transport) = bench_transports(args, bitrate)?;
+    // The simulated drives stand for hardware: they should not wait for the scheduler
+    // either (default: the real-time loop's priority minus one).
+    let drive_priority = args.drives_priority.unwrap_or(args.rt_priority - 1);
+    let (sim_fifo_tx, sim_fifo_rx) = std::sync::mpsc::sync_channel(1);
+    let sim = SimRunner::spawn_with_init(sim_machine, sim_transport, move || {
+        let _ = sim_fifo_tx.send(drive_priority > 0 && hal::rt::set_fifo_priority(drive_priority));
+    });
+    let sim_fifo = sim_fifo_rx.recv().unwrap_or(false);
+    // The forwarder is on the hot path too: the real-time loop's priority minus two.
+    let forwarder_priority = args.rt_priority - 2;
+    let mut forwarder_fifo = false;
+    let sink: Box<dyn SampleSink> = if args.direct {
+        Box::new(ContactPublisher::new(prefix).map_err(|e| e.to_string())?)
+    } else {
+        let (sink, fifo) = ForwardingSink::spawn_realtime(prefix, forwarder_priority.max(0))
+            .map_err(|e| e.to_string())?;
+        forwarder_fifo = fifo;
+        Box::new(sink)
+    };
+    let options = MasterOptions {
+        pacing: Pacing::RealTime,
+        rt_priority: args.rt_priority,
+        run_id: TRIGGER_RUN,
+        command_timeout: Duration::from_secs(10),
+        abort: None,
+    };
+    tell!(
+        "bench: bringing up the drives ({} bus, SYNC every {} us) ...",
+        args.can.as_deref().unwrap_or("in-process"),
+        args.period()
+    );
+    let (machine, startup) =
+        CanMachine::start(cfg, master_transport, sink, options).map_err(|e| e.to_string())?;
+    let floor = ContactPublisher::new(prefix).map_err(|e| e.to_string())?;
+    floor.update_connections().map_err(|e| e.to_string())?;
+    // This thread publishes the floor samples: at the forwarder's priority, so the
+    // floor's sender waits for the scheduler no more than the bridge's does.
+    let main_fifo = forwarder_priority > 0 && hal::rt::set_fifo_priority(forwarder_priority);
+
+    Ok(Rig {
+        estimator,
+        estimator_fifo,
+        sim: Some(sim),
+        sim_fifo,
+        drive_priority,
+        forwarder_priority,
+        forwarder_fifo,
+        machine,
+        startup,
+        floor,
+        main_fifo,
+        latches,
+    })
+}

@@ -1,0 +1,67 @@
+//! Start-up: the CiA 402 enable sequence of every drive.
+
+use super::{Activity, RtLoop};
+use crate::cia402::controlword::Controlword;
+use crate::cia402::state::State;
+use crate::contact_sample::SampleSink;
+use crate::machine::ErrorKind;
+use crate::master::command::{Detail, Reply, RtError};
+
+/// While enabling, a drive that has not sent its TPDO1 for this long gets the NMT
+/// start again (the first may have been lost on the bus; a started node ignores it).
+const NMT_START_REPEAT_NS: u64 = 100_000_000;
+
+impl<S: SampleSink> RtLoop<S> {
+    /// Start-up: walk every drive to Operation enabled, holding where it is.
+    pub(super) fn enable(&mut self, now: u64, since_ns: u64) {
+        let mut all = true;
+        for d in self.drives.iter_mut() {
+            if !d.seen_tpdo1 {
+                all = false;
+                continue;
+            }
+            // Hold where the drive is: enabling must not move anything.
+            d.target_inc = d.actual_inc;
+            let state = State::from_statusword(d.statusword);
+            match state.and_then(|s| s.command_towards_operation_enabled()) {
+                Some(cw) => {
+                    all = false;
+                    d.controlword = cw;
+                }
+                None if state == Some(State::OperationEnabled) => {
+                    d.controlword = Controlword::ENABLE_OPERATION_CMD
+                }
+                None => all = false,
+            }
+        }
+        if !all
+            && self.drives.iter().any(|d| !d.seen_tpdo1)
+            && now.saturating_sub(self.nmt_start_at_ns) >= NMT_START_REPEAT_NS
+        {
+            self.nmt_start_at_ns = now;
+            self.nmt_start_due = true;
+        }
+        if all {
+            self.hold_all();
+            self.activity = Activity::Idle;
+            self.reply = Some(Reply::Ready {
+                positions: self.actual_positions(),
+            });
+        } else if now - since_ns > self.cfg.enable_timeout_ns {
+            let (node, sw) = self
+                .drives
+                .iter()
+                .find(|d| State::from_statusword(d.statusword) != Some(State::OperationEnabled))
+                .map_or((0, 0), |d| (d.node, d.statusword));
+            let kind = if self.drives.iter().any(|d| !d.seen_tpdo1) {
+                ErrorKind::NodeLost
+            } else {
+                ErrorKind::DriveFault
+            };
+            let err = RtError::new(kind, Detail::NotEnabled { state: sw }).node(node);
+            self.fault = Some(err);
+            self.reply = Some(Reply::Error(err));
+            self.activity = Activity::Idle;
+        }
+    }
+}
