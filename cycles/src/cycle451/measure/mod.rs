@@ -1,0 +1,219 @@
+//! Steps 2 and 3: locating the sphere, then measuring it at every position of every
+//! planned axis. Between positions the probe retracts to Q408 above the preset and
+//! over it before the rotary axes turn, or (Q408 = 0) follows the sphere at the pole in
+//! steps of at most [`TRACK_STEP_DEG`]. A sphere is the pole along the (possibly tilted)
+//! tool axis and Q423 points around the equator, fitted by the estimator; it is probed
+//! again around the fitted centre when that is more than [`RE_PROBE_TOLERANCE`] from
+//! where it was expected.
+
+use super::plan::KinematicsPlan;
+use super::report::SphereRecord;
+use crate::cycle::CycleContext;
+use crate::cycle_block::CycleBlock;
+use crate::error::CycleError;
+use crate::kinematics::model::{angles_of, rotary_slot, Angles, KinematicModel};
+use crate::probe_axis::ProbeAxis;
+use crate::probe_table::ProbeEntry;
+use crate::progress::ProgressEvent;
+use hal::{Axis, AxisPositions, Contact, Machine, ProbeMove};
+use nalgebra::Vector3;
+use std::collections::BTreeMap;
+
+mod locate;
+mod positions;
+mod sphere;
+
+/// A sphere whose fitted centre is farther than this from where it was expected is
+/// probed a second time around the fitted centre, mm.
+pub const RE_PROBE_TOLERANCE: f64 = 0.1;
+/// Largest rotary step of a move that follows the sphere (Q408 = 0), deg.
+pub const TRACK_STEP_DEG: f64 = 5.0;
+/// How far off the sphere centre the probe may start locating it (Q431 = 1/3), as a
+/// fraction of Q407 + ball radius, in any direction of the working plane.
+pub const LOCATE_REACH: f64 = 0.6;
+/// Depth of the first locating pass's points below the pole contact, as a fraction
+/// of Q407 + ball radius: a start within [`LOCATE_REACH`] puts the centre 0.8 to 1
+/// of it below the contact, so the points pass within 0.1 of the centre's height.
+pub const LOCATE_DEPTH: f64 = 0.9;
+
+pub(super) fn axis_map(axes: &[Axis], a: &Angles) -> BTreeMap<String, f64> {
+    axes.iter()
+        .map(|x| (x.name().to_string(), a[rotary_slot(*x).expect("rotary")]))
+        .collect()
+}
+
+pub(super) fn arr(v: &Vector3<f64>) -> [f64; 3] {
+    [v.x, v.y, v.z]
+}
+
+/// Per position of an axis: whether it is the reference, and its sphere(s).
+pub(super) type PositionSpheres = Vec<(bool, Vec<Sphere>)>;
+
+/// A sphere measured at one position (last round).
+#[derive(Clone, Debug)]
+pub(super) struct Sphere {
+    pub angles: Angles,
+    pub centre: Vector3<f64>,
+    pub radius: f64,
+    pub record: SphereRecord,
+}
+
+/// Every measured axis (its index in the plan) and its positions.
+pub(super) type Measured = Vec<(usize, PositionSpheres)>;
+
+/// The machine, the plan and the model while the cycle measures.
+pub(super) struct Measure<'a, 'c, M: Machine> {
+    machine: &'a mut M,
+    pub ctx: &'a mut CycleContext<'c>,
+    plan: &'a KinematicsPlan,
+    probe: &'a ProbeEntry,
+    tool: ProbeAxis,
+    block: u32,
+    /// The control's model with the active kinematics.
+    pub model: KinematicModel,
+    run_base: u64,
+    runs: u64,
+    /// Commanded rotary angles now.
+    now: Angles,
+    /// Rotary angles where the cycle started (over the sphere).
+    pub start: Angles,
+    /// The sphere centre in table coordinates (from the locate measurement).
+    table_point: Vector3<f64>,
+    /// Active datum (preset plus shift), machine X/Y/Z.
+    pub preset: Vector3<f64>,
+    /// Notes for the report.
+    pub notes: Vec<String>,
+    /// The locating measurement (Q431 = 1/3), taken as the first reference when the
+    /// axes have not moved since.
+    located: Option<Sphere>,
+    /// Spheres measured so far (a sphere probed twice counts once).
+    pub spheres: usize,
+}
+
+impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
+    /// Reads where the machine stands; nothing moves yet.
+    pub fn new(
+        machine: &'a mut M,
+        ctx: &'a mut CycleContext<'c>,
+        plan: &'a KinematicsPlan,
+        call: &'a CycleBlock,
+        model: KinematicModel,
+    ) -> Result<Self, CycleError> {
+        let start = machine
+            .positions()
+            .map_err(|e| CycleError::machine("reading the axis positions", &e))?;
+        let start = angles_of(&start);
+        let preset = Vector3::from(ctx.datum.origin());
+        Ok(Measure {
+            machine,
+            ctx,
+            plan,
+            probe: &call.tool.probe,
+            tool: call.tool.axis,
+            block: call.block,
+            model,
+            run_base: hal::clock::monotonic_ns(),
+            runs: 0,
+            now: start,
+            start,
+            table_point: Vector3::zeros(),
+            preset,
+            notes: Vec::new(),
+            located: None,
+            spheres: 0,
+        })
+    }
+
+    pub fn note(&mut self, text: String) {
+        (self.ctx.progress)(ProgressEvent::Note {
+            block: self.block,
+            text,
+        });
+    }
+
+    fn mv(&mut self, step: &str, target: AxisPositions, feed: f64) -> Result<(), CycleError> {
+        (self.ctx.progress)(ProgressEvent::Move {
+            block: self.block,
+            target,
+            feed,
+        });
+        self.machine
+            .move_to(&target, feed)
+            .map_err(|e| CycleError::machine(step, &e))
+    }
+
+    fn move_xyz(&mut self, step: &str, p: Vector3<f64>) -> Result<(), CycleError> {
+        self.mv(
+            step,
+            AxisPositions::linear(arr(&p)),
+            self.plan.positioning_feed,
+        )
+    }
+
+    fn probe(&mut self, step: &str, dir: Vector3<f64>, max: f64) -> Result<Contact, CycleError> {
+        let direction = arr(&dir.normalize());
+        (self.ctx.progress)(ProgressEvent::Probe {
+            block: self.block,
+            direction,
+            max_distance: max,
+        });
+        let c = crate::positioning::probe_again_if_lost(
+            self.machine,
+            &ProbeMove {
+                direction,
+                feed: self.probe.f,
+                max_distance: max,
+            },
+        )
+        .map_err(|e| CycleError::machine(step, &e))?;
+        (self.ctx.progress)(ProgressEvent::Contact {
+            block: self.block,
+            centre: c.positions.xyz(),
+        });
+        Ok(c)
+    }
+
+    fn clearance(&self) -> f64 {
+        self.probe.set_up + self.plan.params.clearance
+    }
+
+    /// Distance of the ball centre from the sphere centre at a start point.
+    fn reach(&self) -> f64 {
+        self.plan.params.sphere_radius + self.probe.radius + self.clearance()
+    }
+
+    /// Tool axis, main axis and minor axis in machine coordinates at `a`.
+    fn frame(&self, a: &Angles) -> [Vector3<f64>; 3] {
+        let [main, minor, tool] = self.tool.indices();
+        let unit = |i: usize| {
+            let mut v = Vector3::zeros();
+            v[i] = 1.0;
+            self.model.tool_vector(a, v)
+        };
+        [unit(tool), unit(main), unit(minor)]
+    }
+
+    /// Pole start at `a` for the sphere centre `c` (X/Y/Z axis coordinates).
+    fn pole(&self, a: &Angles, c: &Vector3<f64>) -> Vector3<f64> {
+        c + self.frame(a)[0] * self.reach()
+    }
+
+    fn predicted_pole(&self, a: &Angles) -> Vector3<f64> {
+        self.pole(a, &self.model.predict(a, &self.table_point))
+    }
+
+    fn rotary(&self, a: &Angles) -> AxisPositions {
+        let mut p = AxisPositions::new();
+        for &x in &self.plan.present {
+            p.set(x, a[rotary_slot(x).expect("rotary")]);
+        }
+        p
+    }
+
+    fn next_run(&mut self) -> u64 {
+        self.runs += 1;
+        let id = self.run_base + self.runs;
+        self.machine.set_run(id);
+        id
+    }
+}

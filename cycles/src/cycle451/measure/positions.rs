@@ -1,0 +1,238 @@
+//! The measuring positions of every planned axis and the moves between them: the
+//! probe retracts to Q408 and over the preset before the rotary axes turn, or
+//! (Q408 = 0) follows the sphere at the pole in steps of at most [`super::TRACK_STEP_DEG`];
+//! the height that clears the sphere for every angle on the way.
+
+use super::{arr, Measure, Measured, Sphere, TRACK_STEP_DEG};
+use crate::error::CycleError;
+use crate::kinematics::model::Angles;
+use hal::{Axis, AxisPositions, Machine};
+
+impl<M: Machine> Measure<'_, '_, M> {
+    /// Every angle set the cycle commands, in order: from the start, each axis's
+    /// reference and positions (from both sides with Q432), back to the start.
+    fn cycle_path(&self) -> Vec<Angles> {
+        let plan = self.plan;
+        let mut path = vec![self.start];
+        for ap in &plan.axes {
+            let b = if plan.backlash_measured(ap) {
+                plan.params.backlash
+            } else {
+                0.0
+            };
+            for &angle in std::iter::once(&0.0).chain(&ap.positions) {
+                if b != 0.0 {
+                    path.push(plan.angles(ap.axis, angle + b));
+                    path.push(plan.angles(ap.axis, angle));
+                    path.push(plan.angles(ap.axis, angle - b));
+                }
+                path.push(plan.angles(ap.axis, angle));
+            }
+        }
+        path.push(self.start);
+        path
+    }
+
+    /// The tool-axis coordinate of the X/Y/Z axes at which the ball passes `gap`
+    /// from the sphere centre (or more) along the tool axis at every angle the rotary
+    /// axes take on the straight way through `path` (sampled every degree).
+    pub(super) fn clear_height(&self, path: &[Angles], gap: f64) -> f64 {
+        let t = self.tool.tool_index();
+        let mut high = f64::NEG_INFINITY;
+        for w in path.windows(2).chain(std::iter::once(&path[..1])) {
+            let (from, to) = (w[0], *w.last().expect("one angle"));
+            let turn = (0..3).map(|s| (to[s] - from[s]).abs()).fold(0.0, f64::max);
+            let steps = (turn.ceil() as usize).max(1);
+            for i in 0..=steps {
+                let f = i as f64 / steps as f64;
+                let a: Angles = std::array::from_fn(|s| from[s] + (to[s] - from[s]) * f);
+                high = high.max(self.model.predict(&a, &self.table_point)[t] + gap);
+            }
+        }
+        high
+    }
+
+    /// Measures every planned axis: the 0 deg reference, then its positions (from both
+    /// sides with Q432), and goes back to where the cycle started.
+    pub fn measure_axes(&mut self) -> Result<Measured, CycleError> {
+        let plan = self.plan;
+        let mut measured = Vec::new();
+        for (gi, ap) in plan.axes.iter().enumerate() {
+            let b = if plan.backlash_measured(ap) {
+                plan.params.backlash
+            } else {
+                0.0
+            };
+            if plan.params.backlash != 0.0 && ap.hirth > 0.0 {
+                self.notes.push(format!(
+                    "{}: no backlash measurement on a Hirth axis",
+                    ap.axis
+                ));
+            }
+            let mut positions = Vec::new();
+            for (k, &angle) in std::iter::once(&0.0).chain(&ap.positions).enumerate() {
+                let what = if k == 0 {
+                    format!("{} reference at 0 deg", ap.axis)
+                } else {
+                    format!("{} position {k} ({}{angle:+.4})", ap.axis, ap.axis)
+                };
+                self.note(format!("measuring {what}"));
+                let spheres = self.position(ap.axis, angle, b, &what)?;
+                positions.push((k == 0, spheres));
+            }
+            measured.push((gi, positions));
+        }
+        // Back to where the cycle started, over the sphere.
+        self.go_to(self.start, None)?;
+        Ok(measured)
+    }
+
+    /// The sphere(s) at one position of `axis`: approached from `angle + b` and from
+    /// `angle - b` when `b != 0` (Q432), else directly.
+    fn position(
+        &mut self,
+        axis: Axis,
+        angle: f64,
+        b: f64,
+        what: &str,
+    ) -> Result<Vec<Sphere>, CycleError> {
+        let plan = self.plan;
+        let target = plan.angles(axis, angle);
+        let sides: Vec<Option<f64>> = if b != 0.0 {
+            vec![Some(b), Some(-b)]
+        } else {
+            vec![None]
+        };
+        let unmoved = (0..3).all(|s| (target[s] - self.now[s]).abs() <= 1e-9);
+        if b == 0.0 && unmoved {
+            if let Some(s) = self.located.take() {
+                // Nothing moved since the sphere was located there: that is this
+                // position's measurement.
+                self.note(format!(
+                    "{what}: the locating measurement at the same angles is the reference"
+                ));
+                return Ok(vec![s]);
+            }
+        }
+        self.located = None;
+        let mut spheres = Vec::new();
+        for (si, side) in sides.iter().enumerate() {
+            let via = side.map(|off| plan.angles(axis, angle + off));
+            if si == 0 {
+                self.go_to(target, via)?;
+            } else {
+                if let Some(v) = via {
+                    self.track(v)?;
+                }
+                self.track(target)?;
+            }
+            let expected = self.model.predict(&target, &self.table_point);
+            let label = match side {
+                Some(off) => format!(
+                    "{what}, approached from {}",
+                    if *off > 0.0 { "above" } else { "below" }
+                ),
+                None => what.to_string(),
+            };
+            let mut s = self.sphere(&target, expected, &label)?;
+            s.record.approach = side.map(|off| if off > 0.0 { "above" } else { "below" }.into());
+            spheres.push(s);
+        }
+        Ok(spheres)
+    }
+
+    /// Turns the rotary axes to `to` following the sphere at the pole, in steps.
+    fn track(&mut self, to: Angles) -> Result<(), CycleError> {
+        let from = self.now;
+        let turn = (0..3).map(|s| (to[s] - from[s]).abs()).fold(0.0, f64::max);
+        let steps = ((turn / TRACK_STEP_DEG).ceil() as usize).max(1);
+        for i in 1..=steps {
+            let f = i as f64 / steps as f64;
+            let mut a = from;
+            for s in 0..3 {
+                a[s] = from[s] + (to[s] - from[s]) * f;
+            }
+            if i == steps {
+                a = to;
+            }
+            let target = self
+                .rotary(&a)
+                .merged(&AxisPositions::linear(arr(&self.predicted_pole(&a))));
+            self.mv(
+                "turning the rotary axes with the probe over the sphere",
+                target,
+                self.plan.positioning_feed,
+            )?;
+            self.now = a;
+        }
+        Ok(())
+    }
+
+    /// Goes to the pole start at `to`, approaching `to` from `via` (backlash).
+    fn go_to(&mut self, to: Angles, via: Option<Angles>) -> Result<(), CycleError> {
+        let moves = (0..3).any(|s| (to[s] - self.now[s]).abs() > 1e-9) || via.is_some();
+        let h = self.plan.params.retract_height;
+        if !moves {
+            let pole = self.predicted_pole(&to);
+            return self.move_xyz("moving over the sphere", pole);
+        }
+        if h > 0.0 {
+            let t = self.tool.tool_index();
+            let height = self.preset[t] + h;
+            // The probe stands at Q408 unmonitored while the rotary axes turn: it must
+            // clear the sphere by the ball radius and SET_UP at every angle on the way,
+            // this turn's and every later one's (the message names one value for all).
+            let mut path: Vec<Angles> = std::iter::once(self.now)
+                .chain(via)
+                .chain(std::iter::once(to))
+                .collect();
+            path.extend(self.cycle_path());
+            let rs = self.plan.params.sphere_radius + self.probe.radius;
+            let lowest = crate::cycle451::plan::round_up(
+                self.clear_height(&path, rs + self.probe.set_up) - self.preset[t],
+            );
+            if h < lowest {
+                return Err(CycleError::Plan(format!(
+                    "Q408={h}: the retraction height does not clear the sphere by the ball radius + SET_UP at every angle the rotary axes turn through (the sphere rises with them); the lowest Q408 that clears it is {lowest:.4}"
+                )));
+            }
+            let [main, minor, _] = self.tool.indices();
+            let up = AxisPositions::new().with(Axis::LINEAR[t], height);
+            self.mv("retracting to Q408", up, self.plan.positioning_feed)?;
+            let over = AxisPositions::new()
+                .with(Axis::LINEAR[main], self.preset[main])
+                .with(Axis::LINEAR[minor], self.preset[minor]);
+            self.mv(
+                "moving over the preset at Q408",
+                over,
+                self.plan.positioning_feed,
+            )?;
+            for a in via.iter().chain(std::iter::once(&to)) {
+                self.mv(
+                    "turning the rotary axes (Q253)",
+                    self.rotary(a),
+                    self.plan.rotary_feed,
+                )?;
+                self.now = *a;
+            }
+            let pole = self.predicted_pole(&to);
+            if pole[t] > height {
+                return Err(CycleError::Plan(format!(
+                    "Q408: the retraction height {height:.3} ({} above the preset) is below the probe's start point over the sphere ({:.3}) at {}; give a higher Q408",
+                    h,
+                    pole[t],
+                    self.rotary(&to)
+                )));
+            }
+            let mut above = pole;
+            above[t] = height;
+            self.move_xyz("moving over the sphere at Q408", above)?;
+            self.move_xyz("approaching the sphere", pole)
+        } else {
+            if let Some(v) = via {
+                self.track(v)?;
+            }
+            self.track(to)
+        }
+    }
+}

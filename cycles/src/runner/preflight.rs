@@ -1,0 +1,379 @@
+//! What `check` and `run` check before the first move: the machine, its configuration
+//! and kinematics file can run each cycle, and every move the program will make (its
+//! `L` blocks and its cycles' moves, planned in the datum and from the axes where the
+//! blocks before leave them) stays inside what the machine allows.
+
+use crate::cycle451;
+use crate::cycle451::PlanErrorKind;
+use crate::cycles_config::CyclesConfig;
+use crate::datum::Datum;
+use crate::formula::EvalErrorKind;
+use crate::kinematics_file::ActiveKinematics;
+use crate::linear::{parse_linear, LinearBlockError, LinearBlockErrorKind, LinearMove, MoveFeed};
+use crate::parser::resolve_deferred;
+use crate::planned_move::{check_planned, PlannedMove};
+use crate::program::{CycleCall, CycleKind, Program, Statement};
+use crate::program_flow::{start_params, substitute_params, CheckWalk, FlowFaultKind};
+use crate::q_params::{load_remanent, remanent_path};
+use hal::config::MachineConfig;
+use hal::motion_guard::MotionGuard;
+use hal::{Axis, AxisPositions};
+
+/// Why a program cannot start on this machine.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum PreflightKind {
+    /// Cycle 451 cannot be planned on this machine.
+    Plan(PlanErrorKind),
+    /// The active kinematics file cannot be read.
+    ActiveKinematics,
+    /// The probe of a TOOL CALL is not in the probe table.
+    ProbeNotInTable,
+    /// The machine lacks a linear axis.
+    MissingAxis,
+    /// A positioning block (L) cannot run.
+    Positioning(LinearBlockErrorKind),
+    /// A move of a probing cycle (431, 444) the machine would refuse: a point outside
+    /// the software limits, a feed the axes cannot run, a safe height below a start.
+    Moves,
+    /// A Q-parameter block that cannot be carried out (an undefined parameter, a
+    /// division by zero, a program that loops, ...).
+    Program(FlowFaultKind),
+    /// The QR parameters kept beside the preset table cannot be read.
+    Remanent,
+}
+
+/// Checks, before anything moves, what only the machine and its configuration can
+/// tell: the probe of each cycle is still in the probe table, the machine has X, Y, Z,
+/// and this build can run the cycle.
+fn preflight(
+    call: &CycleCall,
+    machine_axes: u8,
+    cfg: &CyclesConfig,
+    kinematics: &std::path::Path,
+) -> Result<(), (PreflightKind, String)> {
+    let tool = &call.head.tool;
+    match &call.kind {
+        CycleKind::MeasurePlane(_) | CycleKind::Probing3d(_) => {}
+        // Works on files only: no probe, no motion.
+        CycleKind::SaveKinematics(_) => return Ok(()),
+        CycleKind::MeasureKinematics(p) => {
+            cycle451::plan(p, &tool.probe, &cfg.machine)
+                .map_err(|e| (PreflightKind::Plan(e.kind()), format!("{e}; nothing moved")))?;
+            ActiveKinematics::load(kinematics, &cfg.machine).map_err(|e| {
+                (
+                    PreflightKind::ActiveKinematics,
+                    format!("active kinematics: {e}; nothing moved"),
+                )
+            })?;
+        }
+    }
+    if cfg.probe(&tool.probe.name).is_none() {
+        return Err((
+            PreflightKind::ProbeNotInTable,
+            format!(
+                "probe \"{}\" (TOOL CALL line {}) is not in the probe table of machine {}",
+                tool.probe.name, tool.line, cfg.machine.name
+            ),
+        ));
+    }
+    for a in Axis::LINEAR {
+        if machine_axes & (1 << a.index()) == 0 {
+            return Err((
+                PreflightKind::MissingAxis,
+                format!("the machine has no {a} axis"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Why a program cannot start on this machine.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum Preflight {
+    /// A cycle's demands the machine, its configuration or its kinematics file cannot
+    /// meet.
+    #[error("line {line}, block {block} (cycle {cycle}): {message}")]
+    Cycle {
+        block: u32,
+        cycle: u16,
+        /// 1-based first line of the cycle block.
+        line: usize,
+        kind: PreflightKind,
+        message: String,
+    },
+    /// A positioning block (L) that cannot be carried out.
+    #[error("line {line}: {error}")]
+    Positioning {
+        line: usize,
+        error: LinearBlockError,
+    },
+    /// A Q-parameter block (or the QR file, line 0) that cannot be carried out.
+    #[error("line {line}: {message}")]
+    Program {
+        line: usize,
+        kind: PreflightKind,
+        message: String,
+    },
+}
+
+impl Preflight {
+    pub fn kind(&self) -> PreflightKind {
+        match self {
+            Preflight::Cycle { kind, .. } => *kind,
+            Preflight::Positioning { error, .. } => PreflightKind::Positioning(error.kind()),
+            Preflight::Program { kind, .. } => *kind,
+        }
+    }
+}
+
+/// Everything `run_program` checks before the first move, without a machine: `check`
+/// runs it on the configuration's axes, `run` on the connected machine's. The axes
+/// start where [`assumed_start`] puts them (`run` starts from where the machine stands,
+/// [`preflight_program_from`]).
+pub fn preflight_program(
+    program: &Program,
+    machine_axes: u8,
+    cfg: &CyclesConfig,
+    kinematics: &std::path::Path,
+) -> Result<(), Preflight> {
+    let start = assumed_start(&cfg.machine);
+    preflight_program_from(program, machine_axes, cfg, kinematics, &start)
+}
+
+/// Where `check` assumes the axes stand before the program's first block: every axis
+/// at 0 (or the software limit nearest to it). The program's `L` blocks move them from
+/// there, so a program that pre-positions the probe is planned exactly as `run` will
+/// move it.
+pub fn assumed_start(machine: &MachineConfig) -> AxisPositions {
+    let mut p = AxisPositions::new();
+    for a in &machine.axes {
+        p.set(a.name, 0.0f64.clamp(a.min, a.max));
+    }
+    p
+}
+
+/// [`preflight_program`] with the axes at `start` before the first block.
+pub fn preflight_program_from(
+    program: &Program,
+    machine_axes: u8,
+    cfg: &CyclesConfig,
+    kinematics: &std::path::Path,
+    start: &AxisPositions,
+) -> Result<(), Preflight> {
+    for call in program.cycles() {
+        preflight_cycle(call, machine_axes, cfg, kinematics)?;
+    }
+    // The moves themselves, in the order the program runs them (its jumps, calls and
+    // repeats followed, the parameters it computes from constants known) with the
+    // datum as the program changes it and every axis where the blocks before leave it:
+    // `L` targets, the probing cycles' points, and every move of cycle 451 (planned by
+    // running its sequence on a dry-run machine), in machine coordinates.
+    let guard = MotionGuard::new(&cfg.machine);
+    let params = start_params(
+        &load_remanent(&remanent_path(&cfg.presets.path)).map_err(|e| Preflight::Program {
+            line: 0,
+            kind: PreflightKind::Remanent,
+            message: e.to_string(),
+        })?,
+    );
+    let mut walk = CheckWalk::new(
+        program,
+        params,
+        Datum::new(cfg.presets.clone()),
+        assumed_start(&cfg.machine).merged(start),
+        cfg.parameters.max_jumps,
+    );
+    while let Some(block) = walk.next_block().map_err(|f| Preflight::Program {
+        line: f.line,
+        kind: PreflightKind::Program(f.kind),
+        message: f.message,
+    })? {
+        let (datum, params, here) = walk.state();
+        let mut path_ends = false;
+        match &block.statement {
+            // `run` stops at a preset row that does not exist, with the same message;
+            // nothing after it moves.
+            Statement::Datum(d) if datum.apply(d).is_err() => path_ends = true,
+            Statement::Other(code) => {
+                // A value measured by a cycle is known only when the program runs:
+                // `run` checks that move then, before it moves.
+                let code = match substitute_params(code, params) {
+                    Ok(c) => c,
+                    Err(e) if e.kind == EvalErrorKind::Measured => continue,
+                    Err(e) => {
+                        return Err(Preflight::Program {
+                            line: block.line,
+                            kind: PreflightKind::Program(FlowFaultKind::Eval(e.kind)),
+                            message: e.message,
+                        })
+                    }
+                };
+                let checked = parse_linear(&code, program.unit).map(|r| {
+                    r.and_then(|mut mv| {
+                        mv.target = mv.machine_target(datum, cfg.parameters.m92_reference)?;
+                        check_linear_move(&mv, &cfg.machine).map(|()| mv)
+                    })
+                });
+                match checked {
+                    Some(Err(error)) => {
+                        return Err(Preflight::Positioning {
+                            line: block.line,
+                            error,
+                        })
+                    }
+                    Some(Ok(mv)) => *here = here.merged(&mv.target),
+                    None => {}
+                }
+            }
+            Statement::Cycle(call) => {
+                check_cycle_moves(call, cfg, kinematics, datum, here, &guard)?;
+            }
+            Statement::Deferred(d) => match resolve_deferred(d, params, cfg) {
+                // A value measured by a cycle: `run` resolves and checks the block
+                // then, before it moves.
+                Err(e) if e.kind == EvalErrorKind::Measured => {}
+                Err(e) => {
+                    return Err(Preflight::Program {
+                        line: d.line,
+                        kind: PreflightKind::Program(FlowFaultKind::Eval(e.kind)),
+                        message: e.message,
+                    })
+                }
+                Ok(call) => {
+                    preflight_cycle(&call, machine_axes, cfg, kinematics)?;
+                    check_cycle_moves(&call, cfg, kinematics, datum, here, &guard)?;
+                }
+            },
+            _ => {}
+        }
+        if path_ends {
+            walk.end_path();
+        }
+    }
+    Ok(())
+}
+
+/// [`preflight`] of one cycle, as a [`Preflight`] error.
+pub(super) fn preflight_cycle(
+    call: &CycleCall,
+    machine_axes: u8,
+    cfg: &CyclesConfig,
+    kinematics: &std::path::Path,
+) -> Result<(), Preflight> {
+    preflight(call, machine_axes, cfg, kinematics).map_err(|(kind, message)| Preflight::Cycle {
+        block: call.head.block,
+        cycle: call.head.cycle,
+        line: call.head.line,
+        kind,
+        message,
+    })
+}
+
+/// The moves a cycle plans, from the datum and the axes where the program's path
+/// leaves them, against the motion guard: the probing cycles' points, and every move of
+/// cycle 451 (its sequence run on a dry-run machine). Leaves `here` where the cycle
+/// leaves the axes, and, for 451 with Q431 = 1/3 in modes 1..3, the active preset at
+/// the sphere centre it sets.
+pub(super) fn check_cycle_moves(
+    call: &CycleCall,
+    cfg: &CyclesConfig,
+    kinematics: &std::path::Path,
+    datum: &mut Datum,
+    here: &mut AxisPositions,
+    guard: &MotionGuard,
+) -> Result<(), Preflight> {
+    let origin = datum.origin();
+    let refused = |kind: PreflightKind, message: String| Preflight::Cycle {
+        block: call.head.block,
+        cycle: call.head.cycle,
+        line: call.head.line,
+        kind,
+        message,
+    };
+    let moves = match &call.kind {
+        CycleKind::MeasurePlane(p) => p
+            .planned_moves(&call.head, origin)
+            .map_err(|e| e.to_string()),
+        CycleKind::Probing3d(p) => p
+            .planned_moves(&call.head, origin)
+            .map_err(|e| e.to_string()),
+        CycleKind::MeasureKinematics(p) => {
+            let planned =
+                cycle451::dry_run::plan_moves(p, &call.head, cfg, kinematics, datum, here)
+                    .map_err(|e| {
+                        let mut message = e.to_string();
+                        if !message.ends_with("nothing moved") {
+                            message.push_str("; nothing moved");
+                        }
+                        refused(PreflightKind::Plan(e.kind()), message)
+                    })?;
+            *here = planned.end;
+            // Q431 = 1/3 in modes 1..3: later blocks are relative to the preset the
+            // cycle writes at the sphere centre.
+            if (p.preset == 1 || p.preset == 3) && p.mode.writes() {
+                let row = [0, 1, 2].map(|i| planned.preset[i] - datum.shift[i]);
+                datum.presets.set_active_xyz(row);
+            }
+            Ok(Vec::new())
+        }
+        CycleKind::SaveKinematics(_) => Ok(Vec::new()),
+    };
+    let moves = moves
+        .and_then(|m| check_planned(&m, guard).map(|()| m))
+        .map_err(|message| refused(PreflightKind::Moves, message))?;
+    for m in &moves {
+        if let PlannedMove::Position { target, .. } = m {
+            *here = here.merged(target);
+        }
+    }
+    Ok(())
+}
+
+/// A program file as `check` and `run` take it: BEGIN PGM and END PGM present (an
+/// empty, whitespace-only or cut-off file does nothing and must not pass as ok).
+/// Program text built in code (tests, embedding) may leave them out.
+pub fn check_complete(program: &Program) -> Result<(), String> {
+    let has = |f: fn(&Statement) -> bool| program.blocks.iter().any(|b| f(&b.statement));
+    if !has(|s| matches!(s, Statement::BeginPgm { .. })) {
+        return Err("no BEGIN PGM: an empty or cut-off program; nothing moved".into());
+    }
+    if !has(|s| matches!(s, Statement::EndPgm { .. })) {
+        return Err("no END PGM: a cut-off program; nothing moved".into());
+    }
+    Ok(())
+}
+
+/// What the machine would refuse of an `L` block, found before anything moves: a
+/// target outside the software limits, a feed outside the motion guard's range.
+pub(super) fn check_linear_move(
+    mv: &LinearMove,
+    machine: &MachineConfig,
+) -> Result<(), LinearBlockError> {
+    for (axis, v) in mv.target.iter() {
+        if let Some(a) = machine.axes.iter().find(|a| a.name == axis) {
+            if !(a.min..=a.max).contains(&v) {
+                return Err(LinearBlockError::new(
+                    LinearBlockErrorKind::SoftwareLimit,
+                    format!(
+                        "L block: {axis}{v:+.4} is outside the software limits {:+.4} .. {:+.4}",
+                        a.min, a.max
+                    ),
+                ));
+            }
+        }
+    }
+    if let MoveFeed::Feed(f) = mv.feed {
+        let fastest = machine.axes.iter().map(|a| a.max_feed).fold(0.0, f64::max);
+        if !(hal::motion_guard::MIN_FEED..=fastest).contains(&f) {
+            return Err(LinearBlockError::new(
+                LinearBlockErrorKind::Feed,
+                format!(
+                    "L block: F{f}: the feed must be between {} and the machine's fastest max_feed {fastest} mm/min",
+                    hal::motion_guard::MIN_FEED
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
