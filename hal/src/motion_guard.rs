@@ -21,9 +21,7 @@ struct AxisBounds {
     max_feed: f64,
 }
 
-// Until cycles/src/runner.rs's split (issue 24) is merged and names the constant where
-// it lives: then this line goes, with no other change.
-pub use crate::config::bounds::MIN_FEED;
+use crate::config::bounds::MIN_FEED;
 
 /// The longest a single move may take at its feed (s): longer is a mistyped feed or
 /// distance, refused before anything moves.

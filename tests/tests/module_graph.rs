@@ -22,25 +22,12 @@ const MAX_LINES: usize = 600;
 /// Files over [`MAX_LINES`] that are being split into folders of one concept per file
 /// (issue 24). Once a split is merged its entry goes: a listed file that is short
 /// enough (or gone) fails the check, so the list only shrinks.
-const BEING_SPLIT: &[&str] = &[
-    "hal/src/master/rt_loop.rs",
-    "bridge/src/commands/bench.rs",
-    "cycles/src/parser.rs",
-    "cycles/src/formula.rs",
-    "cycles/src/runner.rs",
-    "cycles/src/cycle451/measure.rs",
-    "sim/src/drive.rs",
-    "sim/src/scenario.rs",
-    "bridge/src/history/trend.rs",
-];
+const BEING_SPLIT: &[&str] = &[];
 
 /// Circles through a file being split, by crate and module prefixes: a circle whose
 /// modules all start with one of the prefixes is let through until the split unties
 /// it. An entry that lets no circle through fails the check, so the list only shrinks.
-/// - `hal/src/master/rt_loop.rs` keeps `Pacing` (a field of its `LoopConfig`, read
-///   only by the driver in `pacing.rs`) from `pacing.rs`, which drives its `RtLoop`.
-const CIRCLES_BEING_SPLIT: &[(&str, &[&str])] =
-    &[("hal", &["crate::master::pacing", "crate::master::rt_loop"])];
+const CIRCLES_BEING_SPLIT: &[(&str, &[&str])] = &[];
 
 fn workspace_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

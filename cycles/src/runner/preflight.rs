@@ -365,12 +365,12 @@ pub(super) fn check_linear_move(
     }
     if let MoveFeed::Feed(f) = mv.feed {
         let fastest = machine.axes.iter().map(|a| a.max_feed).fold(0.0, f64::max);
-        if !(hal::motion_guard::MIN_FEED..=fastest).contains(&f) {
+        if !(hal::config::bounds::MIN_FEED..=fastest).contains(&f) {
             return Err(LinearBlockError::new(
                 LinearBlockErrorKind::Feed,
                 format!(
                     "L block: F{f}: the feed must be between {} and the machine's fastest max_feed {fastest} mm/min",
-                    hal::motion_guard::MIN_FEED
+                    hal::config::bounds::MIN_FEED
                 ),
             ));
         }

@@ -13,22 +13,12 @@
 //! the time the driver takes them in.
 
 use super::command::{Command, Reply};
-use super::rt_loop::{LoopConfig, LoopStats, RtLoop, TickFrames};
+use super::rt_loop::{LoopConfig, LoopStats, Pacing, RtLoop, TickFrames};
 use crate::can::{CanTransport, TransportError};
 use crate::clock::monotonic_ns;
 use crate::config::MachineConfig;
 use crate::contact_sample::SampleSink;
 use core::time::Duration;
-
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Pacing {
-    RealTime,
-    Lockstep {
-        /// Longest wall-clock wait for the drives' answers to one SYNC; a drive that
-        /// does not answer in time is not waited for again (its heartbeat decides).
-        answer_timeout: Duration,
-    },
-}
 
 /// Where the next SYNC slot of a real-time grid is, from the loop's start `epoch_ns`,
 /// the slots used so far and the time `now_ns`: the deadline, and how many slots were

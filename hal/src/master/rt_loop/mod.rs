@@ -37,7 +37,17 @@ use crate::motion::{AxisLimits, Profile};
 use crate::motion_guard::{may_start_deflected, ProbeInput};
 use latch::{ArmStage, PendingContact, ProbeRequest};
 
-pub use super::pacing::Pacing;
+/// How the loop is paced: on CLOCK_MONOTONIC at the SYNC period, or in lockstep with a
+/// simulator on a virtual clock (driven by `master::pacing`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Pacing {
+    RealTime,
+    Lockstep {
+        /// Longest wall-clock wait for the drives' answers to one SYNC; a drive that
+        /// does not answer in time is not waited for again (its heartbeat decides).
+        answer_timeout: core::time::Duration,
+    },
+}
 
 /// Most frames one tick sends: RPDO1 and RPDO2 of every drive, a repeated NMT start
 /// while enabling, the master's heartbeat, then SYNC.
