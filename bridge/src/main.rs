@@ -377,3 +377,9 @@ fn main() -> ExitCode {
         }
     }
 }
+
+/// The docs' links, tree paths and command lines against this CLI (test only; beside
+/// the integration tests, since it is one, but inside the binary to reach `Cli`).
+#[cfg(test)]
+#[path = "../tests/docs_check/mod.rs"]
+mod docs_check;
