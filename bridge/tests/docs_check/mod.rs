@@ -4,7 +4,7 @@
 //! `cargo test -p probebridge --bin probebridge docs_check`.
 //!
 //!
-//! - every relative link and image in README.md and docs/*.md names a
+//! - every relative link and image in README.md, ARCHITECTURE.md and docs/*.md names a
 //!   file that exists, and its `#anchor` a heading of that file (GitHub's slugs);
 //! - every path of the tree written in backticks (`hal/src/motion_guard.rs`,
 //!   `tests/vcan/cases`, `hal/src/canopen/`) exists, and every Rust file named without
@@ -28,9 +28,9 @@ fn root() -> PathBuf {
         .to_path_buf()
 }
 
-/// README.md and every page of docs/, relative to the root.
+/// README.md, ARCHITECTURE.md and every page of docs/, relative to the root.
 fn pages(root: &Path) -> Vec<PathBuf> {
-    let mut out = vec![PathBuf::from("README.md")];
+    let mut out = vec![PathBuf::from("README.md"), PathBuf::from("ARCHITECTURE.md")];
     let mut docs: Vec<PathBuf> = std::fs::read_dir(root.join("docs"))
         .expect("docs/ is readable")
         .map(|e| e.expect("docs/ entry").path())
