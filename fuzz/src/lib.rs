@@ -1,7 +1,7 @@
 //! Fuzzing for probebridge on the stable toolchain: every parser and frame decoder
 //! as a [`driver::Target`], and a driver that mutates a corpus seeded from the
-//! project's own files within a time or iteration budget (see the README's
-//! "Fuzzing" section and `probebridge-fuzz --help`).
+//! project's own files within a time or iteration budget (see docs/testing.md,
+//! "Fuzzing", and `probebridge-fuzz --help`).
 //!
 //! See `ARCHITECTURE.md#fuzz` in the repository root.
 

@@ -1,5 +1,5 @@
-//! The plausible ranges of the machine values, as the README's configuration section
-//! names them: a value outside is a typing error (a unit slip, a stray exponent) and is
+//! The plausible ranges of the machine values, as docs/configuration.md names
+//! them: a value outside is a typing error (a unit slip, a stray exponent) and is
 //! refused with the file, the key and the range before anything moves.
 
 /// The slowest feed any move is given (mm/min, deg/min): below it a move would take

@@ -519,7 +519,7 @@ A = [0.0, 0.0, 0.0]
 C = [0.0, 0.0, 0.0]
 "#;
 
-    /// Values outside the plausible ranges (README, Configuration) are refused with
+    /// Values outside the plausible ranges (docs/configuration.md) are refused with
     /// the file, the key, the value and the range. On main before these bounds every
     /// one of these parsed (`1e-300 > 0`, a NaN compares false, 0 ms was taken).
     #[test]

@@ -2,8 +2,8 @@
 //! (one FC16, sequence number last), a status block it reads (one FC3) and a latch
 //! ring (see [`super::latch_ring`]). Offsets are relative to each block's zero-based
 //! PDU base address; every 32-bit field is two registers in the configured
-//! [`WordOrder`]. Codec only: registers in, values out, no I/O. The README's table is
-//! this file.
+//! [`WordOrder`]. Codec only: registers in, values out, no I/O. The tables of
+//! docs/modbus.md ("The mailbox") are this file.
 
 use super::word_order::WordOrder;
 use crate::axis::{Axis, MAX_AXES};
