@@ -158,20 +158,7 @@ enum Cmd {
         realtime: bool,
     },
     /// The estimator process: receives contacts over iceoryx2, fits, answers requests.
-    Estimator {
-        #[arg(long, default_value = "probebridge")]
-        service: String,
-        /// One line per received contact.
-        #[arg(long)]
-        verbose: bool,
-        /// Record when each contact arrived (CLOCK_MONOTONIC) and write the records to
-        /// FILE at exit: `run_id sequence trigger_ns receive_ns t1_ns` per line.
-        #[arg(long, value_name = "FILE")]
-        record_times: Option<PathBuf>,
-        /// Records kept without reallocating.
-        #[arg(long, value_name = "N")]
-        record_capacity: Option<usize>,
-    },
+    Estimator(commands::estimator::EstimatorArgs),
     /// The gateway service: the machine up once, measurements on request of the PLC
     /// or HMI over a Modbus TCP face, readiness and watchdog for systemd.
     Serve {
@@ -323,12 +310,7 @@ fn main() -> ExitCode {
             (None, None, None) => Err("give --can, --modbus or --modbus-rtu".into()),
         }
         .map(|()| 0),
-        Cmd::Estimator {
-            service,
-            verbose,
-            record_times,
-            record_capacity,
-        } => commands::estimator::run(&service, verbose, record_times, record_capacity).map(|()| 0),
+        Cmd::Estimator(args) => commands::estimator::run(args).map(|()| 0),
         Cmd::Bench(BenchCmd::Trigger(args)) if args.modbus => {
             commands::bench::modbus::run(&commands::bench::modbus::ModbusBenchArgs {
                 triggers: args.triggers,

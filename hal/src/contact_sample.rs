@@ -10,6 +10,46 @@ use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 pub const FLAG_HW_LATCH: u32 = 1 << 0;
 /// `flags` bit: this sample ends a run (the estimator closes the run's set).
 pub const FLAG_END_OF_RUN: u32 = 1 << 1;
+/// `flags` bit: not a contact but a probing move's announcement ([`ProbeWindow`]):
+/// `trigger_ns` is when the move starts, `receive_ns` when it ends at the latest.
+pub const FLAG_PROBE_WINDOW: u32 = 1 << 2;
+
+/// A probing move about to start, told to the sink by the real-time loop: the
+/// receiver may watch for its contact until `end_ns` (same clock as the samples; the
+/// estimator uses only the duration, on its own clock).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ProbeWindow {
+    pub run_id: u64,
+    pub start_ns: u64,
+    /// The longest the move can take to its contact or its end, from `start_ns`.
+    pub end_ns: u64,
+}
+
+impl ProbeWindow {
+    pub fn duration_ns(&self) -> u64 {
+        self.end_ns.saturating_sub(self.start_ns)
+    }
+
+    /// The announcement as a sample ([`FLAG_PROBE_WINDOW`]).
+    pub fn to_sample(&self) -> ContactSample {
+        ContactSample {
+            run_id: self.run_id,
+            trigger_ns: self.start_ns,
+            receive_ns: self.end_ns,
+            flags: FLAG_PROBE_WINDOW,
+            ..ContactSample::zeroed()
+        }
+    }
+
+    /// The window a sample announces (`None`: a contact).
+    pub fn of_sample(s: &ContactSample) -> Option<Self> {
+        (s.flags & FLAG_PROBE_WINDOW != 0).then_some(Self {
+            run_id: s.run_id,
+            start_ns: s.trigger_ns,
+            end_ns: s.receive_ns,
+        })
+    }
+}
 
 #[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
 #[type_name("probebridge::ContactSample/1")]
@@ -61,6 +101,11 @@ pub trait SampleSink: Send {
     /// Publishes one sample. A failure is reported back to the loop, which counts it
     /// and goes on: a lost IPC sample must never stop the machine mid-move.
     fn publish(&mut self, sample: &ContactSample) -> Result<(), SinkError>;
+
+    /// A probing move starts (called once the drives are armed, after the tick's
+    /// frames went out): the sink may prepare the contact's publication and tell the
+    /// receiver to watch. Must not block either. Default: nothing.
+    fn probing_move(&mut self, _window: ProbeWindow) {}
 }
 
 /// A sample could not be handed on.
@@ -80,11 +125,27 @@ impl<S: SampleSink + ?Sized> SampleSink for Box<S> {
     fn publish(&mut self, sample: &ContactSample) -> Result<(), SinkError> {
         (**self).publish(sample)
     }
+
+    fn probing_move(&mut self, window: ProbeWindow) {
+        (**self).probing_move(window)
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_window_round_trips_through_a_sample_and_a_contact_is_none() {
+        let w = ProbeWindow {
+            run_id: 4,
+            start_ns: 10,
+            end_ns: 25,
+        };
+        assert_eq!(ProbeWindow::of_sample(&w.to_sample()), Some(w));
+        assert_eq!(w.duration_ns(), 15);
+        assert_eq!(ProbeWindow::of_sample(&ContactSample::zeroed()), None);
+    }
 
     #[test]
     fn layout_is_fixed() {

@@ -1,26 +1,28 @@
 //! The whole hot trigger path allocates nothing: 100 000 probing moves, each one a latch
-//! frame in, the stop started in the same cycle, and a `ContactSample` handed to the
-//! sink the bridge really uses (`ForwardingSink`), whose forwarder thread publishes it
-//! over iceoryx2 to a subscriber in another thread.
+//! frame in, the stop started in the same cycle, and a `ContactSample` published over
+//! iceoryx2 by the sink the bridge really uses (`ContactPublisher`), in the real-time
+//! thread itself (one hop), to a subscriber in another thread. Each probing move is
+//! also announced (its window) and its contact's sample loaned before it starts.
 //!
 //! What is counted, precisely:
 //! - **The real-time thread** (this test's thread): every allocation, reallocation and
 //!   free while the triggers run, through a counting global allocator gated by a
 //!   thread-local flag. This thread runs the master's `RtLoop` (frame decoding, CiA 402,
-//!   the latch, the stop, building the sample, `ForwardingSink::publish`) *and* the
+//!   the latch, the stop, building the sample, the window, the iceoryx2 loan, send and
+//!   notify of `ContactPublisher`) *and* the
 //!   simulated drives (the synchronous `Loopback` bus answers inside `transmit`), so
 //!   their code is counted too. Asserted: 0 allocations, 0 frees.
 //! - **All threads** (printed, not asserted): the same counters without the gate, over
-//!   the same window. They include the forwarder thread's iceoryx2 publish, which in
-//!   iceoryx2 0.10 allocates once per sample inside `loan_uninit` (an `Arc` in
-//!   `ChunkMutSharedState`, freed at `send`), and the subscriber thread's receive.
+//!   the same window: the subscriber thread's receive. (iceoryx2 0.10 would allocate
+//!   an `Arc` per loan; the publisher's service flavour recycles it, see
+//!   `probebridge::ipc::PooledSvc`.)
 //!
 //! The loop runs on the virtual clock (lockstep pacing) so 100 000 triggers take
 //! seconds; the code on the hot path (`RtLoop::on_frame`, the latch, `RtLoop::tick`, the
 //! sink) is the same under real-time pacing, whose driver only adds clock reads and
 //! timed waits.
 
-use probebridge::ipc::{ContactSubscriber, ForwardingSink};
+use probebridge::ipc::{ContactPublisher, ContactSubscriber};
 use probebridge_tests::alloc_count::{count, Counting};
 use probebridge_tests::probing_loop::{start, trigger, CONTACT_Z};
 use probebridge_tests::unique_service;
@@ -33,12 +35,12 @@ static GLOBAL: Counting = Counting;
 
 const TRIGGERS: u64 = 100_000;
 /// The real-time thread waits (yielding, without allocating) when the subscriber is
-/// this many samples behind, so neither the forwarder queue (1024) nor the subscriber
-/// buffer (1024) can overflow on a busy machine.
+/// this many contacts behind, so the subscriber buffer (1024 samples: a window and a
+/// contact per trigger) cannot overflow on a busy machine.
 const MAX_IN_FLIGHT: u64 = 256;
 
 #[test]
-fn hundred_thousand_triggers_through_the_bridge_sink_allocate_nothing_on_the_rt_thread() {
+fn hundred_thousand_triggers_published_by_the_rt_thread_allocate_nothing_there() {
     let service = unique_service("hotpath");
 
     // The estimator's side: a subscriber woken by the event, in its own thread.
@@ -62,7 +64,8 @@ fn hundred_thousand_triggers_through_the_bridge_sink_allocate_nothing_on_the_rt_
         })
     };
 
-    let sink = ForwardingSink::spawn(&service).expect("forwarding sink");
+    let sink = ContactPublisher::new(&service).expect("contact publisher");
+    sink.update_connections().expect("connections");
     let mut rt = start(sink);
 
     // Warm-up outside the count: first use of thread-locals, iceoryx2 connections.
@@ -97,14 +100,12 @@ fn hundred_thousand_triggers_through_the_bridge_sink_allocate_nothing_on_the_rt_
     }
     stop.store(true, Ordering::Release);
     sub_thread.join().unwrap();
-    let refused = rt.sink_mut().refused;
-    drop(rt); // stops the forwarder after it published everything queued
+    let publisher = rt.sink_mut().stats();
 
     println!(
         "{TRIGGERS} triggers in {:.1} s ({} cycles): real-time thread {rt_allocs} allocations, \
          {rt_frees} frees; all threads {all_allocs} allocations, {all_frees} frees \
-         ({:.2} per sample: the forwarder's iceoryx2 loan); \
-         {} samples received",
+         ({:.2} per sample); {} samples received",
         elapsed.as_secs_f64(),
         stats.cycles,
         all_allocs as f64 / TRIGGERS as f64,
@@ -116,7 +117,13 @@ fn hundred_thousand_triggers_through_the_bridge_sink_allocate_nothing_on_the_rt_
         "one sample per trigger"
     );
     assert_eq!(stats.publish_failures, 0);
-    assert_eq!(refused, 0, "the forwarder queue never refused a sample");
+    assert_eq!(publisher.failed, 0, "every publish succeeded");
+    // One hop: each contact went out from the sample loaned when its move started.
+    assert!(
+        publisher.preloaned >= TRIGGERS,
+        "{} of {TRIGGERS} contacts from a preloaned sample",
+        publisher.preloaned
+    );
     assert_eq!(
         received.load(Ordering::Acquire),
         TRIGGERS + 1,

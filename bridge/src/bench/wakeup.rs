@@ -1,5 +1,5 @@
 //! The host's own floor: how long one process takes to wake another that sleeps in
-//! the kernel on another CPU. A bare eventfd ping between a parent and a forked child
+//! the kernel. A bare eventfd ping between a parent and a forked child
 //! (no iceoryx2, no bus, no payload): the child blocks in `read`, the parent stamps
 //! CLOCK_MONOTONIC and writes, the child stamps when it runs again and answers. Every
 //! path that hands a contact from one process to another pays at least this.
@@ -54,6 +54,12 @@ impl SharedPage {
         // accessed atomically by both processes.
         unsafe { &*(self.0 as *const AtomicU64) }
     }
+
+    /// Set by the parent when the child is to leave.
+    fn quit(&self) -> &AtomicU64 {
+        // SAFETY: as `stamp`, the next word of the page.
+        unsafe { &*(self.0 as *const AtomicU64).add(1) }
+    }
 }
 
 impl Drop for SharedPage {
@@ -104,15 +110,107 @@ fn affinity() -> Option<libc::cpu_set_t> {
     }
 }
 
-/// `count` pings (after `warmup` not kept), the child under SCHED_FIFO at `priority`
-/// (0: ordinary), parent and child on different CPUs when there are two.
+/// Stamp word values before the first ping: bit 2 says the child is there, bit 0
+/// pinned, bit 1 SCHED_FIFO.
+const CHILD_THERE: u64 = 4;
+/// Written to the quit word: the child leaves after its next wake-up.
+const QUIT: u64 = 1;
+
+/// A forked partner process asleep in `read` on an eventfd, woken by [`Pinger::ping`]:
+/// once per trigger in the bench (cold: it slept as long as the estimator), or back
+/// to back ([`measure`], hot).
+pub struct Pinger {
+    page: SharedPage,
+    ping: Fd,
+    pong: Fd,
+    pid: libc::pid_t,
+    /// The child is pinned to another CPU than the caller's.
+    pub cross_cpu: bool,
+    /// The child runs under SCHED_FIFO.
+    pub fifo: bool,
+}
+
+impl Pinger {
+    /// Forks the partner, under SCHED_FIFO at `priority` (0: ordinary); with `pin`,
+    /// the caller on CPU 0 and the partner on CPU 1 (when there are two).
+    pub fn start(priority: i32, pin_cpus: bool) -> Result<Self, String> {
+        let page = SharedPage::new()?;
+        let (ping, pong) = (eventfd()?, eventfd()?);
+        let two_cpus = std::thread::available_parallelism().map_or(1, |n| n.get()) >= 2;
+        let pin_cpus = pin_cpus && two_cpus;
+        let parent_cpu = pin_cpus && pin(0);
+        // SAFETY: fork in a process with other threads: the child only makes
+        // async-signal-safe calls (sched_setaffinity, sched_setscheduler, read, write,
+        // clock_gettime, _exit) on memory that exists before the fork, and allocates
+        // nothing.
+        let pid = unsafe { libc::fork() };
+        if pid < 0 {
+            return Err(format!("fork: {}", std::io::Error::last_os_error()));
+        }
+        if pid == 0 {
+            partner(&page, &ping, &pong, pin_cpus, priority);
+        }
+        let child = if wait(&pong) {
+            page.stamp().load(Ordering::Acquire)
+        } else {
+            0
+        };
+        Ok(Self {
+            cross_cpu: parent_cpu && child & 0b101 == 0b101,
+            fifo: child & 0b110 == 0b110,
+            page,
+            ping,
+            pong,
+            pid,
+        })
+    }
+
+    /// One wake-up: CLOCK_MONOTONIC before the write to when the partner ran, ns.
+    pub fn ping(&mut self) -> Option<u64> {
+        let t0 = hal::clock::monotonic_ns();
+        if !signal(&self.ping) || !wait(&self.pong) {
+            return None;
+        }
+        Some(self.page.stamp().load(Ordering::Acquire).saturating_sub(t0))
+    }
+}
+
+impl Drop for Pinger {
+    fn drop(&mut self) {
+        self.page.quit().store(QUIT, Ordering::Release);
+        signal(&self.ping);
+        let mut status = 0;
+        // SAFETY: reaps the child we forked.
+        unsafe { libc::waitpid(self.pid, &mut status, 0) };
+    }
+}
+
+/// The forked partner: answers pings until told to quit, then leaves.
+fn partner(page: &SharedPage, ping: &Fd, pong: &Fd, pin_cpus: bool, priority: i32) -> ! {
+    let pinned = pin_cpus && pin(1);
+    let fifo = priority > 0 && hal::rt::set_fifo_priority(priority);
+    let stamp = page.stamp();
+    stamp.store(
+        CHILD_THERE | pinned as u64 | (fifo as u64) << 1,
+        Ordering::Release,
+    );
+    signal(pong);
+    while wait(ping) {
+        stamp.store(hal::clock::monotonic_ns(), Ordering::Release);
+        if page.quit().load(Ordering::Acquire) == QUIT || !signal(pong) {
+            break;
+        }
+    }
+    // SAFETY: leaves the child at once, running no destructors or atexit handlers of
+    // the parent's state.
+    unsafe { libc::_exit(0) }
+}
+
+/// `count` pings back to back (after `warmup` not kept): the hot figure. The partner
+/// under SCHED_FIFO at `priority` (0: ordinary), caller and partner on different
+/// CPUs when there are two; this thread runs at `priority` meanwhile.
 pub fn measure(count: usize, warmup: usize, priority: i32) -> Result<Wakeup, String> {
-    let page = SharedPage::new()?;
-    let (ping, pong) = (eventfd()?, eventfd()?);
-    let two_cpus = std::thread::available_parallelism().map_or(1, |n| n.get()) >= 2;
     let saved = affinity();
-    let total = count + warmup;
-    let parent_cpu = two_cpus && pin(0);
     // SAFETY: plain syscalls reading the calling thread's scheduling, to restore.
     let (policy, param) = unsafe {
         let mut param = libc::sched_param { sched_priority: 0 };
@@ -120,54 +218,20 @@ pub fn measure(count: usize, warmup: usize, priority: i32) -> Result<Wakeup, Str
         (libc::sched_getscheduler(0), param)
     };
     let parent_fifo = priority > 0 && hal::rt::set_fifo_priority(priority);
-    let stamp = page.stamp();
-    // SAFETY: fork in a process with other threads: the child only makes
-    // async-signal-safe calls (sched_setaffinity, sched_setscheduler, read, write,
-    // clock_gettime, _exit) on memory that exists before the fork, and allocates
-    // nothing.
-    let pid = unsafe { libc::fork() };
-    if pid < 0 {
-        return Err(format!("fork: {}", std::io::Error::last_os_error()));
-    }
-    if pid == 0 {
-        let pinned = two_cpus && pin(1);
-        let fifo = priority > 0 && hal::rt::set_fifo_priority(priority);
-        // The child's settings, in the stamp before the first ping: bit 2 says it is
-        // there, bit 0 pinned, bit 1 SCHED_FIFO.
-        stamp.store(4 | pinned as u64 | (fifo as u64) << 1, Ordering::Release);
-        signal(&pong);
-        for _ in 0..total {
-            if !wait(&ping) {
-                break;
-            }
-            stamp.store(hal::clock::monotonic_ns(), Ordering::Release);
-            if !signal(&pong) {
-                break;
-            }
-        }
-        // SAFETY: leaves the child at once, running no destructors or atexit
-        // handlers of the parent's state.
-        unsafe { libc::_exit(0) };
-    }
     let mut latencies_ns = Vec::with_capacity(count);
-    let child = if wait(&pong) {
-        stamp.load(Ordering::Acquire)
-    } else {
-        0
+    let started = Pinger::start(priority, true);
+    let (cross_cpu, fifo) = match started {
+        Ok(mut pinger) => {
+            for i in 0..count + warmup {
+                let Some(ns) = pinger.ping() else { break };
+                if i >= warmup {
+                    latencies_ns.push(ns);
+                }
+            }
+            (pinger.cross_cpu, pinger.fifo)
+        }
+        Err(_) => (false, false),
     };
-    for i in 0..total {
-        let t0 = hal::clock::monotonic_ns();
-        if !signal(&ping) || !wait(&pong) {
-            break;
-        }
-        let t1 = stamp.load(Ordering::Acquire);
-        if i >= warmup {
-            latencies_ns.push(t1.saturating_sub(t0));
-        }
-    }
-    let mut status = 0;
-    // SAFETY: reaps the child we forked.
-    unsafe { libc::waitpid(pid, &mut status, 0) };
     // Back to the thread's own scheduling.
     if parent_fifo && policy >= 0 {
         // SAFETY: plain syscall on the calling thread, with what it had.
@@ -185,8 +249,8 @@ pub fn measure(count: usize, warmup: usize, priority: i32) -> Result<Wakeup, Str
     }
     Ok(Wakeup {
         latencies_ns,
-        cross_cpu: parent_cpu && child & 0b101 == 0b101,
-        fifo: parent_fifo && child & 0b110 == 0b110,
+        cross_cpu,
+        fifo: parent_fifo && fifo,
     })
 }
 
@@ -199,5 +263,17 @@ mod tests {
         let w = measure(200, 10, 0).unwrap();
         assert_eq!(w.latencies_ns.len(), 200);
         assert!(w.latencies_ns.iter().all(|&ns| ns > 0));
+    }
+
+    #[test]
+    fn a_pinger_answers_each_ping_and_its_partner_leaves_when_dropped() {
+        let mut p = Pinger::start(0, false).unwrap();
+        for _ in 0..3 {
+            assert!(p.ping().is_some_and(|ns| ns > 0));
+        }
+        let pid = p.pid;
+        drop(p);
+        // SAFETY: probes whether the reaped child still exists.
+        assert_eq!(unsafe { libc::kill(pid, 0) }, -1, "the partner is gone");
     }
 }

@@ -1,24 +1,41 @@
 //! `probebridge estimator`: the estimator process.
 
-use crate::estimator::{run_estimator_with, EstimatorOptions};
+use crate::estimator::{run_estimator_with, ArmedReceive, EstimatorOptions};
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
 /// Receive-time records kept without reallocating unless `--record-capacity` says.
 pub const DEFAULT_RECORD_CAPACITY: usize = 1 << 16;
 
-pub fn run(
-    service: &str,
-    verbose: bool,
-    record_times: Option<PathBuf>,
-    record_capacity: Option<usize>,
-) -> Result<(), String> {
+/// The options of `probebridge estimator`, parsed by clap straight into this.
+#[derive(clap::Args, Clone, Debug)]
+pub struct EstimatorArgs {
+    #[arg(long, default_value = "probebridge")]
+    pub service: String,
+    /// One line per received contact.
+    #[arg(long)]
+    pub verbose: bool,
+    /// Record when each contact arrived (CLOCK_MONOTONIC) and write the records to
+    /// FILE at exit: `run_id sequence trigger_ns receive_ns t1_ns` per line.
+    #[arg(long, value_name = "FILE")]
+    pub record_times: Option<PathBuf>,
+    /// Records kept without reallocating.
+    #[arg(long, value_name = "N")]
+    pub record_capacity: Option<usize>,
+    /// Poll for the contact during probing moves ("auto": where the machine has a
+    /// CPU to spare) or always sleep until woken ("off").
+    #[arg(long, value_enum, default_value_t = ArmedReceive::Auto)]
+    pub armed_receive: ArmedReceive,
+}
+
+pub fn run(args: EstimatorArgs) -> Result<(), String> {
     let stop = AtomicBool::new(false);
     let options = EstimatorOptions {
-        verbose,
+        verbose: args.verbose,
         handle_signals: true,
-        record_times,
-        record_capacity: record_capacity.unwrap_or(DEFAULT_RECORD_CAPACITY),
+        record_times: args.record_times,
+        record_capacity: args.record_capacity.unwrap_or(DEFAULT_RECORD_CAPACITY),
+        armed_receive: args.armed_receive,
     };
-    run_estimator_with(service, &options, &stop, std::io::stderr()).map_err(|e| e.to_string())
+    run_estimator_with(&args.service, &options, &stop, std::io::stderr()).map_err(|e| e.to_string())
 }

@@ -305,8 +305,28 @@ impl EstimatorChild {
     /// Starts `current_exe() estimator --service <prefix>` and waits until it answers a
     /// ping (polling, up to `timeout`).
     pub fn spawn(prefix: &str, timeout: Duration) -> Result<Self, IpcError> {
+        Self::spawn_receiving(
+            prefix,
+            crate::estimator::armed::ArmedReceive::default(),
+            timeout,
+        )
+    }
+
+    /// As [`EstimatorChild::spawn`], with `--armed-receive` (config
+    /// `[estimator] armed_receive`).
+    pub fn spawn_receiving(
+        prefix: &str,
+        armed: crate::estimator::armed::ArmedReceive,
+        timeout: Duration,
+    ) -> Result<Self, IpcError> {
         let mut command = Command::new(std::env::current_exe()?);
-        command.args(["estimator", "--service", prefix]);
+        command.args([
+            "estimator",
+            "--service",
+            prefix,
+            "--armed-receive",
+            armed.as_str(),
+        ]);
         Self::spawn_command(command, prefix, timeout)
     }
 

@@ -15,19 +15,18 @@
 //! one function here ([`open_contact_service`] etc.) with the quality-of-service numbers
 //! below, so `open_or_create` sees the same settings from every process.
 //!
-//! The real-time loop gets either [`ContactPublisher`] (publishes in the loop's thread;
-//! one heap allocation per sample inside iceoryx2 0.10, see there) or [`ForwardingSink`]
-//! (no allocation in the loop's thread; a forwarder thread publishes).
+//! The real-time loop gets [`ContactPublisher`]: it publishes in the loop's thread (one
+//! hop to the estimator) and allocates nothing there, on [`PooledSvc`].
 //!
-//! Everything uses [`Svc`] = `ipc_threadsafe::Service`: [`hal::SampleSink`] must be `Send`
-//! (the real-time loop owns it in its own thread), and the plain `ipc::Service` ports are
-//! `!Send` (`Rc` inside). Both flavours share the same shared-memory layout, so a process
-//! using `ipc::Service` could still talk to these services.
+//! Everything else uses [`Svc`] = `ipc_threadsafe::Service`: [`hal::SampleSink`] must be
+//! `Send` (the real-time loop owns it in its own thread), and the plain `ipc::Service`
+//! ports are `!Send` (`Rc` inside). All flavours share the same shared-memory layout,
+//! so a process using `ipc::Service` could still talk to these services.
 
 mod client;
-mod forwarder;
 mod identify;
 mod payload;
+mod pooled_service;
 mod process_watch;
 mod publisher;
 mod runtime_dir;
@@ -35,12 +34,12 @@ mod service_lock;
 mod subscriber;
 
 pub use client::{EstimatorChild, EstimatorClient};
-pub use forwarder::{ForwardingSink, FORWARD_QUEUE};
 pub use identify::{IdentifySessions, IpcEstimator, CHUNK, MAX_INPUT, MAX_SESSIONS};
 pub use payload::{
     EstimatorReply, EstimatorRequest, ReplyStatus, RequestKind, SphereResult, REPLY_VALUES,
     REQUEST_MAX_RUNS, REQUEST_PARAMS,
 };
+pub use pooled_service::{PooledArc, PooledSvc};
 pub use publisher::{ContactPublisher, PublisherStats};
 pub use runtime_dir::{
     iceoryx_config, iceoryx_root_in, lock_dir, unit_runtime_dir, RUNTIME_DIRECTORY,
@@ -55,6 +54,7 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event, publish_subscribe, request_response};
+use iceoryx2::service::Service;
 
 use hal::ContactSample;
 
@@ -80,7 +80,8 @@ pub const CONTACT_MAX_BORROWED: usize = 2;
 pub const CONTACT_MAX_PUBLISHERS: usize = 2;
 /// The estimator plus monitors (a `probebridge contacts` viewer, tests).
 pub const CONTACT_MAX_SUBSCRIBERS: usize = 4;
-/// Samples the publisher loans at a time (loan, write, send: one).
+/// Samples the publisher loans at a time (one, loaned when a probing move starts and
+/// sent with its contact).
 pub const CONTACT_MAX_LOANS: usize = 1;
 
 /// One estimator per prefix: a second one fails to create its server.
@@ -180,14 +181,14 @@ impl IpcError {
 /// Creates a node, under the root of [`iceoryx_config`]. Signal handling is left to the
 /// application: iceoryx2 would otherwise install SIGINT/SIGTERM handlers for the whole
 /// process.
-pub fn create_node(name: &str) -> Result<Node<Svc>, IpcError> {
+pub fn create_node<S: Service>(name: &str) -> Result<Node<S>, IpcError> {
     let name = NodeName::new(name).map_err(|e| IpcError::iox("node name", e))?;
     let config = iceoryx_config().map_err(|e| IpcError::iox("configuration", e))?;
     NodeBuilder::new()
         .name(&name)
         .config(config)
         .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<Svc>()
+        .create::<S>()
         .map_err(|e| IpcError::iox("create node", e))
 }
 
@@ -195,16 +196,16 @@ fn service_name(name: &str) -> Result<ServiceName, IpcError> {
     ServiceName::new(name).map_err(|e| IpcError::iox("service name", e))
 }
 
-pub type ContactService = publish_subscribe::PortFactory<Svc, ContactSample, ()>;
+pub type ContactService<S = Svc> = publish_subscribe::PortFactory<S, ContactSample, ()>;
 pub type RequestService =
     request_response::PortFactory<Svc, EstimatorRequest, (), EstimatorReply, ()>;
-pub type EventService = event::PortFactory<Svc>;
+pub type EventService<S = Svc> = event::PortFactory<S>;
 
 /// `<prefix>/contacts` with the settings above.
-pub fn open_contact_service(
-    node: &Node<Svc>,
+pub fn open_contact_service<S: Service>(
+    node: &Node<S>,
     names: &ServiceNames,
-) -> Result<ContactService, IpcError> {
+) -> Result<ContactService<S>, IpcError> {
     node.service_builder(&service_name(&names.contacts)?)
         .publish_subscribe::<ContactSample>()
         .enable_safe_overflow(true)
@@ -237,7 +238,10 @@ pub fn open_request_service(
 }
 
 /// One of the wake-up event services.
-pub fn open_event_service(node: &Node<Svc>, name: &str) -> Result<EventService, IpcError> {
+pub fn open_event_service<S: Service>(
+    node: &Node<S>,
+    name: &str,
+) -> Result<EventService<S>, IpcError> {
     node.service_builder(&service_name(name)?)
         .event()
         .max_notifiers(MAX_EVENT_PORTS)
@@ -246,14 +250,14 @@ pub fn open_event_service(node: &Node<Svc>, name: &str) -> Result<EventService, 
         .map_err(|e| IpcError::iox("open or create an event service", e))
 }
 
-pub(crate) fn notifier(service: &EventService) -> Result<Notifier<Svc>, IpcError> {
+pub(crate) fn notifier<S: Service>(service: &EventService<S>) -> Result<Notifier<S>, IpcError> {
     service
         .notifier_builder()
         .create()
         .map_err(|e| IpcError::iox("create notifier", e))
 }
 
-pub(crate) fn listener(service: &EventService) -> Result<Listener<Svc>, IpcError> {
+pub(crate) fn listener<S: Service>(service: &EventService<S>) -> Result<Listener<S>, IpcError> {
     service
         .listener_builder()
         .create()

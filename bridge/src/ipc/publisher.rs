@@ -1,21 +1,26 @@
-//! The real-time side: every latched contact goes out as one iceoryx2 sample.
+//! The real-time side: every latched contact goes out as one iceoryx2 sample, published
+//! by the real-time thread itself (one hop: no forwarder thread between).
+
+use core::mem::MaybeUninit;
 
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
+use iceoryx2::sample_mut_uninit::SampleMutUninit;
 
+use hal::contact_sample::ProbeWindow;
 use hal::{ContactSample, SampleSink, SinkError};
 
 use super::{
-    create_node, notifier, open_contact_service, open_event_service, IpcError, ServiceNames, Svc,
-    CONTACT_MAX_LOANS,
+    create_node, notifier, open_contact_service, open_event_service, IpcError, PooledSvc,
+    ServiceNames, CONTACT_MAX_LOANS,
 };
 
 /// Counters of a [`ContactPublisher`] (read them outside the real-time thread).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PublisherStats {
-    /// Samples handed to iceoryx2.
+    /// Samples handed to iceoryx2 (contacts and probing windows).
     pub published: u64,
     /// Samples that could not be loaned or sent (returned as [`SinkError`]).
     pub failed: u64,
@@ -24,44 +29,42 @@ pub struct PublisherStats {
     /// Samples sent whose wake-up event could not be sent (the estimator sees the
     /// sample at its next periodic wake-up instead).
     pub notify_failed: u64,
+    /// Contacts sent from a sample loaned before their probing move started.
+    pub preloaned: u64,
 }
 
+type Loaned = SampleMutUninit<PooledSvc, MaybeUninit<ContactSample>, ()>;
+
 /// Publishes [`ContactSample`]s on `<prefix>/contacts` and wakes the estimator through
-/// `<prefix>/contacts/event`.
+/// `<prefix>/contacts/event`; the real-time loop's sink.
 ///
-/// `publish` does, per sample: `Publisher::loan_uninit`, `SampleMutUninit::write_payload`,
-/// `SampleMut::send`, `Notifier::notify`. No lock is taken that another thread of this
-/// process holds (the port mutexes of `ipc_threadsafe` are only ever locked by the owner
-/// thread) and nothing blocks (safe overflow: a full subscriber buffer loses its oldest
-/// sample).
+/// Per contact: the payload written into a sample loaned when the probing move started
+/// ([`SampleSink::probing_move`]), `SampleMut::send`, `Notifier::notify`. No lock is
+/// taken that another thread holds and nothing blocks (safe overflow: a full subscriber
+/// buffer loses its oldest sample).
 ///
-/// Allocation, read from the iceoryx2 0.10 sources:
-/// - `loan_uninit` allocates once on the heap per sample: `SampleMutUninit::new` wraps
-///   the chunk in `ChunkMutSharedState::new`, which is `ArcSyncPolicy::new` = `Arc::new`
-///   (+ a non-shared pthread mutex) for `ipc_threadsafe` (`Rc::new` for `ipc`); it is
-///   freed again at `send`. iceoryx2 0.10 has no loan variant without it (`send_copy`,
-///   `loan`, `loan_slice_uninit` all go through `SampleMutUninit::new`).
-/// - `send` and `notify` do not allocate in the steady state. They do when the set of
-///   subscribers/listeners changed since the previous call: `send` then opens the new
-///   zero-copy connection (`format!` of its name, shared-memory open), `notify`
-///   rebuilds its listener list (a `Vec`). Call [`ContactPublisher::update_connections`]
-///   outside the hot path (e.g. when a run starts) to take that cost there.
-/// - Error paths log through iceoryx2's logger, which formats.
+/// Allocation: none after the first sample. The ports are on [`PooledSvc`], whose
+/// per-sample shared state comes from recycled blocks (see there for where iceoryx2
+/// 0.10 allocates otherwise). `send` and `notify` allocate only when the set of
+/// subscribers/listeners changed since the previous call (a new connection is opened):
+/// [`ContactPublisher::update_connections`] takes that cost outside the hot path, and
+/// so does every probing window. Error paths log through iceoryx2's logger, which
+/// formats.
 pub struct ContactPublisher {
-    // Field order = drop order: ports before the node.
-    publisher: Publisher<Svc, ContactSample, ()>,
-    notifier: Notifier<Svc>,
+    // Field order = drop order: the loaned sample and the ports before the node.
+    loaned: Option<Loaned>,
+    publisher: Publisher<PooledSvc, ContactSample, ()>,
+    notifier: Notifier<PooledSvc>,
     stats: PublisherStats,
     names: ServiceNames,
-    _node: Node<Svc>,
+    _node: Node<PooledSvc>,
 }
 
 impl ContactPublisher {
     /// Opens (or creates) the contact services under `prefix` and creates the ports.
-    /// All allocation happens here.
     pub fn new(prefix: &str) -> Result<Self, IpcError> {
         let names = ServiceNames::new(prefix)?;
-        let node = create_node("probebridge-contacts")?;
+        let node = create_node::<PooledSvc>("probebridge-contacts")?;
         let service = open_contact_service(&node, &names)?;
         let publisher = service
             .publisher_builder()
@@ -70,6 +73,7 @@ impl ContactPublisher {
             .map_err(|e| IpcError::iox("create contact publisher", e))?;
         let notifier = notifier(&open_event_service(&node, &names.contacts_event)?)?;
         Ok(Self {
+            loaned: None,
             publisher,
             notifier,
             stats: PublisherStats::default(),
@@ -97,20 +101,27 @@ impl ContactPublisher {
             .map_err(|e| IpcError::iox("update notifier connections", e))
     }
 
-    /// Publishes one sample; returns how many subscribers received it.
+    /// Loans the sample the next contact is written into, if none is loaned yet.
+    pub fn preloan(&mut self) {
+        if self.loaned.is_none() {
+            self.loaned = self.publisher.loan_uninit().ok();
+        }
+    }
+
+    /// Publishes one sample (from the loaned one, else a new loan); returns how many
+    /// subscribers received it.
     pub fn send(&mut self, sample: &ContactSample) -> Result<usize, SinkError> {
-        let receivers = match self.publisher.loan_uninit() {
-            Ok(slot) => match slot.write_payload(*sample).send() {
-                Ok(n) => n,
-                Err(_) => {
-                    self.stats.failed += 1;
-                    return Err(SinkError);
-                }
-            },
-            Err(_) => {
-                self.stats.failed += 1;
-                return Err(SinkError);
-            }
+        let slot = match self.loaned.take() {
+            Some(slot) => Ok(slot),
+            None => self.publisher.loan_uninit(),
+        };
+        let sent = match slot {
+            Ok(slot) => slot.write_payload(*sample).send().map_err(|_| SinkError),
+            Err(_) => Err(SinkError),
+        };
+        let Ok(receivers) = sent else {
+            self.stats.failed += 1;
+            return Err(SinkError);
         };
         self.stats.published += 1;
         if receivers == 0 {
@@ -125,7 +136,17 @@ impl ContactPublisher {
 
 impl SampleSink for ContactPublisher {
     fn publish(&mut self, sample: &ContactSample) -> Result<(), SinkError> {
+        if self.loaned.is_some() {
+            self.stats.preloaned += 1;
+        }
         self.send(sample).map(|_| ())
+    }
+
+    /// Tells the estimator the window (it may poll for the contact until its end),
+    /// then loans the contact's sample, so the contact only writes and sends.
+    fn probing_move(&mut self, window: ProbeWindow) {
+        let _ = self.send(&window.to_sample());
+        self.preloan();
     }
 }
 

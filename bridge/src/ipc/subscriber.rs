@@ -1,5 +1,6 @@
 //! The receiving side of `<prefix>/contacts` (estimator, monitors, tests).
 
+use core::cell::Cell;
 use core::time::Duration;
 use std::time::Instant;
 
@@ -7,6 +8,7 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 
+use hal::contact_sample::ProbeWindow;
 use hal::ContactSample;
 
 use super::{
@@ -15,7 +17,12 @@ use super::{
 };
 
 /// Subscribes to `<prefix>/contacts` and listens on `<prefix>/contacts/event`.
+///
+/// Probing windows ([`ProbeWindow`], announced on the same service) are not returned
+/// as samples: the last one is kept until its contact arrives or it is taken
+/// ([`ContactSubscriber::take_window`]).
 pub struct ContactSubscriber {
+    window: Cell<Option<ProbeWindow>>,
     // Field order = drop order: ports before the node.
     subscriber: Subscriber<Svc, ContactSample, ()>,
     listener: Listener<Svc>,
@@ -39,6 +46,7 @@ impl ContactSubscriber {
             .map_err(|e| IpcError::iox("create contact subscriber", e))?;
         let listener = listener(&open_event_service(&node, &names.contacts_event)?)?;
         Ok(Self {
+            window: Cell::new(None),
             subscriber,
             listener,
             names,
@@ -59,13 +67,29 @@ impl ContactSubscriber {
         &self.listener
     }
 
-    /// Takes one sample if there is one (does not wait).
+    /// Takes one contact if there is one (does not wait). A window on the way is
+    /// kept; a contact ends the window it belongs to.
     pub fn try_receive(&self) -> Result<Option<ContactSample>, IpcError> {
-        match self.subscriber.receive() {
-            Ok(Some(sample)) => Ok(Some(*sample.payload())),
-            Ok(None) => Ok(None),
-            Err(e) => Err(IpcError::iox("receive contact sample", e)),
+        loop {
+            match self.subscriber.receive() {
+                Ok(Some(sample)) => {
+                    let s = *sample.payload();
+                    if let Some(w) = ProbeWindow::of_sample(&s) {
+                        self.window.set(Some(w));
+                        continue;
+                    }
+                    self.window.set(None);
+                    return Ok(Some(s));
+                }
+                Ok(None) => return Ok(None),
+                Err(e) => return Err(IpcError::iox("receive contact sample", e)),
+            }
         }
+    }
+
+    /// The probing window announced last whose contact has not come yet, once.
+    pub fn take_window(&self) -> Option<ProbeWindow> {
+        self.window.take()
     }
 
     /// Consumes pending wake-up events (call before draining with `try_receive`, so a

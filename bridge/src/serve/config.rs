@@ -23,6 +23,18 @@ pub struct GatewayConfig {
     pub history: HistorySection,
     #[serde(default)]
     pub web: WebSection,
+    #[serde(default)]
+    pub estimator: EstimatorSection,
+}
+
+/// `[estimator]`: the estimator process the gateway starts.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EstimatorSection {
+    /// `"auto"` (default): poll for the contact during probing moves where the machine
+    /// has a CPU to spare; `"off"`: always sleep until woken.
+    #[serde(default)]
+    pub armed_receive: crate::estimator::ArmedReceive,
 }
 
 /// The read-only web face (trend page, measuring protocols, status): off unless

@@ -45,13 +45,13 @@ pub fn run(
             return;
         }
     };
-    let mut estimator = spawn_estimator(&opts.service);
+    let mut estimator = spawn_estimator(&opts.service, cfg.estimator.armed_receive);
     let _ = ready.send(Ok(session.notes.clone()));
     let mut link = MachineLink::Up(Box::new(session));
     loop {
         match jobs.recv_timeout(HEALTH_PERIOD) {
             Ok(ToMachine::Run(job)) => {
-                supervise(&mut estimator, &opts.service);
+                supervise(&mut estimator, &opts.service, cfg.estimator.armed_receive);
                 match link.session() {
                     Some(session) => {
                         let ctx = Measure {
@@ -85,7 +85,7 @@ pub fn run(
             }
             Ok(ToMachine::Quit) | Err(RecvTimeoutError::Disconnected) => break,
             Err(RecvTimeoutError::Timeout) => {
-                supervise(&mut estimator, &opts.service);
+                supervise(&mut estimator, &opts.service, cfg.estimator.armed_receive);
                 link.supervise(shared, &opts);
             }
         }
@@ -100,8 +100,8 @@ struct Measure<'a> {
     history: Option<&'a Recorder>,
 }
 
-fn spawn_estimator(service: &str) -> Option<EstimatorChild> {
-    match EstimatorChild::spawn(service, ESTIMATOR_TIMEOUT) {
+fn spawn_estimator(service: &str, armed: crate::estimator::ArmedReceive) -> Option<EstimatorChild> {
+    match EstimatorChild::spawn_receiving(service, armed, ESTIMATOR_TIMEOUT) {
         Ok(c) => {
             tracing::info!(pid = c.id(), service, "estimator process started");
             Some(c)
@@ -116,7 +116,11 @@ fn spawn_estimator(service: &str) -> Option<EstimatorChild> {
 }
 
 /// Restarts the estimator process when it has died.
-fn supervise(estimator: &mut Option<EstimatorChild>, service: &str) {
+fn supervise(
+    estimator: &mut Option<EstimatorChild>,
+    service: &str,
+    armed: crate::estimator::ArmedReceive,
+) {
     let dead = match estimator.as_mut().map(EstimatorChild::try_wait) {
         Some(Ok(None)) => false,
         Some(Ok(Some(status))) => {
@@ -131,7 +135,7 @@ fn supervise(estimator: &mut Option<EstimatorChild>, service: &str) {
     };
     if dead {
         *estimator = None;
-        *estimator = spawn_estimator(service);
+        *estimator = spawn_estimator(service, armed);
     }
 }
 

@@ -3,7 +3,7 @@
 //! or, over Modbus, a PLC that moves the axes ([`modbus`]).
 
 use crate::configs;
-use crate::ipc::{ForwardingSink, ServiceLock};
+use crate::ipc::{ContactPublisher, ServiceLock};
 use cycles::CyclesConfig;
 use hal::can::inproc::{InprocBus, WireClock};
 use hal::can::record::RecordHealth;
@@ -125,7 +125,7 @@ impl Session {
         let service = ServiceLock::acquire(&opts.service)?;
         let (mut config, scenario) = resolve_machine(opts)?;
         let sink =
-            ForwardingSink::spawn(&opts.service).map_err(|e| SessionError::Ipc(e.to_string()))?;
+            ContactPublisher::new(&opts.service).map_err(|e| SessionError::Ipc(e.to_string()))?;
         let run_id = hal::clock::monotonic_ns();
         if modbus::wanted(opts, &config) {
             let (machine, plc, notes) =

@@ -2,7 +2,7 @@
 //!
 //! ```text
 //!  simulated PLC ──latch ring──> ModbusMachine ──ContactSample──> estimator process
-//!  (t0: CLOCK_MONOTONIC   (status polled   (ForwardingSink,        (t1: CLOCK_MONOTONIC
+//!  (t0: CLOCK_MONOTONIC   (status polled   (ContactPublisher,      (t1: CLOCK_MONOTONIC
 //!   when the PLC latches)  every poll_ms)   iceoryx2)               when it has it)
 //! ```
 //!
@@ -14,7 +14,7 @@
 use crate::bench::{self, Summary};
 use crate::configs;
 use crate::estimator::ReceiveTime;
-use crate::ipc::{EstimatorChild, ForwardingSink};
+use crate::ipc::{ContactPublisher, EstimatorChild};
 use hal::config::BusConfig;
 use hal::modbus::{ModbusBusConfig, ModbusMachine, ModbusOptions};
 use hal::{AxisPositions, Machine, ProbeMove};
@@ -100,7 +100,8 @@ pub fn run(args: &ModbusBenchArgs) -> Result<(), String> {
     bus.address = plc.local_addr().map(|a| a.to_string());
     let mut cfg = crate::session::machine_config(&scenario);
     cfg.bus = BusConfig::Modbus(bus.clone());
-    let sink = ForwardingSink::spawn(&ws.prefix).map_err(|e| e.to_string())?;
+    let sink = ContactPublisher::new(&ws.prefix).map_err(|e| e.to_string())?;
+    sink.update_connections().map_err(|e| e.to_string())?;
     let options = ModbusOptions {
         run_id: TRIGGER_RUN,
         ..ModbusOptions::default()
@@ -230,7 +231,7 @@ fn report(
     };
     say!(
         "probebridge bench trigger --modbus: {} triggers ({warmup} warm-up not counted) in {:.1} s; \
-         simulated PLC on Modbus TCP loopback, PLC cycle {} us, status poll {} ms; sink: ForwardingSink",
+         simulated PLC on Modbus TCP loopback, PLC cycle {} us, status poll {} ms; sink: ContactPublisher (one hop)",
         args.triggers,
         elapsed.as_secs_f64(),
         args.plc_cycle_us,
@@ -261,6 +262,14 @@ fn report(
         client.timeouts,
         client.reconnects
     );
+    // The path's own floor: a latch waits up to one PLC task cycle to be seen and up to
+    // one status poll to be read.
+    let floor_us = args.plc_cycle_us as f64 + args.poll_ms as f64 * 1000.0;
+    say!(
+        "floor: PLC task cycle + status poll = {floor_us:.0} us; trigger -> estimator vs the floor: p50 {:.2}x, p99 {:.2}x",
+        trig.p50_us / floor_us,
+        trig.p99_us / floor_us
+    );
     say!("the axes stop in the PLC on its latch; this latency is when the estimator has the contact, not its accuracy");
     if let Some(path) = &args.json {
         let v = json!({
@@ -270,6 +279,11 @@ fn report(
             "plc_cycle_us": args.plc_cycle_us,
             "poll_ms": args.poll_ms,
             "trigger_to_estimator": trig.to_json(),
+            "floor_us": floor_us,
+            "trigger_vs_floor": {
+                "p50_ratio": trig.p50_us / floor_us,
+                "p99_ratio": trig.p99_us / floor_us,
+            },
             "latch_to_bridge": hop.map(Summary::to_json),
             "bridge_to_estimator": ipc.map(Summary::to_json),
             "lost_samples": lost,

@@ -71,8 +71,12 @@ impl<S: SampleSink> RtLoop<S> {
     }
 
     /// The driver sent the frames of the last tick at `sent_ns`: the stop latency of a
-    /// contact is measured up to here.
+    /// contact is measured up to here. A probing move that started with this tick is
+    /// told to the sink now, so its SYNC did not wait for that.
     pub fn frames_sent(&mut self, sent_ns: u64) {
+        if let Some(w) = self.window_due.take() {
+            self.sink.probing_move(w);
+        }
         if let Some((rx, rx_sync)) = self.stop_pending_since.take() {
             self.stats.last_stop_latency_ns = sent_ns.saturating_sub(rx);
             // SYNC periods between the cycle of the latch and this one (rounded: in real

@@ -5,7 +5,7 @@
 use super::{Activity, DriveLink, RtLoop};
 use crate::axis::{Axis, MAX_AXES};
 use crate::cia402::touch_probe::{Probe, TouchProbeFunction, TouchProbeStatus};
-use crate::contact_sample::{ContactSample, SampleSink, FLAG_HW_LATCH};
+use crate::contact_sample::{ContactSample, ProbeWindow, SampleSink, FLAG_HW_LATCH};
 use crate::machine::ErrorKind;
 use crate::master::command::{Detail, Reply, RtError};
 use crate::master::process_data::Tpdo2;
@@ -249,8 +249,17 @@ impl<S: SampleSink> RtLoop<S> {
             for (to, d) in to.iter_mut().zip(request.direction) {
                 *to += d * request.max_distance;
             }
+            let profile = Profile::line(from, to, request.feed, &self.limits);
+            // The contact comes within the path, its latch frame within two periods
+            // after it.
+            let longest = (profile.duration() * 1e9) as u64 + 2 * self.cfg.period_ns;
+            self.window_due = Some(ProbeWindow {
+                run_id: request.run_id,
+                start_ns: self.sync_ns,
+                end_ns: self.sync_ns + longest,
+            });
             self.activity = Activity::Probing {
-                profile: Profile::line(from, to, request.feed, &self.limits),
+                profile,
                 t: 0.0,
                 request,
             };

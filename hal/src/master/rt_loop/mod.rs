@@ -31,7 +31,7 @@ use crate::can::CanFrame;
 use crate::canopen::heartbeat::HeartbeatConsumer;
 use crate::cia402::controlword::Controlword;
 use crate::config::{CanOpenBusConfig, MachineConfig};
-use crate::contact_sample::SampleSink;
+use crate::contact_sample::{ProbeWindow, SampleSink};
 use crate::machine::ErrorKind;
 use crate::motion::{AxisLimits, Profile};
 use crate::motion_guard::{may_start_deflected, ProbeInput};
@@ -254,6 +254,8 @@ pub struct RtLoop<S: SampleSink> {
     heartbeat_due_ns: Option<u64>,
     /// Ticks since the shutdown; after [`SHUTDOWN_TICKS`] the goodbye goes out.
     shutdown_ticks: u32,
+    /// A probing move started with this tick: told to the sink once its frames are out.
+    window_due: Option<ProbeWindow>,
 }
 
 impl<S: SampleSink> RtLoop<S> {
@@ -301,6 +303,7 @@ impl<S: SampleSink> RtLoop<S> {
             arm_retry: false,
             heartbeat_due_ns: None,
             shutdown_ticks: 0,
+            window_due: None,
         }
     }
 

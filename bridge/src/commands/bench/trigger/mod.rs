@@ -8,24 +8,28 @@
 //! ```
 //!
 //! The bridge side is the real one: `CanMachine` with its real-time thread (SCHED_FIFO
-//! and locked memory where permitted), the sink the bridge uses (`ForwardingSink`, or
-//! with `--direct` a `ContactPublisher` called in the real-time thread), the estimator
-//! as a child process (`probebridge estimator --record-times FILE`) woken by the
-//! iceoryx2 event. The drives are the simulator in this process (the in-process bus, or
-//! a second socket on `--can IFACE`), which records t0 in a lock-free ring
-//! (`sim::machine::LatchLog`).
+//! and locked memory where permitted), the sink the bridge uses (`ContactPublisher`,
+//! called in the real-time thread: one hop), the estimator as a child process
+//! (`probebridge estimator --record-times FILE --armed-receive auto|off`). The drives
+//! are the simulator in this process (the in-process bus, or a second socket on
+//! `--can IFACE`), which records t0 in a lock-free ring (`sim::machine::LatchLog`).
 //!
-//! In the same run, after every trigger, the floor: one `ContactSample` published by
-//! this process with `ContactPublisher` straight to the same estimator (same services,
-//! same payload, same event wake-up), t0 taken right before the send. After the
-//! triggers, the host's own floor: a bare eventfd wake-up of a forked process on the
-//! other CPU ([`crate::bench::wakeup`]).
+//! The floors are taken in the trigger's own regime, interleaved with the triggers:
+//! after each trigger, one cold eventfd ping to a forked process that has slept since
+//! the previous trigger ([`crate::bench::wakeup::Pinger`]), and one bare iceoryx2 hop
+//! (`ContactPublisher` in this process, same payload and services) to a second
+//! estimator process that has slept as long. Each receiver is woken once per trigger,
+//! so all three wake after the same idle gap, at the same priorities. After the
+//! triggers, the same two back to back: the hot figures, reported beside them.
+//!
+//! Both modes of the estimator's receive run, each with its own estimator: armed (it
+//! polls during probing moves) and unarmed (it sleeps in the WaitSet throughout).
 //!
 //! The in-process bus has the machine's bit rate (wire time, arbitration by id), and
 //! the bench refuses a SYNC period whose traffic would load it above the limit. So the
 //! report gives the path end to end (latch to estimator, wire time included) and the
 //! software path alone (from the last bit of the latch frame, when the real-time loop
-//! could first have it, to the estimator), each against both floors, and the stop
+//! could first have it, to the estimator), each against the floors, and the stop
 //! latency in SYNC cycles.
 
 mod measure;
@@ -34,14 +38,37 @@ mod rig;
 mod stats;
 
 use super::{collect_records, Workspace};
+use crate::estimator::ArmedReceive;
+use hal::config::MachineConfig;
 use measure::{match_records, measure};
 use report::Report;
 use rig::{bench_machine, start_rig};
+use sim::Scenario;
 use std::path::PathBuf;
 
 /// Run IDs that tell the estimator's records apart.
 pub(super) const TRIGGER_RUN: u64 = 1;
 pub(super) const FLOOR_RUN: u64 = 2;
+pub(super) const HOT_RUN: u64 = 3;
+
+/// The estimator's receive during probing moves, as the bench runs it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Modes {
+    /// Armed, then unarmed.
+    Both,
+    Armed,
+    Unarmed,
+}
+
+impl Modes {
+    fn list(self) -> &'static [ArmedReceive] {
+        match self {
+            Self::Both => &[ArmedReceive::Auto, ArmedReceive::Off],
+            Self::Armed => &[ArmedReceive::Auto],
+            Self::Unarmed => &[ArmedReceive::Off],
+        }
+    }
+}
 
 /// The options of `probebridge bench trigger`, parsed by clap straight into this.
 #[derive(clap::Args, Clone, Debug)]
@@ -61,15 +88,15 @@ pub struct BenchArgs {
     /// Write all figures as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Publish from the real-time thread with ContactPublisher (one heap allocation
-    /// per sample inside iceoryx2 0.10) instead of the ForwardingSink.
-    #[arg(long)]
-    pub direct: bool,
+    /// Which receive of the estimator to measure: armed (`armed_receive = "auto"`),
+    /// unarmed (`"off"`), or both, one after the other.
+    #[arg(long, value_enum, default_value_t = Modes::Both)]
+    pub modes: Modes,
     /// Warm-up triggers, not counted.
     #[arg(long)]
     pub warmup: Option<u64>,
     /// SCHED_FIFO priority of the real-time thread (0: do not ask); the simulated
-    /// drives get one less, the forwarder two less.
+    /// drives get one less, the floors' sender two less.
     #[arg(long, default_value_t = 80)]
     pub rt_priority: i32,
     /// Run the estimator process under SCHED_FIFO at this priority (0: an
@@ -84,7 +111,7 @@ pub struct BenchArgs {
     pub drives_priority: Option<i32>,
     /// Over Modbus TCP on loopback instead: the simulated PLC (its task cycle
     /// --period-us) latches, the bridge polls its status every --poll-ms.
-    #[arg(long, conflicts_with_all = ["can", "direct"])]
+    #[arg(long, conflicts_with = "can")]
     pub modbus: bool,
     /// Modbus: status poll period, ms.
     #[arg(long, default_value_t = 1, requires = "modbus")]
@@ -103,35 +130,71 @@ pub fn run(args: &BenchArgs) -> Result<(), String> {
         return Err("--triggers must be at least 1".into());
     }
     crate::output::check_output(args.json.as_deref())?;
-    let (scenario, cfg, mut notes) = bench_machine(args)?;
+    let (scenario, cfg, notes) = bench_machine(args)?;
     // From here on the period is the one the machine runs.
     let args = &BenchArgs {
         period_us: cfg.canopen_bus().map(|b| b.sync_period_us),
         ..args.clone()
     };
+    let mut docs = Vec::new();
+    for &mode in args.modes.list() {
+        let report = run_mode(args, mode, &scenario, &cfg, notes.clone())?;
+        docs.push(report.print()?);
+    }
+    if let Some(path) = &args.json {
+        let doc = match <[serde_json::Value; 1]>::try_from(docs) {
+            Ok([one]) => one,
+            Err(docs) => serde_json::json!({ "benchmark": "trigger", "modes": docs }),
+        };
+        crate::output::write_json(path, &doc)?;
+    }
+    Ok(())
+}
+
+/// One run: a rig with its estimator receiving in `mode`, the triggers with the
+/// floors between them, the hot floors after.
+fn run_mode(
+    args: &BenchArgs,
+    mode: ArmedReceive,
+    scenario: &Scenario,
+    cfg: &MachineConfig,
+    mut notes: Vec<String>,
+) -> Result<Report, String> {
     let warmup = args.warmup.unwrap_or((args.triggers / 10).clamp(1, 100));
     let total = warmup + args.triggers;
     let pid = std::process::id();
-    let ws = Workspace::new(format!("probebridge-bench-{pid}"))?;
-    let rig = start_rig(args, &ws, &scenario, &cfg, total)?;
+    let ws = Workspace::new(format!("probebridge-bench-{pid}-{}", mode.as_str()))?;
+    let floor_ws = Workspace::new(format!("probebridge-bench-{pid}-{}-floor", mode.as_str()))?;
+    let rig = start_rig(args, mode, (&ws, &floor_ws), scenario, cfg, total)?;
     notes.extend(rig.startup.notes.iter().cloned());
     let (measured, rig) = measure(args, rig, warmup, total)?;
     let records = collect_records(rig.estimator, &ws)?;
-    let latencies = match_records(&measured, &records);
+    let floor_records = collect_records(rig.floor_estimator, &floor_ws)?;
+    let latencies = match_records(&measured, &records, &floor_records);
+    let armed = armed_in_log(&ws.estimator_log);
     let _ = std::fs::remove_dir_all(&ws.dir);
-    let report = Report {
-        args,
+    let _ = std::fs::remove_dir_all(&floor_ws.dir);
+    Ok(Report {
+        args: args.clone(),
+        mode,
+        armed,
         warmup,
         notes,
         startup: rig.startup,
         sim_fifo: rig.sim_fifo,
         drive_priority: rig.drive_priority,
-        forwarder_priority: rig.forwarder_priority,
-        forwarder_fifo: rig.forwarder_fifo,
+        sender_priority: rig.sender_priority,
         estimator_fifo: rig.estimator_fifo,
         main_fifo: rig.main_fifo,
         measured,
         latencies,
-    };
-    report.print_and_write()
+    })
+}
+
+/// Whether the estimator armed its receive, from its log (`None`: it did not say).
+fn armed_in_log(log: &std::path::Path) -> Option<String> {
+    let text = std::fs::read_to_string(log).ok()?;
+    text.lines()
+        .find_map(|l| l.strip_prefix("estimator: armed receive "))
+        .map(str::to_string)
 }

@@ -4,46 +4,60 @@ use super::measure::{Latencies, Measured};
 use super::stats::Figures;
 use super::BenchArgs;
 use crate::bench::Summary;
+use crate::estimator::ArmedReceive;
 use hal::master::StartupReport;
 use serde_json::json;
 
-/// Everything the report prints and writes.
-pub(super) struct Report<'a> {
-    pub(super) args: &'a BenchArgs,
+/// Everything the report of one mode prints and writes.
+pub(super) struct Report {
+    pub(super) args: BenchArgs,
+    pub(super) mode: ArmedReceive,
+    /// What the estimator said of its armed receive (its log).
+    pub(super) armed: Option<String>,
     pub(super) warmup: u64,
     pub(super) notes: Vec<String>,
     pub(super) startup: StartupReport,
     pub(super) sim_fifo: bool,
     pub(super) drive_priority: i32,
-    pub(super) forwarder_priority: i32,
-    pub(super) forwarder_fifo: bool,
+    pub(super) sender_priority: i32,
     pub(super) estimator_fifo: bool,
     pub(super) main_fifo: bool,
     pub(super) measured: Measured,
     pub(super) latencies: Latencies,
 }
 
-impl Report<'_> {
-    pub(super) fn print_and_write(&self) -> Result<(), String> {
-        let l = &self.latencies;
+impl Report {
+    /// Prints the report; returns its JSON.
+    pub(super) fn print(&self) -> Result<serde_json::Value, String> {
+        let f = self.figures()?;
+        self.print_settings(&f);
+        self.print_figures(&f);
+        Ok(self.json(&f))
+    }
+
+    fn figures(&self) -> Result<Figures, String> {
+        let (l, m) = (&self.latencies, &self.measured);
         let (Some(trig), Some(fl)) = (Summary::of(&l.trigger), Summary::of(&l.floor)) else {
-            return Err("no trigger or floor sample reached the estimator".into());
+            return Err("no trigger or floor sample reached its estimator".into());
         };
-        let mut cycles_sorted = self.measured.stop_cycles.clone();
+        let mut cycles_sorted = m.stop_cycles.clone();
         cycles_sorted.sort_unstable();
-        let f = Figures {
+        Ok(Figures {
+            armed: self.armed.as_deref().is_some_and(|a| a.starts_with("on")),
             trig,
             fl,
+            fl_hot: Summary::of(&l.floor_hot),
             bus_hop: Summary::of(&l.to_rt),
             ipc_hop: Summary::of(&l.rt_to_estimator),
-            wake: self
-                .measured
+            wake: Summary::of(&m.cold_wakeup_ns),
+            wake_hot: m
                 .wakeup
                 .as_ref()
                 .ok()
                 .and_then(|w| Summary::of(&w.latencies_ns)),
-            stop: Summary::of(&self.measured.stop_ns),
+            stop: Summary::of(&m.stop_ns),
             cycles_sorted,
+            lost: l.lost_triggers + l.lost_floor + m.missing_t0 + m.loop_stats.publish_failures,
             bus_name: self
                 .args
                 .can
@@ -51,53 +65,41 @@ impl Report<'_> {
                 .unwrap_or_else(|| "in-process".to_string()),
             wire_modelled: self.args.can.is_none(),
             cpuidle: hal::rt::cpuidle_driver(),
-        };
-        self.print_settings(&f);
-        self.print_figures(&f);
-        if let Some(path) = &self.args.json {
-            crate::output::write_json(path, &self.json(&f))?;
-        }
-        Ok(())
+        })
     }
 
     /// What ran, and which real-time settings it got.
-    pub(super) fn print_settings(&self, f: &Figures) {
-        let args = self.args;
+    fn print_settings(&self, f: &Figures) {
+        let args = &self.args;
         let startup = &self.startup;
-        let sink_name = if args.direct {
-            "ContactPublisher in the real-time thread (--direct)"
-        } else {
-            "ForwardingSink (forwarder thread publishes)"
-        };
+        say!();
         say!(
-            "probebridge bench trigger: {} triggers ({} warm-up not counted) in {:.1} s; SYNC {} us; {} bus; sink: {}",
+            "probebridge bench trigger, estimator receive \"{}\" ({}): {} triggers ({} warm-up not counted) in {:.1} s; SYNC {} us; {} bus; sink: ContactPublisher in the real-time thread (one hop)",
+            self.mode.as_str(),
+            self.armed.as_deref().unwrap_or("not reported"),
             args.triggers,
             self.warmup,
             self.measured.elapsed.as_secs_f64(),
             args.period(),
             f.bus_name,
-            sink_name
         );
         let granted = |b: bool| if b { "granted" } else { "NOT granted" };
         say!(
-            "SCHED_FIFO: real-time loop {} (priority {}), simulated drives {} ({}), {}, {}; memory {}; CPU wake-up latency {} (cpuidle driver: {}); {} CPUs",
+            "SCHED_FIFO: real-time loop {} (priority {}), simulated drives {} ({}), floors' sender {} ({}), {}; memory {}; CPU wake-up latency {} (cpuidle driver: {}); {} CPUs; load average {}",
             granted(startup.realtime_priority),
             args.rt_priority,
             granted(self.sim_fifo),
             self.drive_priority,
-            if args.direct {
-                "no forwarder (--direct)".to_string()
-            } else {
-                format!("forwarder {} ({})", granted(self.forwarder_fifo), self.forwarder_priority)
-            },
+            granted(self.main_fifo),
+            self.sender_priority,
             if args.estimator_priority > 0 {
                 format!(
-                    "estimator {} ({})",
+                    "estimators {} ({})",
                     granted(self.estimator_fifo),
                     args.estimator_priority
                 )
             } else {
-                "estimator: ordinary process".to_string()
+                "estimators: ordinary processes".to_string()
             },
             if startup.memory_locked { "locked" } else { "NOT locked" },
             if startup.cpu_latency_held {
@@ -106,33 +108,22 @@ impl Report<'_> {
                 "NOT held"
             },
             f.cpuidle.as_deref().unwrap_or("not reported"),
-            std::thread::available_parallelism().map_or(0, |n| n.get())
+            std::thread::available_parallelism().map_or(0, |n| n.get()),
+            load_average()
         );
-        match &self.measured.wakeup {
-            Ok(w) => say!(
-                "host wake-up floor: {} eventfd pings between two processes, {}, {}",
-                w.latencies_ns.len(),
-                if w.cross_cpu {
-                    "pinned to different CPUs"
-                } else {
-                    "NOT pinned to different CPUs"
-                },
-                if w.fifo {
-                    format!("SCHED_FIFO {}", args.estimator_priority)
-                } else {
-                    "ordinary scheduling".to_string()
-                }
-            ),
-            Err(e) => say!("host wake-up floor: not measured: {e}"),
+        if let Some(e) = &self.measured.cold_wakeup_error {
+            say!("cold eventfd floor: {e}");
+        }
+        if let Err(e) = &self.measured.wakeup {
+            say!("hot eventfd floor: not measured: {e}");
         }
         for n in &self.notes {
             say!("note: {n}");
         }
     }
 
-    /// The latency table, the comparisons with both floors, the targets, anything
-    /// lost.
-    pub(super) fn print_figures(&self, f: &Figures) {
+    /// The latency table, the comparisons with the floors, the targets, anything lost.
+    fn print_figures(&self, f: &Figures) {
         say!();
         for line in f.lines() {
             say!("{line}");
@@ -148,25 +139,27 @@ impl Report<'_> {
         }
     }
 
-    /// All figures as JSON (`--json`).
-    pub(super) fn json(&self, f: &Figures) -> serde_json::Value {
-        let (args, startup, l, m) = (self.args, &self.startup, &self.latencies, &self.measured);
+    /// All figures of this mode as JSON.
+    fn json(&self, f: &Figures) -> serde_json::Value {
+        let (args, startup, l, m) = (&self.args, &self.startup, &self.latencies, &self.measured);
         let mut doc = json!({
             "benchmark": "trigger",
+            "armed_receive": self.mode.as_str(),
+            "armed_state": self.armed,
             "triggers": args.triggers,
             "warmup": self.warmup,
             "period_us": args.period(),
             "bus": f.bus_name,
             "bus_load": self.startup.bus_load.percent,
             "bus_load_latch_cycle": self.startup.bus_load.burst_percent,
-            "sink": if args.direct { "direct" } else { "forwarding" },
+            "sink": "direct",
             "elapsed_s": m.elapsed.as_secs_f64(),
             "cpus": std::thread::available_parallelism().map_or(0, |n| n.get()),
+            "load_average": load_average(),
             "realtime": {
                 "sched_fifo": startup.realtime_priority,
                 "priority": args.rt_priority,
                 "simulated_drives_sched_fifo": self.sim_fifo,
-                "forwarder_sched_fifo": self.forwarder_fifo,
                 "estimator_priority": args.estimator_priority,
                 "estimator_sched_fifo": self.estimator_fifo,
                 "simulated_drives_priority": self.drive_priority,
@@ -174,8 +167,8 @@ impl Report<'_> {
                 "memory_locked": startup.memory_locked,
                 "cpu_latency_held": startup.cpu_latency_held,
                 "cpuidle_driver": f.cpuidle,
-                "host_wakeup_cross_cpu": m.wakeup.as_ref().is_ok_and(|w| w.cross_cpu),
-                "host_wakeup_sched_fifo": m.wakeup.as_ref().is_ok_and(|w| w.fifo),
+                "host_wakeup_hot_cross_cpu": m.wakeup.as_ref().is_ok_and(|w| w.cross_cpu),
+                "host_wakeup_hot_sched_fifo": m.wakeup.as_ref().is_ok_and(|w| w.fifo),
                 "notes": self.notes,
             },
             "lost": {
@@ -192,4 +185,13 @@ impl Report<'_> {
         }
         doc
     }
+}
+
+/// The host's load average (1, 5, 15 min), as /proc/loadavg gives it: the bench
+/// shares the machine, and says with what.
+fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_else(|| "not reported".into())
 }

@@ -1,18 +1,19 @@
-//! The rig of a run: the bench machine, the estimator process, the simulated drives,
-//! the bridge's `CanMachine` with its sink, and the floor's publisher.
+//! The rig of a run: the bench machine, the estimator process and the floors' second
+//! estimator, the simulated drives, the bridge's `CanMachine` with its sink, the
+//! floors' publisher and eventfd partner.
 
 use super::{BenchArgs, TRIGGER_RUN};
 use crate::bench::{self};
 use crate::commands::bench::Workspace;
 use crate::commands::estimator::DEFAULT_RECORD_CAPACITY;
 use crate::configs;
-use crate::ipc::{ContactPublisher, EstimatorChild, ForwardingSink};
+use crate::estimator::ArmedReceive;
+use crate::ipc::{ContactPublisher, EstimatorChild};
 use hal::can::inproc::{InprocBus, WireClock};
 use hal::can::socketcan::SocketCanTransport;
 use hal::can::CanTransport;
 use hal::config::MachineConfig;
 use hal::master::{BusLoad, CanMachine, MasterOptions, Pacing, StartupReport};
-use hal::SampleSink;
 use sim::machine::{LatchLog, SimClock, SimMachine, SimRunner};
 use sim::Scenario;
 use std::process::{Command, Stdio};
@@ -35,15 +36,19 @@ pub(super) fn is_fifo(pid: u32) -> bool {
 pub(super) struct Rig {
     pub(super) estimator: EstimatorChild,
     pub(super) estimator_fifo: bool,
+    /// The floors' receiver: an estimator that never arms, on its own services.
+    pub(super) floor_estimator: EstimatorChild,
     /// The simulated drives; taken and stopped once the machine has shut down.
     pub(super) sim: Option<SimRunner>,
     pub(super) sim_fifo: bool,
     pub(super) drive_priority: i32,
-    pub(super) forwarder_priority: i32,
-    pub(super) forwarder_fifo: bool,
+    /// This thread's priority: it sends the floors.
+    pub(super) sender_priority: i32,
     pub(super) machine: CanMachine,
     pub(super) startup: StartupReport,
     pub(super) floor: ContactPublisher,
+    /// The cold eventfd floor's partner process, asleep between triggers.
+    pub(super) pinger: Result<bench::wakeup::Pinger, String>,
     /// This thread (the floor's sender) under SCHED_FIFO.
     pub(super) main_fifo: bool,
     pub(super) latches: Arc<LatchLog>,
@@ -98,6 +103,7 @@ pub(super) fn bench_machine(
 pub(super) fn spawn_estimator(
     args: &BenchArgs,
     ws: &Workspace,
+    mode: ArmedReceive,
     total: u64,
 ) -> Result<(EstimatorChild, bool), String> {
     let (prefix, times_file, estimator_log) =
@@ -114,6 +120,8 @@ pub(super) fn spawn_estimator(
         &(2 * total + 64)
             .max(DEFAULT_RECORD_CAPACITY as u64)
             .to_string(),
+        "--armed-receive",
+        mode.as_str(),
     ]);
     let log = std::fs::File::create(estimator_log)
         .map_err(|e| format!("{}: {e}", estimator_log.display()))?;
@@ -165,17 +173,20 @@ pub(super) fn bench_transports(args: &BenchArgs, bitrate: u32) -> Result<Ends, S
     })
 }
 
-/// The estimator, the simulated drives, the bridge's sink and `CanMachine`, the floor
-/// publisher; every thread on the measured path under SCHED_FIFO where permitted.
+/// The estimators, the simulated drives, the bridge's sink and `CanMachine`, the
+/// floors' publisher and partner; every thread on the measured path under SCHED_FIFO
+/// where permitted.
 pub(super) fn start_rig(
     args: &BenchArgs,
-    ws: &Workspace,
+    mode: ArmedReceive,
+    (ws, floor_ws): (&Workspace, &Workspace),
     scenario: &Scenario,
     cfg: &MachineConfig,
     total: u64,
 ) -> Result<Rig, String> {
-    let prefix = ws.prefix.as_str();
-    let (estimator, estimator_fifo) = spawn_estimator(args, ws, total)?;
+    let (estimator, estimator_fifo) = spawn_estimator(args, ws, mode, total)?;
+    // The floors' receiver sleeps in the WaitSet like an unarmed estimator.
+    let (floor_estimator, _) = spawn_estimator(args, floor_ws, ArmedReceive::Off, 2 * total)?;
     let latches = LatchLog::new();
     let mut sim_machine = SimMachine::new(scenario);
     sim_machine.set_latch_log(latches.clone());
@@ -190,17 +201,9 @@ pub(super) fn start_rig(
         let _ = sim_fifo_tx.send(drive_priority > 0 && hal::rt::set_fifo_priority(drive_priority));
     });
     let sim_fifo = sim_fifo_rx.recv().unwrap_or(false);
-    // The forwarder is on the hot path too: the real-time loop's priority minus two.
-    let forwarder_priority = args.rt_priority - 2;
-    let mut forwarder_fifo = false;
-    let sink: Box<dyn SampleSink> = if args.direct {
-        Box::new(ContactPublisher::new(prefix).map_err(|e| e.to_string())?)
-    } else {
-        let (sink, fifo) = ForwardingSink::spawn_realtime(prefix, forwarder_priority.max(0))
-            .map_err(|e| e.to_string())?;
-        forwarder_fifo = fifo;
-        Box::new(sink)
-    };
+    // One hop: the real-time thread publishes itself.
+    let sink = ContactPublisher::new(&ws.prefix).map_err(|e| e.to_string())?;
+    sink.update_connections().map_err(|e| e.to_string())?;
     let options = MasterOptions {
         pacing: Pacing::RealTime,
         rt_priority: args.rt_priority,
@@ -209,29 +212,32 @@ pub(super) fn start_rig(
         abort: None,
     };
     tell!(
-        "bench: bringing up the drives ({} bus, SYNC every {} us) ...",
+        "bench: bringing up the drives ({} bus, SYNC every {} us; estimator receive {}) ...",
         args.can.as_deref().unwrap_or("in-process"),
-        args.period()
+        args.period(),
+        mode.as_str()
     );
     let (machine, startup) =
         CanMachine::start(cfg, master_transport, sink, options).map_err(|e| e.to_string())?;
-    let floor = ContactPublisher::new(prefix).map_err(|e| e.to_string())?;
+    let floor = ContactPublisher::new(&floor_ws.prefix).map_err(|e| e.to_string())?;
     floor.update_connections().map_err(|e| e.to_string())?;
-    // This thread publishes the floor samples: at the forwarder's priority, so the
-    // floor's sender waits for the scheduler no more than the bridge's does.
-    let main_fifo = forwarder_priority > 0 && hal::rt::set_fifo_priority(forwarder_priority);
+    let pinger = bench::wakeup::Pinger::start(args.estimator_priority.max(0), false);
+    // This thread sends the floors: below the drives, above the estimators.
+    let sender_priority = args.rt_priority - 2;
+    let main_fifo = sender_priority > 0 && hal::rt::set_fifo_priority(sender_priority);
 
     Ok(Rig {
         estimator,
         estimator_fifo,
+        floor_estimator,
         sim: Some(sim),
         sim_fifo,
         drive_priority,
-        forwarder_priority,
-        forwarder_fifo,
+        sender_priority,
         machine,
         startup,
         floor,
+        pinger,
         main_fifo,
         latches,
     })

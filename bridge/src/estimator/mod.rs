@@ -2,7 +2,8 @@
 //!
 //! It sleeps in an iceoryx2 `WaitSet` on two events (`<prefix>/contacts/event`, a new
 //! sample; `<prefix>/requests/event`, a new request) with a periodic timeout
-//! ([`STOP_POLL`]) to look at the stop flag: no busy polling.
+//! ([`STOP_POLL`]) to look at the stop flag. During a probing move it may poll the
+//! contact subscriber instead (the armed receive, [`armed`]).
 
 use core::sync::atomic::{AtomicBool, Ordering};
 use core::time::Duration;
@@ -16,6 +17,14 @@ use nalgebra::Vector3;
 
 use hal::contact_sample::{FLAG_END_OF_RUN, FLAG_HW_LATCH};
 use hal::ContactSample;
+
+pub mod armed;
+mod receive_times;
+
+pub use armed::{watch, ArmedReceive, ArmedStats, WindowEnd, MAX_ARMED};
+pub use receive_times::{ReceiveTime, ReceiveTimes};
+
+use std::time::Instant;
 
 use crate::ipc::{
     create_node, listener, notifier, open_event_service, open_request_service,
@@ -55,67 +64,8 @@ pub struct EstimatorOptions {
     /// Records kept in memory without reallocating (more are kept, at the cost of a
     /// reallocation in the receive path).
     pub record_capacity: usize,
-}
-
-/// Receive times recorded by the estimator: per sample, taken on CLOCK_MONOTONIC right
-/// after the sample was taken from the subscriber (after the wake-up). The file has
-/// one line per sample: `run_id sequence trigger_ns receive_ns t1_ns`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct ReceiveTime {
-    pub run_id: u64,
-    pub sequence: u64,
-    /// The sample's `trigger_ns` and `receive_ns` as published.
-    pub trigger_ns: u64,
-    pub receive_ns: u64,
-    /// When the estimator had it.
-    pub t1_ns: u64,
-}
-
-/// Reading and writing the receive-time file of [`EstimatorOptions::record_times`].
-pub struct ReceiveTimes;
-
-impl ReceiveTimes {
-    /// Written whole through [`hal::atomic_write`], or not at all.
-    pub fn write(path: &std::path::Path, times: &[ReceiveTime]) -> std::io::Result<()> {
-        let mut out = Vec::with_capacity(times.len() * 64);
-        for t in times {
-            writeln!(
-                out,
-                "{} {} {} {} {}",
-                t.run_id, t.sequence, t.trigger_ns, t.receive_ns, t.t1_ns
-            )?;
-        }
-        hal::atomic_write::write_atomic(path, &out).map_err(|e| e.to_io())
-    }
-
-    pub fn read(path: &std::path::Path) -> Result<Vec<ReceiveTime>, String> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-        text.lines()
-            .enumerate()
-            .map(|(i, line)| {
-                let v: Vec<u64> = line
-                    .split_whitespace()
-                    .map(str::parse)
-                    .collect::<Result<_, _>>()
-                    .map_err(|e| format!("{} line {}: {e}", path.display(), i + 1))?;
-                match v[..] {
-                    [run_id, sequence, trigger_ns, receive_ns, t1_ns] => Ok(ReceiveTime {
-                        run_id,
-                        sequence,
-                        trigger_ns,
-                        receive_ns,
-                        t1_ns,
-                    }),
-                    _ => Err(format!(
-                        "{} line {}: expected 5 numbers",
-                        path.display(),
-                        i + 1
-                    )),
-                }
-            })
-            .collect()
-    }
+    /// Poll for the contact during probing moves (config `[estimator] armed_receive`).
+    pub armed_receive: ArmedReceive,
 }
 
 /// [`run_estimator_with`] with default options (quiet, no signal handlers).
@@ -187,39 +137,51 @@ pub fn run_estimator_with(
         names.prefix, names.contacts, names.requests
     );
 
-    let mut store = RunStore::default();
-    let mut times: Vec<ReceiveTime> = Vec::with_capacity(if options.record_times.is_some() {
-        options.record_capacity
-    } else {
-        0
-    });
-    let mut receive = |store: &mut RunStore, mut log: &mut dyn Write| -> Result<(), IpcError> {
-        while let Some(sample) = contacts.try_receive()? {
-            if options.record_times.is_some() {
-                times.push(ReceiveTime {
-                    run_id: sample.run_id,
-                    sequence: sample.sequence,
-                    trigger_ns: sample.trigger_ns,
-                    receive_ns: sample.receive_ns,
-                    t1_ns: hal::clock::monotonic_ns(),
-                });
-            }
-            store.add(&sample, options.verbose, &mut log);
+    let armed = options.armed_receive.enabled();
+    let _ = writeln!(
+        log,
+        "estimator: armed receive {}",
+        match (armed, options.armed_receive) {
+            (true, _) => "on (polls the contacts during probing moves)",
+            (false, ArmedReceive::Off) => "off (armed_receive = \"off\")",
+            (false, ArmedReceive::Auto) => "off (auto: no CPU to spare for it)",
         }
-        Ok(())
+    );
+    let mut intake = Intake {
+        store: RunStore::default(),
+        times: Vec::with_capacity(if options.record_times.is_some() {
+            options.record_capacity
+        } else {
+            0
+        }),
+        record: options.record_times.is_some(),
+        verbose: options.verbose,
+    };
+    let mut armed_stats = ArmedStats::default();
+    let ports = Ports {
+        contacts: &contacts,
+        server: &server,
+        request_listener: &request_listener,
+        result_notifier: &result_notifier,
+        waitset: &waitset,
     };
     let result = serve(
-        &contacts,
-        &server,
-        &request_listener,
-        &result_notifier,
-        &waitset,
+        &ports,
         options,
+        armed.then_some(&mut armed_stats),
         stop,
-        &mut store,
-        &mut receive,
+        &mut intake,
         &mut log,
     );
+    if armed {
+        let s = armed_stats;
+        let _ = writeln!(
+            log,
+            "estimator: armed windows {}: {} ended by the contact, {} by the move's end, {} timed out",
+            s.windows, s.contacts, s.move_ends, s.timeouts
+        );
+    }
+    let times = intake.times;
     if let Some(path) = &options.record_times {
         match ReceiveTimes::write(path, &times) {
             Ok(()) => {
@@ -239,59 +201,86 @@ pub fn run_estimator_with(
     result
 }
 
-#[allow(clippy::too_many_arguments)]
+/// The estimator's ports.
+struct Ports<'a> {
+    contacts: &'a ContactSubscriber,
+    server: &'a Server<Svc, EstimatorRequest, (), EstimatorReply, ()>,
+    request_listener: &'a iceoryx2::port::listener::Listener<Svc>,
+    result_notifier: &'a Notifier<Svc>,
+    waitset: &'a WaitSet<Svc>,
+}
+
+/// Where received contacts go: the run store, and their receive times when recorded.
+struct Intake {
+    store: RunStore,
+    times: Vec<ReceiveTime>,
+    record: bool,
+    verbose: bool,
+}
+
+impl Intake {
+    fn take(&mut self, sample: &ContactSample, mut log: &mut dyn Write) {
+        if self.record {
+            self.times.push(ReceiveTime {
+                run_id: sample.run_id,
+                sequence: sample.sequence,
+                trigger_ns: sample.trigger_ns,
+                receive_ns: sample.receive_ns,
+                t1_ns: hal::clock::monotonic_ns(),
+            });
+        }
+        self.store.add(sample, self.verbose, &mut log);
+    }
+
+    /// Everything the subscriber holds.
+    fn drain(&mut self, contacts: &ContactSubscriber, log: &mut dyn Write) -> Result<(), IpcError> {
+        while let Some(sample) = contacts.try_receive()? {
+            self.take(&sample, &mut *log);
+        }
+        Ok(())
+    }
+}
+
+/// The estimator's loop; `armed`: the armed receive is on, with its counters.
 fn serve(
-    contacts: &ContactSubscriber,
-    server: &Server<Svc, EstimatorRequest, (), EstimatorReply, ()>,
-    request_listener: &iceoryx2::port::listener::Listener<Svc>,
-    result_notifier: &Notifier<Svc>,
-    waitset: &WaitSet<Svc>,
+    ports: &Ports,
     options: &EstimatorOptions,
+    mut armed: Option<&mut ArmedStats>,
     stop: &AtomicBool,
-    store: &mut RunStore,
-    receive: &mut dyn FnMut(&mut RunStore, &mut dyn Write) -> Result<(), IpcError>,
-    mut log: &mut dyn Write,
+    intake: &mut Intake,
+    log: &mut dyn Write,
 ) -> Result<(), EstimatorError> {
+    let contacts = ports.contacts;
     while !stop.load(Ordering::Relaxed) {
-        // Consume the wake-up events first, then everything that is there: whatever
-        // arrives after this gets a new event and wakes the next wait.
+        // The contact first, right after the wake-up: no syscall before it is read.
+        // Then the wake-up events are consumed, and whatever arrived meanwhile is
+        // read (its event is gone with them, so it would not wake the next wait).
+        intake.drain(contacts, &mut *log)?;
         contacts.clear_events()?;
-        request_listener
+        ports
+            .request_listener
             .try_wait(|_| {})
             .map_err(|e| IpcError::iox("read request events", e))?;
-
-        receive(store, &mut *log)?;
-        let mut shutdown = false;
-        while let Some(active) = server
-            .receive()
-            .map_err(|e| IpcError::iox("receive request", e))?
-        {
-            let request = *active.payload();
-            // A request that was sent before the samples it is about were drained.
-            receive(store, &mut *log)?;
-            let mut reply = store.answer(&request, &mut log);
-            reply.server_pid = std::process::id();
-            shutdown |= request.request_kind() == Some(RequestKind::Shutdown);
-            let sent = active
-                .loan_uninit()
-                .map_err(|e| IpcError::iox("loan reply", e))
-                .and_then(|r| {
-                    r.write_payload(reply)
-                        .send()
-                        .map_err(|e| IpcError::iox("send reply", e))
-                });
-            if let Err(e) = sent {
-                let _ = writeln!(log, "estimator: {e}");
-            }
-            drop(active);
-            notify(result_notifier, &mut log);
-        }
-        if shutdown {
+        intake.drain(contacts, &mut *log)?;
+        if serve_requests(ports, intake, &mut *log)? {
             let _ = writeln!(log, "estimator: shutdown requested");
             break;
         }
-
-        match waitset
+        if let Some(stats) = armed.as_deref_mut() {
+            // A probing move announced and not yet ended by its contact: poll.
+            while let Some(window) = contacts.take_window() {
+                watch(
+                    window,
+                    Instant::now(),
+                    stats,
+                    || contacts.try_receive(),
+                    Instant::now,
+                    |s| intake.take(s, &mut *log),
+                )?;
+            }
+        }
+        match ports
+            .waitset
             .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, STOP_POLL)
         {
             Ok(WaitSetRunResult::TerminationRequest) | Ok(WaitSetRunResult::Interrupt)
@@ -305,6 +294,41 @@ fn serve(
         }
     }
     Ok(())
+}
+
+/// Answers every pending request; true when one asked the estimator to shut down.
+fn serve_requests(
+    ports: &Ports,
+    intake: &mut Intake,
+    mut log: &mut dyn Write,
+) -> Result<bool, EstimatorError> {
+    let mut shutdown = false;
+    while let Some(active) = ports
+        .server
+        .receive()
+        .map_err(|e| IpcError::iox("receive request", e))?
+    {
+        let request = *active.payload();
+        // A request that was sent before the samples it is about were drained.
+        intake.drain(ports.contacts, &mut *log)?;
+        let mut reply = intake.store.answer(&request, &mut log);
+        reply.server_pid = std::process::id();
+        shutdown |= request.request_kind() == Some(RequestKind::Shutdown);
+        let sent = active
+            .loan_uninit()
+            .map_err(|e| IpcError::iox("loan reply", e))
+            .and_then(|r| {
+                r.write_payload(reply)
+                    .send()
+                    .map_err(|e| IpcError::iox("send reply", e))
+            });
+        if let Err(e) = sent {
+            let _ = writeln!(log, "estimator: {e}");
+        }
+        drop(active);
+        notify(ports.result_notifier, &mut log);
+    }
+    Ok(shutdown)
 }
 
 fn notify(notifier: &Notifier<Svc>, log: &mut dyn Write) {
