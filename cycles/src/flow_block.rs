@@ -286,6 +286,19 @@ fn parse_jump(n: u32, body: &str) -> Result<Jump, String> {
         .position(|w| *w == "GOTO")
         .filter(|g| *g > cmp && uwords.get(g + 1) == Some(&"LBL"))
         .ok_or_else(|| usage.clone())?;
+    // The TNC's jumps compare numbers; texts are compared with STRCOMP first.
+    let string_operand = words[..cmp]
+        .iter()
+        .chain(&words[cmp + 1..goto])
+        .map(|w| w.trim_start_matches(['+', '-']))
+        .find(|w| {
+            w.starts_with('"') || QName::parse(&w.to_ascii_uppercase()).is_some_and(|q| q.is_text())
+        });
+    if let Some(w) = string_operand {
+        return Err(format!(
+            "FN {n}: {w} is a string, and FN 9..12 compare numbers: compare texts with Qn = STRCOMP ( SRC_QSa SEA_QSb ) (0: the same, -1: before, +1: after) and jump on Qn"
+        ));
+    }
     let left =
         crate::formula::parse_expr(&words[..cmp].join(" ")).map_err(|e| format!("FN {n}: {e}"))?;
     let right = crate::formula::parse_expr(&words[cmp + 1..goto].join(" "))

@@ -36,6 +36,13 @@ pub struct MachineParameters {
     /// The texts of `FN 14: ERROR = n`, by number (`[cycles.errors]`, `1001 = "..."`).
     #[serde(default)]
     pub errors: BTreeMap<String, String>,
+    /// `mStrobeRotAxPos` (204803): the M function with which the PLC positions the
+    /// rotary axes (an indexing table), -1 (the default) when the NC positions them.
+    /// Set, cycle 451 starts only with every rotary axis at 0 deg and confirmed so,
+    /// measures no backlash (Q432), and turns the rotary axes alone, each target angle
+    /// in Q120 (A), Q121 (B), Q122 (C) as the TNC hands it to the PLC.
+    #[serde(default = "default_strobe_rot_ax_pos", rename = "mStrobeRotAxPos")]
+    pub strobe_rot_ax_pos: i64,
 }
 
 fn default_max_dev_cal_ball() -> f64 {
@@ -50,6 +57,9 @@ fn default_tool_axes() -> Vec<ProbeAxis> {
 fn default_max_jumps() -> u64 {
     100_000
 }
+fn default_strobe_rot_ax_pos() -> i64 {
+    -1
+}
 
 impl Default for MachineParameters {
     fn default() -> Self {
@@ -61,6 +71,7 @@ impl Default for MachineParameters {
             m92_reference: None,
             max_jumps: default_max_jumps(),
             errors: BTreeMap::new(),
+            strobe_rot_ax_pos: default_strobe_rot_ax_pos(),
         }
     }
 }
@@ -70,6 +81,11 @@ impl Default for MachineParameters {
 pub const TOLERANCE_RANGE: (f64, f64) = (1e-6, 10.0);
 
 impl MachineParameters {
+    /// The M function that positions the rotary axes (`mStrobeRotAxPos`), if one does.
+    pub fn rotary_m_function(&self) -> Option<u32> {
+        u32::try_from(self.strobe_rot_ax_pos).ok()
+    }
+
     /// The first value out of range, as (key, reason). PREDEF values are checked
     /// against the parameter tables ([`crate::params`]).
     pub fn invalid_field(&self) -> Option<(String, String)> {
@@ -112,6 +128,15 @@ impl MachineParameters {
                     "not an FN 14 error number 0..65535".to_string(),
                 ));
             }
+        }
+        if !(-1..=9999).contains(&self.strobe_rot_ax_pos) {
+            return Some((
+                "cycles.mStrobeRotAxPos".to_string(),
+                format!(
+                    "{} is not an M function number 0..9999 (or -1: the NC positions the rotary axes)",
+                    self.strobe_rot_ax_pos
+                ),
+            ));
         }
         if self.tool_axes.is_empty() {
             return Some((

@@ -7,7 +7,7 @@
 
 use crate::datum::Datum;
 use crate::flow_block::{Label, MAX_NESTING};
-use crate::formula::{eval_formula, Env, EvalError, EvalErrorKind, Expr, Lookup};
+use crate::formula::{eval_formula, Env, EvalError, EvalErrorKind, Expr, Lookup, StrExpr};
 use crate::program::{Block, Program, Statement};
 use crate::q_params::{QName, QParams, QValue};
 use std::borrow::Cow;
@@ -95,13 +95,17 @@ pub fn substitute_params<'a>(code: &'a str, env: &dyn Env) -> Result<Cow<'a, str
 }
 
 /// A cycle block's text with each `Qnnn=+Qm` (`-Qm`, `QLm`, `QRm`) replaced by the
-/// value (`Qnnn=+12.5`).
+/// value (`Qnnn=+12.5`), and each `QSnnn=QSm` by the text (`QSnnn="..."`); nothing
+/// inside a quoted string is touched.
 pub fn substitute_cycle_values(source: &str, env: &dyn Env) -> Result<String, EvalError> {
     let mut out = String::with_capacity(source.len());
     let mut rest = source;
     while let Some(i) = rest.find('=') {
         out.push_str(&rest[..=i]);
         rest = &rest[i + 1..];
+        if out.matches('"').count() % 2 == 1 {
+            continue;
+        }
         let trimmed = rest.trim_start();
         let (neg, after_sign) = match trimmed.as_bytes().first() {
             Some(b'+') => (false, &trimmed[1..]),
@@ -113,6 +117,10 @@ pub fn substitute_cycle_values(source: &str, env: &dyn Env) -> Result<String, Ev
                 let v = crate::formula::eval(&Expr::Param(name), env)?;
                 let v = if neg { -v } else { v };
                 out.push_str(&format!("{v:+}"));
+                rest = &after_sign[len..];
+            } else if after_sign.len() == trimmed.len() {
+                let t = crate::formula::eval_text(&StrExpr::Param(name), env)?;
+                out.push_str(&format!("\"{t}\""));
                 rest = &after_sign[len..];
             }
         }

@@ -1,7 +1,7 @@
 //! Cycle 451's plan refuses, before anything moves, what the machine cannot do; the
 //! error's kind says which check failed.
 
-use probebridge_cycles::cycle451::{plan, KinematicsParams, PlanErrorKind};
+use probebridge_cycles::cycle451::{plan, plan_on, KinematicsParams, PlanErrorKind};
 use probebridge_cycles::kinematics::Mode;
 use probebridge_cycles::program::CycleKind;
 use probebridge_cycles::{CyclesConfig, Program};
@@ -60,4 +60,45 @@ fn plan_errors_have_their_kind() {
         plan(&none, probe, &cfg.machine).unwrap_err().kind(),
         PlanErrorKind::NoAxisToMeasure
     );
+}
+
+/// `[cycles] mStrobeRotAxPos`: the rotary axes positioned by an M function. The seeds
+/// allow no backlash measurement there; the probe cannot follow the sphere (Q408 = 0)
+/// while the PLC turns the table. Both refused before anything moves.
+#[test]
+fn rotary_axes_positioned_by_an_m_function() {
+    let mut cfg = table_ac();
+    let probe = cfg.probes[0].clone();
+    let retracted = params(&cfg, "Q408=+0", "Q408=+30");
+    // Not set (-1): as before.
+    assert_eq!(plan_on(&retracted, &probe, &cfg).unwrap().rotary_m, None);
+    cfg.parameters.strobe_rot_ax_pos = 203;
+    assert_eq!(cfg.parameters.invalid_field(), None);
+    assert_eq!(
+        plan_on(&retracted, &probe, &cfg).unwrap().rotary_m,
+        Some(203)
+    );
+    let mut backlash = retracted.clone();
+    backlash.backlash = 0.5;
+    let e = plan_on(&backlash, &probe, &cfg).unwrap_err();
+    assert_eq!(e.kind(), PlanErrorKind::BacklashWithMFunction, "{e}");
+    assert!(
+        e.to_string()
+            .starts_with("Q432=0.5: backlash cannot be measured")
+            && e.to_string().contains("mStrobeRotAxPos = 203"),
+        "{e}"
+    );
+    let direct = params(&cfg, "", "");
+    assert_eq!(direct.retract_height, 0.0);
+    let e = plan_on(&direct, &probe, &cfg).unwrap_err();
+    assert_eq!(e.kind(), PlanErrorKind::DirectMoveWithMFunction, "{e}");
+    // Without the key, Q432 is measured as before.
+    cfg.parameters.strobe_rot_ax_pos = -1;
+    plan_on(&backlash, &probe, &cfg).unwrap();
+    // Out of range: refused with its key.
+    for bad in [-2, 10000] {
+        cfg.parameters.strobe_rot_ax_pos = bad;
+        let (key, _) = cfg.parameters.invalid_field().unwrap();
+        assert_eq!(key, "cycles.mStrobeRotAxPos");
+    }
 }

@@ -470,3 +470,120 @@ fn q_parameters_as_cycle_parameter_values() {
     );
     assert!(m.probes.is_empty());
 }
+
+/// STRCOMP and INSTR, as the TNC has them: a text comparison gives a number the jumps
+/// compare.
+#[test]
+fn string_comparison_with_strcomp_and_instr() {
+    let r = run("1 QS1 = \"ABC\"
+2 QS2 = \"ABD\"
+3 QS3 = \"ABC\"
+4 Q1 = STRCOMP ( SRC_QS1 SEA_QS2 )
+5 Q2 = STRCOMP ( SRC_QS2 SEA_QS1 )
+6 Q3 = STRCOMP ( SRC_QS1 SEA_QS3 )
+7 QS4 = \"B\"
+8 Q4 = INSTR ( SRC_QS1 SEA_QS4 )
+9 Q5 = INSTR ( SRC_QS1 SEA_QS4 BEG2 )
+10 QS5 = \"abc\"
+11 Q6 = STRCOMP ( SRC_QS1 SEA_QS5 )
+12 FN 9: IF +Q3 EQU +0 GOTO LBL \"SAME\"
+13 Q7 = 1
+14 LBL \"SAME\"
+15 FN 9: IF STRCOMP ( SRC_QS1 SEA_QS2 ) EQU +0 GOTO LBL 1
+16 Q8 = 1
+17 LBL 1");
+    assert!(r.completed(), "{:?}", r.stopped);
+    for (n, v) in [
+        ("Q1", -1.0),
+        ("Q2", 1.0),
+        ("Q3", 0.0),
+        ("Q4", 1.0),
+        // Not found from character 2 on: the length of QS1.
+        ("Q5", 3.0),
+        // Upper case comes before lower case in the character order.
+        ("Q6", -1.0),
+        ("Q8", 1.0),
+    ] {
+        assert_eq!(num(&r, n), v, "{n}");
+    }
+    assert!(!r.parameters.contains_key("Q7"), "the jump was not taken");
+}
+
+#[test]
+fn string_errors_at_their_line() {
+    let cfg = common::config();
+    for (body, line, what) in [
+        (
+            "1 QS1 = \"A\"\n2 QS2 = \"A\"\n3 FN 9: IF QS1 EQU QS2 GOTO LBL 1\n4 LBL 1",
+            4,
+            "STRCOMP ( SRC_QSa SEA_QSb )",
+        ),
+        (
+            "1 FN 10: IF +Q1 NE \"A\" GOTO LBL 1\n2 LBL 1",
+            2,
+            "FN 9..12 compare numbers",
+        ),
+        ("1 Q1 = STRCOMP ( SRC_QS1 QS2 )", 2, "expected SEA_QSn"),
+        ("1 Q1 = STRCOMP ( SRC_Q1 SEA_QS2 )", 2, "expected SRC_QSn"),
+        ("1 Q1 = INSTR ( SRC_QS1 SEA_QS2 BEG1", 2, "to close INSTR"),
+    ] {
+        let e = Program::parse(&wrap(body), &cfg).unwrap_err();
+        let shown = e.to_string();
+        assert!(
+            shown.starts_with(&format!("line {line}: ")) && shown.contains(what),
+            "{body}: {shown}"
+        );
+    }
+    // At run time: stopped at the line, nothing moved after it.
+    for (body, what) in [
+        (
+            "1 QS1 = \"A\"\n2 Q1 = STRCOMP ( SRC_QS1 SEA_QS9 )\n3 L Z+10 R0 FMAX",
+            "QS9 is not defined",
+        ),
+        (
+            "1 QS1 = \"AB\"\n2 Q1 = INSTR ( SRC_QS1 SEA_QS1 BEG3 )\n3 L Z+10 R0 FMAX",
+            "INSTR: BEG3 is beyond QS1",
+        ),
+    ] {
+        let dir = common::temp_dir("q-str-err");
+        let (r, m) = run_in(&dir, body);
+        let stopped = r.stopped.as_deref().unwrap();
+        assert!(
+            stopped.contains("line 3") && stopped.contains(what),
+            "{stopped}"
+        );
+        assert!(m.moves.is_empty(), "{body}: moved {:?}", m.moves);
+    }
+}
+
+/// A QS parameter as a cycle's string value (`QS400=QS1`): read when the block runs
+/// and validated as a written string is.
+#[test]
+fn qs_parameters_as_cycle_string_values() {
+    let block = "2 TCH PROBE 444 PROBING 3D ~\n  Q263=+0 ~\n  Q264=+0 ~\n  Q294=+0.5 ~\n  Q581=+0 ~\n  Q582=+0 ~\n  Q583=+1 ~\n  Q320=+1 ~\n  Q260=+100 ~\n  QS400=QS1 ~\n  Q309=+0";
+    // The plane is at Z=0, the nominal point at 0.5: 0.5 undersize.
+    for (tol, status) in [("0.4-0.1", 2.0), ("1-1", 0.0), (" ", -1.0)] {
+        let body = format!("1 TOOL CALL \"TOUCH_PROBE\" Z\n3 QS1 = \"{tol}\"\n{block}");
+        let (r, _) = run_in(&common::temp_dir("q-qs400"), &body);
+        assert!(r.completed(), "{tol}: {:?}", r.stopped);
+        assert_eq!(
+            r.cycles[0].q["Q183"], status,
+            "QS400=QS1 with QS1 = \"{tol}\""
+        );
+    }
+    // A text that is no tolerance stops at the cycle's line, nothing probed.
+    let body = format!("1 TOOL CALL \"TOUCH_PROBE\" Z\n3 QS1 = \"wide\"\n{block}");
+    let (r, m) = run_in(&common::temp_dir("q-qs400-bad"), &body);
+    let stopped = r.stopped.as_deref().unwrap();
+    assert!(
+        stopped.contains("line 4") && stopped.contains("QS400"),
+        "{stopped}"
+    );
+    assert!(m.probes.is_empty());
+    // An undefined one too.
+    let body = format!("1 TOOL CALL \"TOUCH_PROBE\" Z\n{block}");
+    let (r, m) = run_in(&common::temp_dir("q-qs400-undef"), &body);
+    let stopped = r.stopped.as_deref().unwrap();
+    assert!(stopped.contains("QS1 is not defined"), "{stopped}");
+    assert!(m.probes.is_empty());
+}

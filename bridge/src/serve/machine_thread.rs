@@ -165,8 +165,12 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
     };
     let confirm_all = job.confirm;
     let mut confirm = |text: &str| {
-        tracing::info!(confirmed = confirm_all, "confirmation asked: {text}");
-        confirm_all
+        // The rotary axes at 0 deg before a 451 on a machine whose PLC positions them
+        // (mStrobeRotAxPos): the PLC's start request is that confirmation.
+        let confirmed =
+            confirm_all || text.starts_with(cycles::cycle451::rotary_m_function::ROTARY_AT_ZERO);
+        tracing::info!(confirmed, "confirmation asked: {text}");
+        confirmed
     };
     let out_dir = cfg
         .programs

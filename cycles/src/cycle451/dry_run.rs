@@ -7,7 +7,7 @@
 //! to fail.
 
 use super::measure::Measure;
-use super::plan::{plan, PlanError, PlanErrorKind};
+use super::plan::{plan_on, PlanError, PlanErrorKind};
 use super::KinematicsParams;
 use crate::cycle::CycleContext;
 use crate::cycle_block::CycleBlock;
@@ -162,7 +162,7 @@ pub fn plan_moves(
     datum: &Datum,
     start: &AxisPositions,
 ) -> Result<PlannedRun, PlanError> {
-    let kinematics_plan = plan(params, &call.tool.probe, &cfg.machine)?;
+    let kinematics_plan = plan_on(params, &call.tool.probe, cfg)?;
     let active = ActiveKinematics::load(kinematics, &cfg.machine)
         .map_err(|e| PlanError::new(PlanErrorKind::Moves, format!("active kinematics: {e}")))?;
     let model = KinematicModel::new(&kinematics_plan.chain, &ErrorSet::from_map(&active.errors));

@@ -46,10 +46,11 @@ pub mod measuring_log;
 pub mod parameters;
 pub mod plan;
 pub mod report;
+pub mod rotary_m_function;
 pub mod write_back;
 
 pub use parameters::{AxisRange, Feed, KinematicsParams};
-pub use plan::{plan, AxisPlan, KinematicsPlan, PlanError, PlanErrorKind};
+pub use plan::{plan, plan_on, AxisPlan, KinematicsPlan, PlanError, PlanErrorKind};
 pub use report::{AxisReport, KinematicsReport, PositionReport, SphereRecord};
 
 use crate::cycle::{CycleContext, MeasuringCycle};
@@ -72,8 +73,11 @@ impl MeasuringCycle for KinematicsParams {
         ctx: &mut CycleContext<'_>,
     ) -> Result<CycleOutput, CycleError> {
         let cfg = ctx.cfg;
-        let plan = plan::plan(self, &call.tool.probe, &cfg.machine)
+        let plan = plan::plan_on(self, &call.tool.probe, cfg)
             .map_err(|e| CycleError::Plan(e.to_string()))?;
+        if let Some(m) = plan.rotary_m {
+            rotary_m_function::check_start(machine, &plan, m, ctx, call.block)?;
+        }
         let active = ActiveKinematics::load(&ctx.kinematics, &cfg.machine)
             .map_err(|e| CycleError::Plan(format!("active kinematics: {e}")))?;
         let active_set = ErrorSet::from_map(&active.errors);

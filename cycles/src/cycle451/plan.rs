@@ -30,6 +30,12 @@ pub enum PlanErrorKind {
     /// outside a probing move, or a Q408 that does not clear the sphere (found by
     /// planning every move before the first, [`super::dry_run`]).
     Moves,
+    /// Q432 (backlash) on a machine whose rotary axes an M function positions
+    /// (`mStrobeRotAxPos`): the seeds say it cannot be measured there.
+    BacklashWithMFunction,
+    /// Q408 = 0 (follow the sphere) with rotary axes an M function positions: the PLC
+    /// turns them alone, so the probe must stand retracted while they turn.
+    DirectMoveWithMFunction,
 }
 
 /// A 451 block the machine cannot run; the message names the parameter.
@@ -79,6 +85,8 @@ pub struct KinematicsPlan {
     pub positioning_feed: f64,
     /// Rotary positioning feed: Q253 (FMAX: the probe table's), deg/min.
     pub rotary_feed: f64,
+    /// The M function that positions the rotary axes (`mStrobeRotAxPos`), if one does.
+    pub rotary_m: Option<u32>,
 }
 
 impl KinematicsPlan {
@@ -176,7 +184,41 @@ pub fn plan(
         incidence,
         positioning_feed,
         rotary_feed,
+        rotary_m: None,
     })
+}
+
+/// [`plan`] with the cycles' machine parameters: where an M function positions the
+/// rotary axes (`[cycles] mStrobeRotAxPos`), the seeds allow no backlash measurement
+/// (Q432), and the axes turn only with the probe retracted (Q408 > 0).
+pub fn plan_on(
+    params: &KinematicsParams,
+    probe: &ProbeEntry,
+    cfg: &crate::cycles_config::CyclesConfig,
+) -> Result<KinematicsPlan, PlanError> {
+    let Some(m) = cfg.parameters.rotary_m_function() else {
+        return plan(params, probe, &cfg.machine);
+    };
+    if params.backlash != 0.0 {
+        return Err(PlanError::new(
+            PlanErrorKind::BacklashWithMFunction,
+            format!(
+                "Q432={}: backlash cannot be measured when an M function positions the rotary axes (mStrobeRotAxPos = {m} in [cycles] of the machine configuration); give Q432=0; nothing moved",
+                params.backlash
+            ),
+        ));
+    }
+    if params.retract_height == 0.0 {
+        return Err(PlanError::new(
+            PlanErrorKind::DirectMoveWithMFunction,
+            format!(
+                "Q408=0 (move directly) is not allowed when M{m} positions the rotary axes (mStrobeRotAxPos): the probe cannot follow the sphere while the PLC turns them; give a retraction height; nothing moved"
+            ),
+        ));
+    }
+    let mut p = plan(params, probe, &cfg.machine)?;
+    p.rotary_m = Some(m);
+    Ok(p)
 }
 
 /// `v` rounded up to the 4 decimals a message shows, so that the value it names as

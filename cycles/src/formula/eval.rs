@@ -140,6 +140,31 @@ pub fn eval(e: &Expr, env: &dyn Env) -> Result<f64, EvalError> {
             }
         }
         Expr::StrLen(n) => read_text(env, *n)?.chars().count() as f64,
+        Expr::StrComp { src, sea } => match read_text(env, *src)?.cmp(&read_text(env, *sea)?) {
+            std::cmp::Ordering::Less => -1.0,
+            std::cmp::Ordering::Equal => 0.0,
+            std::cmp::Ordering::Greater => 1.0,
+        },
+        Expr::InStr { src, sea, beg } => {
+            let (t, find) = (read_text(env, *src)?, read_text(env, *sea)?);
+            let count = t.chars().count();
+            let beg = match beg {
+                Some(b) => whole(eval(b, env)?, "INSTR: BEG")?,
+                None => 0,
+            };
+            if beg > count {
+                return fail(
+                    K::Text,
+                    format!("INSTR: BEG{beg} is beyond {src}, which has {count} characters"),
+                );
+            }
+            // Counted in characters, as SUBSTR's BEG and LEN are.
+            let from: String = t.chars().skip(beg).collect();
+            match from.find(&find) {
+                Some(i) => (beg + from[..i].chars().count()) as f64,
+                None => count as f64,
+            }
+        }
     })
 }
 

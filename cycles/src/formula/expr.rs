@@ -69,6 +69,19 @@ pub enum Expr {
     ToNumb(QName),
     /// `STRLEN ( SRC_QSn )`.
     StrLen(QName),
+    /// `STRCOMP ( SRC_QSa SEA_QSb )`: 0 when the texts are the same, -1 when QSa comes
+    /// first in the character order, +1 when it comes after.
+    StrComp {
+        src: QName,
+        sea: QName,
+    },
+    /// `INSTR ( SRC_QSa SEA_QSb BEGn )`: where QSb first occurs in QSa from character
+    /// `n` on (0 = the first; `BEG` left out: 0), or QSa's length when it does not.
+    InStr {
+        src: QName,
+        sea: QName,
+        beg: Option<Box<Expr>>,
+    },
 }
 
 /// A string expression.
@@ -108,6 +121,13 @@ impl Expr {
             Expr::Bin(_, a, b) => {
                 a.params(out);
                 b.params(out);
+            }
+            Expr::StrComp { src, sea } => out.extend([*src, *sea]),
+            Expr::InStr { src, sea, beg } => {
+                out.extend([*src, *sea]);
+                if let Some(b) = beg {
+                    b.params(out);
+                }
             }
         }
     }

@@ -126,10 +126,11 @@ impl Parser {
                     Expr::StrLen(src)
                 })
             }
+            Some(Tok::Word(w)) if w == "STRCOMP" || w == "INSTR" => self.search(&w),
             Some(Tok::Word(w)) => match Func::from_word(&w) {
                 Some(f) => Ok(Expr::Func(f, Box::new(self.unary()?))),
                 None => Err(format!(
-                    "{w}: unknown function (known: SQ, SQRT, SIN, COS, TAN, ASIN, ACOS, ATAN, ABS, INT, FRAC, SGN, PI, TONUMB, STRLEN)"
+                    "{w}: unknown function (known: SQ, SQRT, SIN, COS, TAN, ASIN, ACOS, ATAN, ABS, INT, FRAC, SGN, PI, TONUMB, STRLEN, STRCOMP, INSTR)"
                 )),
             },
             Some(Tok::Str(_)) => Err(format!(
@@ -141,7 +142,31 @@ impl Parser {
 
     /// `SRC_QSn`.
     fn source(&mut self, func: &str) -> Result<QName, String> {
-        if self.eat_word("SRC_") {
+        self.string_param(func, "SRC_", "the string parameter to read")
+    }
+
+    /// `STRCOMP ( SRC_QSa SEA_QSb )` and `INSTR ( SRC_QSa SEA_QSb BEGn )`, after the
+    /// function's name.
+    fn search(&mut self, func: &str) -> Result<Expr, String> {
+        self.expect_op('(', &format!("after {func}"))?;
+        let src = self.source(func)?;
+        let sea = self.string_param(func, "SEA_", "the string parameter to compare or find")?;
+        let beg = if func == "INSTR" && self.eat_word("BEG") {
+            Some(Box::new(self.unary()?))
+        } else {
+            None
+        };
+        self.expect_op(')', &format!("to close {func}"))?;
+        Ok(if func == "STRCOMP" {
+            Expr::StrComp { src, sea }
+        } else {
+            Expr::InStr { src, sea, beg }
+        })
+    }
+
+    /// `<key>QSn`: a string parameter named after a keyword (`SRC_`, `SEA_`).
+    fn string_param(&mut self, func: &str, key: &str, what: &str) -> Result<QName, String> {
+        if self.eat_word(key) {
             if let Some(Tok::Name(n)) = self.peek().cloned() {
                 if n.kind == QKind::QS {
                     self.pos += 1;
@@ -150,7 +175,7 @@ impl Parser {
             }
         }
         Err(format!(
-            "{func}: expected SRC_QSn (the string parameter to read), found {}",
+            "{func}: expected {key}QSn ({what}), found {}",
             self.found()
         ))
     }

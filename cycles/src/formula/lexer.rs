@@ -1,5 +1,5 @@
 //! Splits a formula into tokens: numbers, parameters, strings, words (functions and
-//! the glued keywords `SRC_`, `BEG`, `LEN`, `DAT`, `DECIMALS`), operators and `||`.
+//! the glued keywords `SRC_`, `SEA_`, `BEG`, `LEN`, `DAT`, `DECIMALS`), operators and `||`.
 
 use crate::q_params::QName;
 use std::fmt;
@@ -28,7 +28,7 @@ impl fmt::Display for Tok {
 }
 
 /// Words that carry their value glued on (`BEG0`, `SRC_QS146`, `DECIMALS3`).
-const GLUED: [&str; 5] = ["SRC_", "BEG", "LEN", "DAT", "DECIMALS"];
+const GLUED: [&str; 6] = ["SRC_", "SEA_", "BEG", "LEN", "DAT", "DECIMALS"];
 
 pub(super) fn lex(s: &str) -> Result<Vec<Tok>, String> {
     let mut out = Vec::new();

@@ -22,6 +22,11 @@ pub(super) fn is_param_ref(raw: &str) -> bool {
     crate::q_params::QName::parse(r).is_some_and(|n| !n.is_text())
 }
 
+/// `QS5`: a string parameter as a string cycle parameter's value (`QS400=QS5`).
+fn is_text_ref(raw: &str) -> bool {
+    crate::q_params::QName::parse(raw).is_some_and(|n| n.is_text())
+}
+
 /// One `Qnnn=value` as written.
 pub(super) struct Assignment<'a> {
     pub(super) name: String,
@@ -145,8 +150,12 @@ pub(super) fn cycle(
                 continue;
             }
             written.push(a.name.clone());
-            // `Q407=+Q5`: the value is the parameter's when the block runs.
-            if matches!(spec.kind, Kind::Number { .. }) && is_param_ref(a.raw) {
+            // `Q407=+Q5`, `QS400=QS1`: the value is the parameter's when the block runs.
+            let deferrable = match spec.kind {
+                Kind::Number { .. } => is_param_ref(a.raw),
+                Kind::Text { .. } => is_text_ref(a.raw),
+            };
+            if deferrable {
                 deferred = true;
                 continue;
             }
@@ -280,7 +289,10 @@ pub(super) fn resolve(
             let Some(text) = a.raw.strip_prefix('"').and_then(|r| r.strip_suffix('"')) else {
                 return fail(
                     diags,
-                    format!("{title}: expected a string in quotes, {}=\"...\"", a.name),
+                    format!(
+                        "{title}: expected a string in quotes, {}=\"...\", or a string parameter, {}=QSn",
+                        a.name, a.name
+                    ),
                 );
             };
             let len = text.chars().count();

@@ -20,7 +20,7 @@ pub fn targets() -> Vec<Target> {
             prepare: || {
                 machines();
             },
-            seeds: || corpus::files(&corpus::configs("programs"), ".h"),
+            seeds: || corpus::with(corpus::files(&corpus::configs("programs"), ".h"), &[STRINGS]),
             dictionary: &[
                 "TCH PROBE", "CYCL DEF", "BEGIN PGM", "END PGM", "TOOL CALL", "FMAX", "FAUTO",
                 "MM", "INCH", "L ", "~\n", ";", " ~", "QS400=", "Q", "R0", "M99", "IX", "IY",
@@ -36,6 +36,9 @@ pub fn targets() -> Vec<Target> {
                 "FN 16: F-PRINT", " || ", "SUBSTR ( SRC_QS146 BEG0 LEN10 )",
                 "TONUMB ( SRC_QS0 )", "TOCHAR ( DAT+Q1 DECIMALS3 )", "STRLEN ( SRC_QS1 )",
                 "X+Q1", "Y-QL2", "FQ3", "M30", "DECLARE STRING ", "STRING FORMULA ",
+                // String comparison and string cycle values.
+                "STRCOMP ( SRC_QS1 SEA_QS2 )", "INSTR ( SRC_QS1 SEA_QS2 BEG0 )", "SEA_QS",
+                "SRC_QS", " BEG", "QS400=QS1", "FN 9: IF QS1 EQU QS2 GOTO LBL 1",
             ],
             run: run_check,
         },
@@ -58,6 +61,31 @@ pub fn targets() -> Vec<Target> {
         },
     ]
 }
+
+/// A seed with the string functions, string comparison and a QS parameter as a
+/// cycle's string value.
+const STRINGS: &str = "0 BEGIN PGM STRINGS MM
+1 TOOL CALL \"TOUCH_PROBE\" Z
+2 QS1 = \"0.4-0.1\"
+3 QS2 = \"0.4-0.1\"
+4 Q1 = STRCOMP ( SRC_QS1 SEA_QS2 )
+5 Q2 = INSTR ( SRC_QS1 SEA_QS2 BEG0 ) + STRLEN ( SRC_QS1 )
+6 FN 10: IF +Q1 NE +0 GOTO LBL 9
+7 L Z+100 R0 FMAX
+8 TCH PROBE 444 PROBING 3D ~
+  Q263=+0 ~
+  Q264=+0 ~
+  Q294=+0 ~
+  Q581=+0 ~
+  Q582=+0 ~
+  Q583=+1 ~
+  Q320=+1 ~
+  Q260=+100 ~
+  QS400=QS1 ~
+  Q309=+0
+9 LBL 9
+10 END PGM STRINGS MM
+";
 
 struct Machine {
     cfg: CyclesConfig,

@@ -1,0 +1,77 @@
+//! Rotary axes positioned by an M function (`[cycles] mStrobeRotAxPos`, the TNC's
+//! machine parameter 204803): an indexing table the PLC turns. The seeds say the
+//! measurement starts only with every rotary axis at 0 deg (collision danger: the NC
+//! cannot turn them by itself), measures no backlash, and the TNC hands each target
+//! angle to the PLC in Q120 (A), Q121 (B), Q122 (C) before the M function.
+
+use super::plan::KinematicsPlan;
+use crate::cycle::CycleContext;
+use crate::error::CycleError;
+use hal::{Axis, AxisPositions, Machine};
+
+/// The start of the confirmation asked before a 451 on such a machine. The gateway
+/// answers it with the PLC's start request (the PLC positions the table); the CLI asks
+/// the operator (`--yes` answers it).
+pub const ROTARY_AT_ZERO: &str = "mStrobeRotAxPos:";
+
+/// How far from 0 deg a rotary axis may stand and still count as at 0 (deg): the
+/// drives' resolution, not a tolerance of the measurement.
+pub const AT_ZERO_DEG: f64 = 1e-4;
+
+/// The parameter the TNC writes a rotary axis's target angle into (`Q120` for A).
+pub fn target_param(axis: Axis) -> Option<&'static str> {
+    match axis {
+        Axis::A => Some("Q120"),
+        Axis::B => Some("Q121"),
+        Axis::C => Some("Q122"),
+        _ => None,
+    }
+}
+
+/// Before anything of the cycle moves: every rotary axis of the machine at 0 deg, and
+/// the operator (or the PLC's start request) confirms it.
+pub(super) fn check_start<M: Machine>(
+    machine: &mut M,
+    plan: &KinematicsPlan,
+    m: u32,
+    ctx: &mut CycleContext<'_>,
+    block: u32,
+) -> Result<(), CycleError> {
+    let here = machine
+        .positions()
+        .map_err(|e| CycleError::machine("reading the rotary axes' positions", &e))?;
+    let off: Vec<String> = plan
+        .present
+        .iter()
+        .filter_map(|&a| {
+            let v = here.get(a).unwrap_or(0.0);
+            (v.abs() > AT_ZERO_DEG).then(|| format!("{a} is at {v:+.4} deg"))
+        })
+        .collect();
+    if !off.is_empty() {
+        return Err(CycleError::Plan(format!(
+            "cycle 451: M{m} positions the rotary axes (mStrobeRotAxPos), and the measurement starts only with every rotary axis at 0 deg: {}; position them at 0 first; nothing moved",
+            off.join(", ")
+        )));
+    }
+    let names: Vec<&str> = plan.present.iter().map(|a| a.name()).collect();
+    let text = format!(
+        "{ROTARY_AT_ZERO} cycle 451 (block {block}): M{m} positions the rotary axes {}; the PLC turns them to each measuring angle (Q120..Q122) while the probe stands at Q408. They read 0 deg: check that they really stand at 0 deg and that the probe clears the sphere at every angle (collision danger). Start the measurement?",
+        names.join(", ")
+    );
+    if !(ctx.confirm)(&text) {
+        return Err(CycleError::Plan(format!(
+            "cycle 451: the start with the rotary axes at 0 deg (M{m} positions them, mStrobeRotAxPos) was not confirmed; nothing moved"
+        )));
+    }
+    Ok(())
+}
+
+/// The Q120..Q122 values of a rotary positioning to `target`: the angles of the rotary
+/// axes it names.
+pub fn target_values(target: &AxisPositions) -> Vec<(&'static str, f64)> {
+    target
+        .iter()
+        .filter_map(|(a, v)| target_param(a).map(|q| (q, v)))
+        .collect()
+}
