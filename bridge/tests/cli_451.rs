@@ -8,10 +8,13 @@
 mod spec451;
 
 mod common;
+#[path = "common/table_ac_case.rs"]
+mod table_ac_case;
 
 use common::*;
 use spec451::*;
 use std::path::{Path, PathBuf};
+use table_ac_case::table_ac_case;
 
 fn machine(name: &str) -> hal::config::MachineConfig {
     hal::config::MachineConfig::load(&configs().join(format!("machines/{name}.toml"))).unwrap()
@@ -71,19 +74,7 @@ const PROGRAM: &str = "0 BEGIN PGM K MM
 /// A folder `tag` with the hand-written scenario (on table-ac) and the program:
 /// (folder, scenario, program).
 fn hand_written_case(tag: &str) -> (PathBuf, PathBuf, PathBuf) {
-    let dir = tmpdir(tag);
-    let scenario = dir.join("scenario.toml");
-    std::fs::write(
-        &scenario,
-        format!(
-            "machine = \"{}\"\n{SCENARIO}",
-            configs().join("machines/table-ac.toml").display()
-        ),
-    )
-    .unwrap();
-    let program = dir.join("k.h");
-    std::fs::write(&program, PROGRAM).unwrap();
-    (dir, scenario, program)
+    table_ac_case(tag, SCENARIO, PROGRAM)
 }
 
 /// Must show: on a scenario written by hand (noise 0), `probebridge run` recovers every

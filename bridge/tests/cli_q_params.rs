@@ -4,9 +4,12 @@
 //! measuring point gives that point's spatial error as the dispersion.
 
 mod common;
+#[path = "common/table_ac_case.rs"]
+mod table_ac_case;
 
 use common::*;
 use std::path::{Path, PathBuf};
+use table_ac_case::table_ac_case;
 
 /// table-ac with errors of A and C injected, noise 0.
 const SCENARIO: &str = r#"
@@ -80,20 +83,9 @@ fn program(limit: &str) -> String {
     )
 }
 
+/// The case of `limit`: (folder, scenario, program).
 fn case(tag: &str, limit: &str) -> (PathBuf, PathBuf, PathBuf) {
-    let dir = tmpdir(tag);
-    let scenario = dir.join("scenario.toml");
-    std::fs::write(
-        &scenario,
-        format!(
-            "machine = \"{}\"\n{SCENARIO}",
-            configs().join("machines/table-ac.toml").display()
-        ),
-    )
-    .unwrap();
-    let program_path = dir.join("k.h");
-    std::fs::write(&program_path, program(limit)).unwrap();
-    (dir, scenario, program_path)
+    table_ac_case(tag, SCENARIO, &program(limit))
 }
 
 fn run_case(

@@ -21,6 +21,9 @@ mod common;
 #[path = "common/pymodbus_venv.rs"]
 mod pymodbus_venv;
 use pymodbus_venv::python;
+#[path = "common/serve.rs"]
+mod serve;
+use serve::{copy_programs, Serve};
 #[path = "common/postgres_server.rs"]
 mod postgres_server;
 
@@ -44,20 +47,30 @@ fn in_ci() -> bool {
     std::env::var("CI").ok().as_deref() == Some("true")
 }
 
-/// `probebridge serve` on the tilted plane, program 431, history as `history` says.
+/// `probebridge serve` on the tilted plane, program 431, history as `history` says,
+/// and the Python that plays its PLC.
 struct Gateway {
-    child: Child,
-    port: u16,
-    dir: PathBuf,
+    serve: Serve,
     py: PathBuf,
+}
+
+impl std::ops::Deref for Gateway {
+    type Target = Serve;
+    fn deref(&self) -> &Serve {
+        &self.serve
+    }
+}
+
+impl std::ops::DerefMut for Gateway {
+    fn deref_mut(&mut self) -> &mut Serve {
+        &mut self.serve
+    }
 }
 
 impl Gateway {
     /// `history`: the keys of the `[history]` section.
     fn start(py: &Path, dir: &Path, name: &str, history: &str) -> Self {
-        let folder = dir.join("programs");
-        std::fs::create_dir_all(&folder).unwrap();
-        std::fs::copy(configs().join("programs/431-plane.h"), folder.join("431.h")).unwrap();
+        copy_programs(dir, &[(431, "431-plane.h")]);
         let config = dir.join("gateway.toml");
         std::fs::write(
             &config,
@@ -74,54 +87,14 @@ impl Gateway {
             ),
         )
         .unwrap();
-        let log = std::fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(dir.join("serve.log"))
-            .unwrap();
-        let mut child = bin()
-            .args(["serve", "--config", config.to_str().unwrap()])
-            .env_remove("STATE_DIRECTORY")
-            .stdout(Stdio::piped())
-            .stderr(log)
-            .spawn()
-            .unwrap();
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        let Some(addr) = line.trim().strip_prefix("probebridge serve: listening on ") else {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!(
-                "serve did not come up: {line:?}\n{}",
-                std::fs::read_to_string(dir.join("serve.log")).unwrap_or_default()
-            );
-        };
-        let port = addr.rsplit(':').next().unwrap().parse().unwrap();
         Self {
-            child,
-            port,
-            dir: dir.to_path_buf(),
+            serve: Serve::spawn(bin(), dir, &config),
             py: py.to_path_buf(),
         }
     }
 
     fn plc(&self, args: &[&str]) -> serde_json::Value {
-        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/gateway/history_plc.py");
-        let out = Command::new(&self.py)
-            .arg(script)
-            .args(["127.0.0.1", &self.port.to_string()])
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "PLC {args:?}: {}\nserve log:\n{}",
-            String::from_utf8_lossy(&out.stderr),
-            self.log()
-        );
-        serde_json::from_slice(&out.stdout).unwrap()
+        self.serve.plc_script(&self.py, "history_plc.py", args)
     }
 
     /// A start of 431 that is refused: "history unavailable", nothing moved.
@@ -163,10 +136,6 @@ impl Gateway {
             );
             std::thread::sleep(Duration::from_millis(100));
         }
-    }
-
-    fn log(&self) -> String {
-        std::fs::read_to_string(self.dir.join("serve.log")).unwrap_or_default()
     }
 
     fn signal(&self, sig: i32) {

@@ -18,12 +18,15 @@ mod common;
 #[path = "common/pymodbus_venv.rs"]
 mod pymodbus_venv;
 use pymodbus_venv::python;
+#[path = "common/serve.rs"]
+mod serve;
+use serve::{copy_programs, Serve as Gateway};
 
 use common::*;
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 /// Writes a gateway configuration in `dir` serving `scenario` with the programs
@@ -35,15 +38,7 @@ fn gateway_config(
     programs: &[(u16, &str)],
     plc: &str,
 ) -> PathBuf {
-    let folder = dir.join("programs");
-    std::fs::create_dir_all(&folder).unwrap();
-    for (n, p) in programs {
-        std::fs::copy(
-            configs().join("programs").join(p),
-            folder.join(format!("{n}.h")),
-        )
-        .unwrap();
-    }
+    copy_programs(dir, programs);
     let config = dir.join("gateway.toml");
     std::fs::write(
         &config,
@@ -60,48 +55,16 @@ fn gateway_config(
     config
 }
 
-/// A running `probebridge serve`; SIGTERM on drop.
-struct Gateway {
-    child: Child,
-    port: u16,
-    dir: PathBuf,
-}
-
 impl Gateway {
     fn start(name: &str, programs: &[(u16, &str)], plc: &str, env: &[(&str, &str)]) -> Self {
         let dir = tmpdir(&format!("face-{name}"));
         let plc = format!("listen = \"127.0.0.1:0\"\n{plc}");
         let config = gateway_config(&dir, name, "tilted-plane.toml", programs, &plc);
-        let log = std::fs::File::create(dir.join("serve.log")).unwrap();
         let mut cmd = bin();
         for (k, v) in env {
             cmd.env(k, v);
         }
-        let mut child = cmd
-            .args(["serve", "--config", config.to_str().unwrap()])
-            .stdout(Stdio::piped())
-            .stderr(log)
-            .spawn()
-            .unwrap();
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        let Some(addr) = line.trim().strip_prefix("probebridge serve: listening on ") else {
-            let _ = child.kill();
-            let log = std::fs::read_to_string(dir.join("serve.log")).unwrap_or_default();
-            panic!("serve did not come up: {line:?}\n{log}");
-        };
-        let port = addr.rsplit(':').next().unwrap().parse().unwrap();
-        Self { child, port, dir }
-    }
-
-    fn addr(&self) -> SocketAddr {
-        SocketAddr::from(([127, 0, 0, 1], self.port))
-    }
-
-    fn log(&self) -> String {
-        std::fs::read_to_string(self.dir.join("serve.log")).unwrap_or_default()
+        Self::spawn(cmd, &dir, &config)
     }
 
     /// Polls the log until `pred` holds (at most 60 s, then fails with the log).
@@ -111,23 +74,6 @@ impl Gateway {
             assert!(Instant::now() < deadline, "{what}:\n{}", self.log());
             std::thread::sleep(Duration::from_millis(50));
         }
-    }
-
-    fn plc(&self, py: &Path, args: &[&str]) -> serde_json::Value {
-        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/gateway/plc.py");
-        let out = Command::new(py)
-            .arg(script)
-            .args(["127.0.0.1", &self.port.to_string()])
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "PLC {args:?}: {}\nserve log:\n{}",
-            String::from_utf8_lossy(&out.stderr),
-            self.log()
-        );
-        serde_json::from_slice(&out.stdout).unwrap()
     }
 
     fn history_statuses(&self) -> Vec<String> {
@@ -141,20 +87,6 @@ impl Gateway {
             .iter()
             .map(|r| r["status"].as_str().unwrap().to_string())
             .collect()
-    }
-
-    fn stop(&mut self) -> std::process::ExitStatus {
-        // SAFETY: kill(2) on our own child's pid.
-        unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
-        self.child.wait().unwrap()
-    }
-}
-
-impl Drop for Gateway {
-    fn drop(&mut self) {
-        if let Ok(None) = self.child.try_wait() {
-            self.stop();
-        }
     }
 }
 

@@ -14,19 +14,15 @@ mod common;
 #[path = "common/pymodbus_venv.rs"]
 mod pymodbus_venv;
 use pymodbus_venv::python;
+#[path = "common/serve.rs"]
+mod serve;
+use serve::{copy_programs, Serve};
 
 use common::*;
 use std::ffi::OsStr;
-use std::io::{BufRead, BufReader, Read};
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-
-/// A running `probebridge serve`; SIGTERM on drop.
-struct Serve {
-    child: Child,
-    port: u16,
-    dir: PathBuf,
-}
+use std::process::{Child, Stdio};
 
 impl Serve {
     /// Serves `scenario` with the programs `(number, shipped program)` in a folder of
@@ -70,15 +66,7 @@ impl Serve {
         envs: &[(&str, &OsStr)],
     ) -> Self {
         let (machine, plc) = extra;
-        let folder = dir.join("programs");
-        std::fs::create_dir_all(&folder).unwrap();
-        for (n, p) in programs {
-            std::fs::copy(
-                configs().join("programs").join(p),
-                folder.join(format!("{n}.h")),
-            )
-            .unwrap();
-        }
+        copy_programs(&dir, programs);
         let scenario = configs().join("scenarios").join(scenario);
         let config = dir.join("gateway.toml");
         std::fs::write(
@@ -94,75 +82,14 @@ impl Serve {
             ),
         )
         .unwrap();
-        let log = std::fs::File::create(dir.join("serve.log")).unwrap();
         let mut cmd = bin();
         cmd.envs(envs.iter().copied());
-        let mut child = cmd
-            .args(["serve", "--config", config.to_str().unwrap()])
-            .stdout(Stdio::piped())
-            .stderr(log)
-            .spawn()
-            .unwrap();
-        // The service says its bound address once the machine is up.
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        let Some(addr) = line.trim().strip_prefix("probebridge serve: listening on ") else {
-            let _ = child.kill();
-            let mut log = String::new();
-            let _ =
-                std::fs::File::open(dir.join("serve.log")).map(|mut f| f.read_to_string(&mut log));
-            panic!("serve did not come up: {line:?}\n{log}");
-        };
-        let port = addr.rsplit(':').next().unwrap().parse().unwrap();
-        Self { child, port, dir }
-    }
-
-    fn plc(&self, py: &Path, args: &[&str]) -> serde_json::Value {
-        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/gateway/plc.py");
-        let out = Command::new(py)
-            .arg(script)
-            .args(["127.0.0.1", &self.port.to_string()])
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "PLC {args:?}: {}\nserve log:\n{}",
-            String::from_utf8_lossy(&out.stderr),
-            self.log()
-        );
-        serde_json::from_slice(&out.stdout).unwrap()
+        Self::spawn(cmd, &dir, &config)
     }
 
     /// `probebridge history --db ... --json`.
     fn history(&self) -> Vec<serde_json::Value> {
         history_json(&self.dir.join("history.sqlite"))
-    }
-
-    fn log(&self) -> String {
-        std::fs::read_to_string(self.dir.join("serve.log")).unwrap_or_default()
-    }
-
-    /// SIGTERM; the exit status.
-    fn stop(&mut self) -> std::process::ExitStatus {
-        self.signal(libc::SIGTERM)
-    }
-
-    /// Sends `sig`; the exit status.
-    fn signal(&mut self, sig: libc::c_int) -> std::process::ExitStatus {
-        // SAFETY: kill(2) on our own child's pid.
-        unsafe { libc::kill(self.child.id() as i32, sig) };
-        self.child.wait().unwrap()
-    }
-}
-
-impl Drop for Serve {
-    fn drop(&mut self) {
-        if let Ok(None) = self.child.try_wait() {
-            self.stop();
-        }
     }
 }
 

@@ -13,32 +13,12 @@ use hal::config::BusConfig;
 use hal::modbus::{ModbusBusConfig, ModbusMachine, ModbusOptions, WordOrder};
 use hal::{Axis, AxisPositions, Machine, NullSink, ProbeMove};
 use probebridge_tests::{configs_dir, machine_config};
+#[path = "../../bridge/tests/common/pymodbus_venv.rs"]
+mod pymodbus_venv;
+use pymodbus_venv::python;
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
-
-fn python() -> Option<PathBuf> {
-    let p = std::env::var_os("PROBEBRIDGE_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("/opt/probebridge-venv/bin/python"));
-    let ok = Command::new(&p)
-        .args(["-c", "import pymodbus"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if ok {
-        return Some(p);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "{}: no pymodbus in CI; scripts/install-test-peers should have made the venv",
-        p.display()
-    );
-    eprintln!(
-        "SKIPPED: {} has no pymodbus (run scripts/install-test-peers)",
-        p.display()
-    );
-    None
-}
 
 struct Double(Child);
 

@@ -1,4 +1,5 @@
-//! The Python that plays the PLC in the gateway tests: the venv that
+//! The Python that plays the PLC in the gateway tests (and the PLC double of
+//! `tests/tests/modbus_pymodbus.rs`, which includes this file): the venv that
 //! `scripts/install-test-peers` makes, with pymodbus (and sqlite3, which the history
 //! tests read the database with). Missing in CI: the test fails; elsewhere it is skipped
 //! with a message.
