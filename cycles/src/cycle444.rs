@@ -132,9 +132,12 @@ struct Approach {
 
 impl Probing3dParams {
     /// The pre-position and probing path with the active datum at `origin` (machine
-    /// XYZ). The pre-position must lie below the safe height: the probe comes down to
-    /// it from Q260 at FMAX, unmonitored, so a Q260 under it would drive the probe
-    /// through the part on the way over (refused as cycle 431 refuses it).
+    /// XYZ). Q260 is where the probe moves unmonitored at FMAX, so it must clear what
+    /// the block says is material (refused as cycle 431 refuses it, with the lowest
+    /// value that clears): the pre-position must lie below it (else the probe would
+    /// come up to the pre-position through the part), and the ball at Q260 must pass
+    /// R + SET_UP above the probed point itself (on a face whose normal is not the tool
+    /// axis, the material at the point rises to the nominal point's height).
     fn approach(&self, call: &CycleBlock, origin: Vector3<f64>) -> Result<Approach, CycleError> {
         let probe = &call.tool.probe;
         let axis = call.tool.axis;
@@ -145,11 +148,21 @@ impl Probing3dParams {
         let approach = probe.radius + probe.set_up + self.clearance;
         let start = nominal + n * approach;
         let safe_height = self.safe_height + origin[t];
+        let over_point = nominal[t] + probe.radius + probe.set_up;
+        let lowest = round_up(start[t].max(over_point) - origin[t]);
         if start[t] > safe_height {
             return Err(CycleError::Plan(format!(
-                "Q260={} is below the start of the point ({:.4} = nominal + (R + SET_UP + Q320) along the normal); nothing moved",
+                "Q260={} is below the start of the point ({:.4} = nominal + (R + SET_UP + Q320) along the normal); the lowest Q260 that clears is {lowest:.4}; nothing moved",
                 self.safe_height,
                 start[t] - origin[t]
+            )));
+        }
+        if over_point > safe_height {
+            return Err(CycleError::Plan(format!(
+                "Q260={} does not clear the probed point: the ball at the safe height must pass R + SET_UP = {:.4} above the nominal point ({:.4}), or it touches the surface there; the lowest Q260 that clears is {lowest:.4}; nothing moved",
+                self.safe_height,
+                probe.radius + probe.set_up,
+                nominal[t] - origin[t]
             )));
         }
         Ok(Approach {
@@ -161,13 +174,15 @@ impl Probing3dParams {
     }
 
     /// Every move the cycle commands, in order, with the active datum at `origin`
-    /// (machine XYZ): what `check` and `run` hold against the machine before the
+    /// (machine XYZ) and the axes at `here` (the safe height and the working plane in
+    /// the order [`from_above`] gives): what `check` and `run` hold against the machine before the
     /// program's first move. The retraction after the contact, MB back along the
     /// normal, lies between its ends for a contact at the start and at the path's end.
     pub fn planned_moves(
         &self,
         call: &CycleBlock,
         origin: [f64; 3],
+        here: &AxisPositions,
     ) -> Result<Vec<PlannedMove>, CycleError> {
         let a = self.approach(call, Vector3::from(origin))?;
         let probe = &call.tool.probe;
@@ -183,9 +198,18 @@ impl Probing3dParams {
             .with(Axis::LINEAR[main], a.start[main])
             .with(Axis::LINEAR[minor], a.start[minor]);
         let path_end = a.start - a.n * a.max_distance;
-        Ok(vec![
+        let (up, across) = (
             position("moving to the safe height", safe),
             position("positioning in the working plane", over),
+        );
+        let [first, second] = if from_above(here.get(axis.axis()), a.safe_height) {
+            [across, up]
+        } else {
+            [up, across]
+        };
+        Ok(vec![
+            first,
+            second,
             position(
                 "moving to the pre-position",
                 AxisPositions::linear(a.start.into()),
@@ -212,6 +236,19 @@ impl Probing3dParams {
     }
 }
 
+/// The positioning logic of the TNC's probing cycles: a probe that stands above the
+/// safe height (`here`, its tool-axis coordinate) moves over the pre-position first
+/// and comes down there, on the free side of the surface, never where it happens to
+/// stand; one below it goes up to the safe height first, then across.
+fn from_above(here: Option<f64>, safe_height: f64) -> bool {
+    here.is_some_and(|h| h > safe_height)
+}
+
+/// `v` rounded up to the 4 decimals a message shows (the lowest value shown clears).
+fn round_up(v: f64) -> f64 {
+    (v * 1e4 - 1e-3).ceil() / 1e4
+}
+
 /// Probes the point; its result parameters and what the log shows of it.
 fn measure<M: Machine>(
     call: &CycleBlock,
@@ -230,6 +267,10 @@ fn measure<M: Machine>(
         safe_height,
     } = p.approach(call, origin)?;
     let direction = -n;
+    let here = machine
+        .positions()
+        .map_err(|e| CycleError::machine("reading the axis positions", &e))?
+        .get(axis.axis());
 
     let mut pos = Positioner {
         machine,
@@ -238,8 +279,13 @@ fn measure<M: Machine>(
         block: call.block,
         progress,
     };
-    pos.safe_height(safe_height)?;
-    pos.over(start.into())?;
+    if from_above(here, safe_height) {
+        pos.over(start.into())?;
+        pos.safe_height(safe_height)?;
+    } else {
+        pos.safe_height(safe_height)?;
+        pos.over(start.into())?;
+    }
     pos.to("moving to the pre-position", start.into())?;
     let contact = pos.probe("probing the point", direction.into(), probe.f, max_distance)?;
     let centre = Vector3::from(contact.positions.xyz());

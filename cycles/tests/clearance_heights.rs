@@ -71,6 +71,11 @@ fn program444(shift: [f64; 3], block: &str) -> Program {
     Program::parse(&text, &common::config()).unwrap_or_else(|e| panic!("{e}\n{text}"))
 }
 
+/// 444's Q260 must clear what the block says is material: the start of the point
+/// (else the probe comes up to it through the part) and the probed point itself by
+/// R + SET_UP (on a face whose normal is not the tool axis the material rises to the
+/// point's height). Both sides of the limit, with normals along the tool axis, oblique
+/// and in the working plane, and a datum shift.
 #[test]
 fn q260_below_the_start_of_the_444_point_is_refused_before_anything_moves() {
     let cfg = common::config();
@@ -79,17 +84,27 @@ fn q260_below_the_start_of_the_444_point_is_refused_before_anything_moves() {
         ([0.0, 0.0, 10.0], [0.0, 0.0, 1.0], 0.0, [0.0; 3]),
         ([12.0, -4.0, -3.5], [0.0, 0.6, 0.8], 1.5, [5.0, 5.0, 40.0]),
         ([-20.0, 7.0, 22.0], [1.0, 0.0, 0.0], 3.0, [0.0, 0.0, -15.0]),
+        ([3.0, 9.0, -7.0], [-0.9, 0.2, 0.3], 0.5, [1.0, -2.0, 3.0]),
     ] {
         let n = Vector3::from(normal).normalize();
         let start = Vector3::from(nominal) + n * (3.0 + 2.0 + q320);
-        for q260 in [start.z - 0.01, start.z - 15.0, -50.0] {
+        let lowest = f64::max(start.z, nominal[2] + 3.0 + 2.0);
+        for q260 in [lowest - 0.01, lowest - 15.0, -50.0] {
             let prog = program444(shift, &block444(nominal, normal, q320, q260));
             let e = preflight_program(&prog, 0b111, &cfg, std::path::Path::new("k.toml"))
                 .unwrap_err()
                 .to_string();
+            let why = if q260 < start.z {
+                format!(
+                    "Q260={q260} is below the start of the point ({:.4} =",
+                    start.z
+                )
+            } else {
+                format!("Q260={q260} does not clear the probed point")
+            };
             assert!(
-                e.contains(&format!("Q260={q260} is below the start of the point"))
-                    && e.contains(&format!("({:.4} =", start.z))
+                e.contains(&why)
+                    && e.contains(&format!("the lowest Q260 that clears is {lowest:.4}"))
                     && e.contains("block 5"),
                 "{e}"
             );
@@ -107,7 +122,7 @@ fn q260_below_the_start_of_the_444_point_is_refused_before_anything_moves() {
                 "{stopped} / {e}"
             );
         }
-        for q260 in [start.z, start.z + 0.01, start.z + 100.0] {
+        for q260 in [lowest, lowest + 0.01, lowest + 100.0] {
             let prog = program444(shift, &block444(nominal, normal, q320, q260));
             preflight_program(&prog, 0b111, &cfg, std::path::Path::new("k.toml"))
                 .unwrap_or_else(|e| panic!("Q260={q260}: {e}"));

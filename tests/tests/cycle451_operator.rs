@@ -511,6 +511,35 @@ fn check_and_run_agree_at_the_same_move() {
             None,
             true,
         ),
+        // The seed's face is vertical at X0, the side of a dome that rises to Z80
+        // within the ball radius behind it: Q260 must clear the probed point itself
+        // by R + SET_UP (5 over Z0), and the probe, standing above Q260, comes down
+        // over the pre-position (X5), never at X0 where it stood (which drove it into
+        // the dome at Q260 = +0.2 and +33 before).
+        (
+            "seed-444.toml",
+            read("444-seed.h").replace("Q260=+100", "Q260=+0.2"),
+            None,
+            true,
+        ),
+        (
+            "seed-444.toml",
+            read("444-seed.h").replace("Q260=+100", "Q260=+4.99"),
+            None,
+            true,
+        ),
+        (
+            "seed-444.toml",
+            read("444-seed.h").replace("Q260=+100", "Q260=+5"),
+            None,
+            false,
+        ),
+        (
+            "seed-444.toml",
+            read("444-seed.h").replace("Q260=+100", "Q260=+33"),
+            None,
+            false,
+        ),
         ("demo-sphere.toml", check451.clone(), None, false),
         ("demo-sphere.toml", read("451-optimise.h"), None, false),
         (
@@ -589,5 +618,144 @@ fn check_and_run_agree_at_the_same_move() {
                 );
             }
         }
+    }
+}
+
+/// Replays the commanded moves of a run on the simulator's true geometry: no move
+/// turns a rotary axis together with a linear one, and while a rotary axis turns the
+/// ball clears the sphere by SET_UP (less 0.05 mm for the injected errors) at every
+/// angle on the way. Returns the number of rotary moves.
+fn turns_clear_the_sphere(sc: &sim::Scenario, set_up: f64, events: &[ProgressEvent]) -> usize {
+    use hal::{Axis, AxisPositions};
+    let world = sim::world::World::new(sc);
+    let r = world.probe().ball_radius();
+    // Every axis at 0: the program's L blocks set X, Y and Z before anything turns.
+    let mut pos = AxisPositions::new();
+    for a in Axis::ALL {
+        if sc.machine.axis(a).is_some() {
+            pos.set(a, 0.0);
+        }
+    }
+    let mut turns = 0;
+    for e in events {
+        let ProgressEvent::Move { target, .. } = e else {
+            continue;
+        };
+        let changes = |axes: &[Axis]| {
+            axes.iter().any(|a| match (target.get(*a), pos.get(*a)) {
+                (Some(t), Some(p)) => (t - p).abs() > 1e-9,
+                _ => false,
+            })
+        };
+        if changes(&Axis::ROTARY) {
+            turns += 1;
+            assert!(
+                !changes(&Axis::LINEAR),
+                "a rotary axis turns together with a linear one: {target:?} from {pos:?}"
+            );
+            let end = pos.merged(target);
+            let span = Axis::ROTARY
+                .iter()
+                .filter_map(|a| Some((end.get(*a)? - pos.get(*a)?).abs()))
+                .fold(0.0, f64::max);
+            let steps = (span / 0.25).ceil().max(1.0) as usize;
+            for i in 0..=steps {
+                let f = i as f64 / steps as f64;
+                let mut p = pos;
+                for (a, v) in end.iter() {
+                    let v0 = pos.get(a).unwrap_or(v);
+                    p.set(a, v0 + (v - v0) * f);
+                }
+                let gap = world.distance(&p) - r;
+                assert!(
+                    gap > set_up - 0.05,
+                    "while turning to {target:?}: the ball is {gap:.4} mm from the sphere at {p:?} (SET_UP {set_up})"
+                );
+            }
+        }
+        pos = pos.merged(target);
+    }
+    turns
+}
+
+/// The rotary axes turn only while the probe stands at a height that clears the
+/// sphere for every angle on the way (Q408 = 0: the lowest such height; Q408 > 0:
+/// Q408), and the approach starts only after they stand at the measurement's angles:
+/// on a tilting table, a B head with a C table, and both horizontal machines, the
+/// axes turning up and down (ranges in both directions, Q432 from both sides), with
+/// the same result as before the turns were made this way (within 1e-4 of a run
+/// whose axes start centred, checked by the other tests).
+#[test]
+fn rotary_axes_turn_only_at_a_height_that_clears_the_sphere() {
+    type Case = (&'static str, char, [f64; 3], P451);
+    let cases: Vec<Case> = vec![
+        (
+            "demo-sphere.toml",
+            'Z',
+            [50.0, -30.0, 80.0],
+            P451 {
+                a: Ax(-70.0, 80.0, 0.0, 3),
+                c: Ax(300.0, 30.0, 0.0, 3),
+                ..P451::default()
+            },
+        ),
+        (
+            "demo-sphere.toml",
+            'Z',
+            [50.0, -30.0, 80.0],
+            P451 {
+                a: Ax(85.0, -45.0, 0.0, 2),
+                c: Ax(45.0, 315.0, 20.0, 2),
+                backlash: 0.7,
+                q408: 42.5,
+                ..P451::default()
+            },
+        ),
+        (
+            "head-b-table-c.toml",
+            'Z',
+            [40.0, 25.0, 60.0],
+            P451 {
+                b: Ax(80.0, -70.0, 0.0, 3),
+                c: Ax(90.0, 270.0, 0.0, 2),
+                points: 3,
+                backlash: 0.5,
+                ..P451::default()
+            },
+        ),
+        (
+            "horizontal-y-sphere.toml",
+            'Y',
+            [50.0, -30.0, 80.0],
+            P451 {
+                a: Ax(60.0, -40.0, 0.0, 2),
+                c: Ax(-60.0, 200.0, 0.0, 2),
+                q320: 1.0,
+                ..P451::default()
+            },
+        ),
+        (
+            "horizontal-x-head-b-table-c.toml",
+            'X',
+            [40.0, 25.0, 60.0],
+            P451 {
+                b: Ax(-50.0, 40.0, 0.0, 2),
+                c: Ax(240.0, 100.0, 0.0, 2),
+                points: 3,
+                backlash: 0.4,
+                ..P451::default()
+            },
+        ),
+    ];
+    for (k, (name, axis, centre, p)) in cases.into_iter().enumerate() {
+        let sc = load(name);
+        let cfg = cycles_config(&sc);
+        let t = "XYZ".find(axis).unwrap();
+        let set_up = cfg.probe("TOUCH_PROBE").unwrap().set_up;
+        let s = start_at(centre, t, p.radius + 3.0, 0.0, 0.0, set_up + p.q320);
+        let r = run_text(&program(&p, axis, s, ""), &sc, &cfg, "turns");
+        result(&r);
+        let turns = turns_clear_the_sphere(&sc, set_up, &r.events);
+        assert!(turns >= 4, "case {k} ({name}): only {turns} turns");
     }
 }

@@ -8,7 +8,8 @@
 //! - every case of `tests/vcan/cases`: the exit status, the JSON against the host
 //!   reference run (in-process bus; every number to 1e-6) and against the scenario's
 //!   truth (`truth=probe`, `truth=431`, `QNNN=V`);
-//! - every program in `configs/programs` is covered by a case;
+//! - every program in `configs/programs` is covered by a case, and is run twice in a row
+//!   (a run case and an again= case on its machine state);
 //! - the Machine conformance suite on SocketCAN ran and passed (and was not skipped);
 //! - the third-party master (`canopen_master.py`, python-canopen against `probebridge
 //!   sim`), our master against a python-canopen LocalNode (`vcan-foreign-master`) and
@@ -1204,6 +1205,18 @@ fn main() -> ExitCode {
                 |c: &Case| c.args.contains(&arg) || c.expect.derived.as_ref() == Some(&arg);
             r.check(cases.iter().any(covers), || {
                 format!("{arg} has no case in tests/vcan/cases: add one (run, or check for cycles that cannot run yet)")
+            });
+            // Every shipped example runs, and runs a second time in a row on the
+            // machine state the first run left (issue 28: it runs again and again).
+            let runs = |again: bool| {
+                cases.iter().any(|c| {
+                    covers(c)
+                        && c.args.first().map(String::as_str) == Some("run")
+                        && c.expect.again.is_some() == again
+                })
+            };
+            r.check(runs(false) && runs(true), || {
+                format!("{arg}: tests/vcan/cases must run it (run) and run it again on that run's machine state (again=)")
             });
         }
     }

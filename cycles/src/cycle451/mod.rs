@@ -20,9 +20,10 @@
 //!    measuring positions ([`crate::kinematics::positions`]); the other rotary axes stand
 //!    at their incidence angles (Q413/Q417/Q421). Between positions the probe retracts to
 //!    Q408 above the preset and over the preset in the working plane before the rotary
-//!    axes turn at Q253; with Q408 = 0 it follows the sphere at the pole in steps of at
-//!    most [`measure::TRACK_STEP_DEG`] (refused with a Hirth axis). Linear pre-positioning runs at
-//!    min(Q253, FMAX).
+//!    axes turn at Q253; with Q408 = 0 it rises along the tool axis to the lowest height
+//!    that clears the sphere at every angle of the turn (refused with a Hirth axis).
+//!    Either way the approach starts only after the axes stand at the measurement's
+//!    angles. Linear pre-positioning runs at min(Q253, FMAX).
 //! 3. Sphere measurement: the pole along the (possibly tilted) tool axis, then Q423
 //!    points around the equator in the working plane from Q380, radially toward the
 //!    centre; a sphere with free radius through the latched X/Y/Z positions (each

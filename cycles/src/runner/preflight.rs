@@ -296,7 +296,7 @@ pub(super) fn check_cycle_moves(
             .planned_moves(&call.head, origin)
             .map_err(|e| e.to_string()),
         CycleKind::Probing3d(p) => p
-            .planned_moves(&call.head, origin)
+            .planned_moves(&call.head, origin, here)
             .map_err(|e| e.to_string()),
         CycleKind::MeasureKinematics(p) => {
             let planned =

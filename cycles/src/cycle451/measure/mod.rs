@@ -1,7 +1,7 @@
 //! Steps 2 and 3: locating the sphere, then measuring it at every position of every
 //! planned axis. Between positions the probe retracts to Q408 above the preset and
-//! over it before the rotary axes turn, or (Q408 = 0) follows the sphere at the pole in
-//! steps of at most [`TRACK_STEP_DEG`]. A sphere is the pole along the (possibly tilted)
+//! over it before the rotary axes turn, or (Q408 = 0) to the lowest height that clears
+//! the sphere at every angle of the turn. A sphere is the pole along the (possibly tilted)
 //! tool axis and Q423 points around the equator, fitted by the estimator; it is probed
 //! again around the fitted centre when that is more than [`RE_PROBE_TOLERANCE`] from
 //! where it was expected.
@@ -26,8 +26,6 @@ mod sphere;
 /// A sphere whose fitted centre is farther than this from where it was expected is
 /// probed a second time around the fitted centre, mm.
 pub const RE_PROBE_TOLERANCE: f64 = 0.1;
-/// Largest rotary step of a move that follows the sphere (Q408 = 0), deg.
-pub const TRACK_STEP_DEG: f64 = 5.0;
 /// How far off the sphere centre the probe may start locating it (Q431 = 1/3), as a
 /// fraction of Q407 + ball radius, in any direction of the working plane.
 pub const LOCATE_REACH: f64 = 0.6;

@@ -1,9 +1,9 @@
-//! The measuring positions of every planned axis and the moves between them: the
-//! probe retracts to Q408 and over the preset before the rotary axes turn, or
-//! (Q408 = 0) follows the sphere at the pole in steps of at most [`super::TRACK_STEP_DEG`];
-//! the height that clears the sphere for every angle on the way.
+//! The measuring positions of every planned axis and the moves between them: before
+//! the rotary axes turn, the probe retracts to Q408 and over the preset, or (Q408 = 0)
+//! to the lowest height that clears the sphere for every angle of the turn; it
+//! approaches the sphere only after they stand at the measurement's angles.
 
-use super::{arr, Measure, Measured, Sphere, TRACK_STEP_DEG};
+use super::{Measure, Measured, Sphere};
 use crate::error::CycleError;
 use crate::kinematics::model::Angles;
 use hal::{Axis, AxisPositions, Machine};
@@ -116,16 +116,11 @@ impl<M: Machine> Measure<'_, '_, M> {
         }
         self.located = None;
         let mut spheres = Vec::new();
-        for (si, side) in sides.iter().enumerate() {
+        for side in &sides {
             let via = side.map(|off| plan.angles(axis, angle + off));
-            if si == 0 {
-                self.go_to(target, via)?;
-            } else {
-                if let Some(v) = via {
-                    self.track(v)?;
-                }
-                self.track(target)?;
-            }
+            // Each side its own turn at the height that clears the sphere (or Q408):
+            // the second side's turn through `angle - b` is no shorter a swing.
+            self.go_to(target, via)?;
             let expected = self.model.predict(&target, &self.table_point);
             let label = match side {
                 Some(off) => format!(
@@ -141,98 +136,105 @@ impl<M: Machine> Measure<'_, '_, M> {
         Ok(spheres)
     }
 
-    /// Turns the rotary axes to `to` following the sphere at the pole, in steps.
-    fn track(&mut self, to: Angles) -> Result<(), CycleError> {
-        let from = self.now;
-        let turn = (0..3).map(|s| (to[s] - from[s]).abs()).fold(0.0, f64::max);
-        let steps = ((turn / TRACK_STEP_DEG).ceil() as usize).max(1);
-        for i in 1..=steps {
-            let f = i as f64 / steps as f64;
-            let mut a = from;
-            for s in 0..3 {
-                a[s] = from[s] + (to[s] - from[s]) * f;
-            }
-            if i == steps {
-                a = to;
-            }
-            let target = self
-                .rotary(&a)
-                .merged(&AxisPositions::linear(arr(&self.predicted_pole(&a))));
-            self.mv(
-                "turning the rotary axes with the probe over the sphere",
-                target,
-                self.plan.positioning_feed,
-            )?;
-            self.now = a;
-        }
-        Ok(())
-    }
-
-    /// Goes to the pole start at `to`, approaching `to` from `via` (backlash).
+    /// Goes to the pole start at `to`, approaching `to` from `via` (backlash). The
+    /// rotary axes turn only while the probe stands at a height that clears the sphere
+    /// for every angle on the way: Q408 above the preset (and over the preset) when
+    /// Q408 > 0, else the lowest height that clears it by Q320 + SET_UP along the tool
+    /// axis at every angle of this turn (or higher, where the probe already stands).
+    /// The approach (over the pole start at that height, then down to it) starts only
+    /// after they stand at `to`.
     fn go_to(&mut self, to: Angles, via: Option<Angles>) -> Result<(), CycleError> {
         let moves = (0..3).any(|s| (to[s] - self.now[s]).abs() > 1e-9) || via.is_some();
-        let h = self.plan.params.retract_height;
         if !moves {
             let pole = self.predicted_pole(&to);
             return self.move_xyz("moving over the sphere", pole);
         }
-        if h > 0.0 {
-            let t = self.tool.tool_index();
-            let height = self.preset[t] + h;
-            // The probe stands at Q408 unmonitored while the rotary axes turn: it must
-            // clear the sphere by the ball radius and SET_UP at every angle on the way,
-            // this turn's and every later one's (the message names one value for all).
-            let mut path: Vec<Angles> = std::iter::once(self.now)
-                .chain(via)
-                .chain(std::iter::once(to))
-                .collect();
-            path.extend(self.cycle_path());
-            let rs = self.plan.params.sphere_radius + self.probe.radius;
-            let lowest = crate::cycle451::plan::round_up(
-                self.clear_height(&path, rs + self.probe.set_up) - self.preset[t],
-            );
-            if h < lowest {
-                return Err(CycleError::Plan(format!(
-                    "Q408={h}: the retraction height does not clear the sphere by the ball radius + SET_UP at every angle the rotary axes turn through (the sphere rises with them); the lowest Q408 that clears it is {lowest:.4}"
-                )));
-            }
-            let [main, minor, _] = self.tool.indices();
+        let t = self.tool.tool_index();
+        let turn: Vec<Angles> = std::iter::once(self.now)
+            .chain(via)
+            .chain(std::iter::once(to))
+            .collect();
+        let h = self.plan.params.retract_height;
+        let height = if h > 0.0 {
+            self.retract_to_q408(&turn)?
+        } else {
+            let here = self
+                .machine
+                .positions()
+                .map_err(|e| CycleError::machine("reading the axis positions", &e))?
+                .xyz();
+            let pole = self.predicted_pole(&to);
+            let height = self
+                .clear_height(&turn, self.reach())
+                .max(pole[t])
+                .max(here[t]);
             let up = AxisPositions::new().with(Axis::LINEAR[t], height);
-            self.mv("retracting to Q408", up, self.plan.positioning_feed)?;
-            let over = AxisPositions::new()
-                .with(Axis::LINEAR[main], self.preset[main])
-                .with(Axis::LINEAR[minor], self.preset[minor]);
             self.mv(
-                "moving over the preset at Q408",
-                over,
+                "moving up to clear the sphere before the rotary axes turn",
+                up,
                 self.plan.positioning_feed,
             )?;
-            for a in via.iter().chain(std::iter::once(&to)) {
-                self.mv(
-                    "turning the rotary axes (Q253)",
-                    self.rotary(a),
-                    self.plan.rotary_feed,
-                )?;
-                self.now = *a;
-            }
-            let pole = self.predicted_pole(&to);
-            if pole[t] > height {
-                return Err(CycleError::Plan(format!(
-                    "Q408: the retraction height {height:.3} ({} above the preset) is below the probe's start point over the sphere ({:.3}) at {}; give a higher Q408",
-                    h,
-                    pole[t],
-                    self.rotary(&to)
-                )));
-            }
-            let mut above = pole;
-            above[t] = height;
-            self.move_xyz("moving over the sphere at Q408", above)?;
-            self.move_xyz("approaching the sphere", pole)
-        } else {
-            if let Some(v) = via {
-                self.track(v)?;
-            }
-            self.track(to)
+            height
+        };
+        for a in via.iter().chain(std::iter::once(&to)) {
+            let step = if h > 0.0 {
+                "turning the rotary axes (Q253)"
+            } else {
+                "turning the rotary axes at a height that clears the sphere (Q253)"
+            };
+            self.mv(step, self.rotary(a), self.plan.rotary_feed)?;
+            self.now = *a;
         }
+        let pole = self.predicted_pole(&to);
+        if pole[t] > height {
+            return Err(CycleError::Plan(format!(
+                "Q408: the retraction height {height:.3} ({h} above the preset) is below the probe's start point over the sphere ({:.3}) at {}; give a higher Q408",
+                pole[t],
+                self.rotary(&to)
+            )));
+        }
+        let mut above = pole;
+        above[t] = height;
+        let over = if h > 0.0 {
+            "moving over the sphere at Q408"
+        } else {
+            "moving over the sphere at the clearing height"
+        };
+        self.move_xyz(over, above)?;
+        self.move_xyz("approaching the sphere", pole)
+    }
+
+    /// Q408 > 0: the probe stands there unmonitored while the rotary axes turn, so
+    /// it must clear the sphere by the ball radius and SET_UP at every angle on the
+    /// way, this turn's (`turn`) and every later one's (the message names one value
+    /// for all). Retracts to Q408 above the preset and over the preset in the working
+    /// plane; returns the height.
+    fn retract_to_q408(&mut self, turn: &[Angles]) -> Result<f64, CycleError> {
+        let h = self.plan.params.retract_height;
+        let t = self.tool.tool_index();
+        let height = self.preset[t] + h;
+        let mut path = turn.to_vec();
+        path.extend(self.cycle_path());
+        let rs = self.plan.params.sphere_radius + self.probe.radius;
+        let lowest = crate::cycle451::plan::round_up(
+            self.clear_height(&path, rs + self.probe.set_up) - self.preset[t],
+        );
+        if h < lowest {
+            return Err(CycleError::Plan(format!(
+                "Q408={h}: the retraction height does not clear the sphere by the ball radius + SET_UP at every angle the rotary axes turn through (the sphere rises with them); the lowest Q408 that clears it is {lowest:.4}"
+            )));
+        }
+        let [main, minor, _] = self.tool.indices();
+        let up = AxisPositions::new().with(Axis::LINEAR[t], height);
+        self.mv("retracting to Q408", up, self.plan.positioning_feed)?;
+        let over = AxisPositions::new()
+            .with(Axis::LINEAR[main], self.preset[main])
+            .with(Axis::LINEAR[minor], self.preset[minor]);
+        self.mv(
+            "moving over the preset at Q408",
+            over,
+            self.plan.positioning_feed,
+        )?;
+        Ok(height)
     }
 }

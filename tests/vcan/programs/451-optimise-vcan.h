@@ -1,0 +1,44 @@
+0 BEGIN PGM 451-optimise-vcan MM
+; configs/programs/451-optimise.h for the vcan VM (tests/vcan/cases): the same
+; program with Q253 (pre-positioning feed) 5000 instead of 750, so it runs in
+; about 2 min of real time instead of 5. tests/vcan/check.rs makes sure the two
+; differ in nothing else.
+1 ; Cycle 451 MEASURE KINEMATICS, mode 1 (optimise position), on demo-sphere.toml:
+2 ; A at -90, -30, +30, +90 and C at 90, 180, 270 deg around the 0 deg references.
+3 ; The probe goes over the sphere (R12.5 at X+50 Y-30 Z+80) first. Q431=1 sets the
+4 ; preset to the sphere centre before measuring. The corrected position errors of A
+5 ; and C go into the machine's active kinematics file (in its state directory, never
+6 ; configs/).
+7 ; The probe is put over the sphere in machine coordinates (M91), whatever the
+8 ; active preset; cycle 247 makes row 1, the sphere centre, the row Q431 sets,
+9 ; so the program runs again and again, and row 0 stays at the machine origin.
+10 TOOL CALL "TOUCH_PROBE" Z
+11 CYCL DEF 247 DATUM SETTING ~
+    Q339=+1        ;DATUM NUMBER
+12 L Z+150 R0 FMAX M91
+13 L X+50 Y-30 R0 FMAX M91
+14 L Z+102.5 R0 FMAX M91
+15 TCH PROBE 451 MEASURE KINEMATICS ~
+    Q406=+1        ;MODE ~
+    Q407=+12.5     ;SPHERE RADIUS ~
+    Q320=+0        ;SET-UP CLEARANCE ~
+    Q408=+0        ;RETR. HEIGHT ~
+    Q253=+5000     ;F PRE-POSITIONING ~
+    Q380=+0        ;REFERENCE ANGLE ~
+    Q411=-90       ;START ANGLE A AXIS ~
+    Q412=+90       ;END ANGLE A AXIS ~
+    Q413=+0        ;INCID. ANGLE A AXIS ~
+    Q414=+4        ;MEAS. POINTS A AXIS ~
+    Q415=+0        ;START ANGLE B AXIS ~
+    Q416=+0        ;END ANGLE B AXIS ~
+    Q417=+0        ;INCID. ANGLE B AXIS ~
+    Q418=+0        ;MEAS. POINTS B AXIS ~
+    Q419=+90       ;START ANGLE C AXIS ~
+    Q420=+270      ;END ANGLE C AXIS ~
+    Q421=+0        ;INCID. ANGLE C AXIS ~
+    Q422=+3        ;MEAS. POINTS C AXIS ~
+    Q423=+4        ;NO. OF PROBE POINTS ~
+    Q431=+1        ;PRESET ~
+    Q432=+0        ;BACKLASH, ANG. RANGE
+16 L Z+150 R0 FMAX M91
+17 END PGM 451-optimise-vcan MM
