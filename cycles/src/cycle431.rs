@@ -132,9 +132,13 @@ impl PlaneParams {
     /// `origin` (machine XYZ); every one must lie below the safe height.
     fn approach(&self, call: &CycleBlock, origin: Vector3<f64>) -> Result<Approach, CycleError> {
         let probe = &call.tool.probe;
+        let cal = probe.calibration();
         let axis = call.tool.axis;
         let t = axis.tool_index();
-        let distance = probe.radius + probe.set_up + self.clearance;
+        let distance = cal.r + probe.set_up + self.clearance;
+        // The true ball centre goes over each point: the axes, less the calibrated
+        // stylus offset and length.
+        let shift = Vector3::from(cal.centre_shift(axis));
         // The probe comes from the positive tool-axis side (from above for Z).
         let mut up = [0.0; 3];
         up[t] = 1.0;
@@ -143,7 +147,7 @@ impl PlaneParams {
         let safe_height = self.safe_height + origin[t];
         let starts = self
             .points
-            .map(|pt| Vector3::from(axis.to_machine(pt)) + origin + up * distance);
+            .map(|pt| Vector3::from(axis.to_machine(pt)) + origin + up * distance - shift);
         if let Some((i, s)) = starts.iter().enumerate().find(|(_, s)| s[t] > safe_height) {
             return Err(CycleError::Plan(format!(
                 "Q260={} is below the start of point {} ({:.4} = nominal + R + SET_UP + Q320); nothing moved",
@@ -225,6 +229,9 @@ fn measure<M: Machine>(
         safe_height,
         starts,
     } = p.approach(call, origin)?;
+    let cal = probe.calibration();
+    let shift = Vector3::from(cal.centre_shift(axis));
+    let radius = cal.radius_toward(axis, up.into());
     ctx.note(call.block, "basic rotation reset");
     let mut pos = Positioner {
         machine,
@@ -244,10 +251,12 @@ fn measure<M: Machine>(
             probe.f,
             approach + probe.dist,
         )?;
-        // Ball centre shifted by R along the probing direction (no 3D radius
-        // compensation: on a tilted plane this is a constant offset of all three
-        // points, which leaves the angles exact).
-        measured[i][2] = contact.positions.xyz()[t] - probe.radius - origin[t];
+        // The true ball centre (latched plus the calibrated stylus shift) less the
+        // effective radius along the probing direction (no 3D radius compensation: on
+        // a tilted plane this is a constant offset of all three points, which leaves
+        // the angles exact).
+        let centre = Vector3::from(contact.positions.xyz()) + shift;
+        measured[i][2] = centre[t] - radius - origin[t];
         pos.safe_height(safe_height)?;
     }
     let angles = plane_angles(measured[0].into(), measured[1].into(), measured[2].into())

@@ -122,7 +122,8 @@ impl MeasuringCycle for Probing3dParams {
 struct Approach {
     /// The surface normal (unit, away from the material).
     n: Vector3<f64>,
-    /// The pre-position: the nominal point plus R + SET_UP + Q320 along the normal.
+    /// The pre-position (axes): the nominal point plus R + SET_UP + Q320 along the
+    /// normal, less the calibrated stylus shift.
     start: Vector3<f64>,
     /// The probing path: to the nominal point and DIST beyond it, mm.
     max_distance: f64,
@@ -140,13 +141,16 @@ impl Probing3dParams {
     /// axis, the material at the point rises to the nominal point's height).
     fn approach(&self, call: &CycleBlock, origin: Vector3<f64>) -> Result<Approach, CycleError> {
         let probe = &call.tool.probe;
+        let cal = probe.calibration();
         let axis = call.tool.axis;
         let t = axis.tool_index();
         let n = Vector3::from(axis.to_machine(self.normal));
         // Program coordinates: relative to the active preset plus shift (`origin`).
         let nominal = Vector3::from(axis.to_machine(self.nominal)) + origin;
-        let approach = probe.radius + probe.set_up + self.clearance;
-        let start = nominal + n * approach;
+        let approach = cal.r + probe.set_up + self.clearance;
+        // The true ball centre starts there: the axes go to it minus the stylus's
+        // offset and length (its row of the probe table).
+        let start = nominal + n * approach - Vector3::from(cal.centre_shift(axis));
         let safe_height = self.safe_height + origin[t];
         let over_point = nominal[t] + probe.radius + probe.set_up;
         let lowest = round_up(start[t].max(over_point) - origin[t]);
@@ -293,7 +297,11 @@ fn measure<M: Machine>(
     pos.to("retracting", (centre + n * probe.mb).into())?;
     pos.safe_height(safe_height)?;
 
-    let actual_m = centre - n * probe.radius - origin;
+    // The true ball centre at the contact, and the effective radius in the
+    // direction the contact pushed the ball (the normal): the probe's calibration.
+    let cal = probe.calibration();
+    let true_centre = centre + Vector3::from(cal.centre_shift(axis));
+    let actual_m = true_centre - n * cal.radius_toward(axis, n.into()) - origin;
     let actual = Vector3::from(axis.to_cycle(actual_m.into()));
     let nominal_c = Vector3::from(p.nominal);
     let deviation = actual - nominal_c;

@@ -1,12 +1,14 @@
 //! A machine as the measuring cycles see it: hal's [`MachineConfig`] and, from the same
 //! TOML file, the probe table ([`crate::probe_table`]) and the cycles' machine
-//! parameters ([`crate::machine_parameters`]); and the preset table beside it
-//! ([`crate::preset_table`]). hal accepts `[[probe]]` and `[cycles]`
+//! parameters ([`crate::machine_parameters`]); and beside it the preset table
+//! ([`crate::preset_table`]) and the probes' calibration rows
+//! ([`crate::probe_table::probes_file`]). hal accepts `[[probe]]` and `[cycles]`
 //! unread; they are validated here, just as strictly (unknown keys refused, errors
 //! name the file, the key and why).
 
 use crate::machine_parameters::MachineParameters;
 use crate::preset_table::PresetTable;
+use crate::probe_table::probes_file::ProbeCalibrations;
 use crate::probe_table::ProbeEntry;
 use hal::config::{ConfigError, MachineConfig};
 use serde::Deserialize;
@@ -22,6 +24,9 @@ pub struct CyclesConfig {
     /// `<machine>.presets.toml` beside the machine file (row 0 at the origin when
     /// there is none); a program starts with its active row.
     pub presets: PresetTable,
+    /// `<machine>.probes.toml` beside the machine file: the probes' calibration rows
+    /// (none when there is no file), also set on [`Self::probes`].
+    pub calibrations: ProbeCalibrations,
 }
 
 /// The sections of the machine TOML the cycles own; hal checks every other key.
@@ -100,12 +105,33 @@ impl CyclesConfig {
             return Err(invalid(key, why));
         }
         let presets = PresetTable::load(&PresetTable::default_path(&machine), &machine)?;
-        Ok(Self {
+        let calibrations =
+            ProbeCalibrations::load(&ProbeCalibrations::default_path(&machine), &s.probes)?;
+        let mut cfg = Self {
             machine,
             probes: s.probes,
             parameters: s.cycles,
             presets,
-        })
+            calibrations,
+        };
+        cfg.apply_calibrations();
+        Ok(cfg)
+    }
+
+    /// Sets each probe's calibration from [`Self::calibrations`] (after the rows or
+    /// the radii changed).
+    pub fn apply_calibrations(&mut self) {
+        for p in &mut self.probes {
+            p.calibration = self.calibrations.row(&p.name).map(|r| r.calibration());
+        }
+    }
+
+    /// Reads the calibration rows from `path` instead (a test's or a run's own copy)
+    /// and applies them.
+    pub fn use_calibrations(&mut self, path: &std::path::Path) -> Result<(), ConfigError> {
+        self.calibrations = ProbeCalibrations::load(path, &self.probes)?;
+        self.apply_calibrations();
+        Ok(())
     }
 
     /// Makes row `number` the active preset the program starts with (a scenario's

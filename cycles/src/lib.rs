@@ -28,6 +28,7 @@ pub mod cycle431;
 pub mod cycle444;
 pub mod cycle450;
 pub mod cycle451;
+pub mod cycle460;
 pub mod cycle_block;
 pub mod cycles_config;
 pub mod datum;

@@ -3,6 +3,7 @@
 //! "message": null}]}`.
 
 use crate::cycle451::report::KinematicsReport;
+use crate::cycle460::report::CalibrationReport;
 use crate::q_params::QValue;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -65,6 +66,8 @@ pub struct CycleOutput {
     pub stop: Option<String>,
     /// Cycle 451's report.
     pub kinematics: Option<Box<KinematicsReport>>,
+    /// Cycle 460's report.
+    pub calibration: Option<Box<CalibrationReport>>,
     /// Measuring logs written.
     pub logs: Vec<PathBuf>,
 }

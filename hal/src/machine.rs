@@ -182,6 +182,15 @@ pub trait Machine {
     fn health(&mut self) -> Result<(), Self::Error> {
         self.positions().map(|_| ())
     }
+
+    /// Turns the spindle to `angle_deg` (an oriented spindle stop) and waits until it
+    /// stands there: `Ok(true)`. `Ok(false)`: this machine has no spindle it can
+    /// orient, nothing moved (the default); a cycle that needs one (460's stylus
+    /// offset) says so.
+    fn orient_spindle(&mut self, angle_deg: f64) -> Result<bool, Self::Error> {
+        let _ = angle_deg;
+        Ok(false)
+    }
 }
 
 /// Forwards every method to the machine behind a pointer (`**self`).
@@ -206,6 +215,9 @@ macro_rules! forward_machine {
             }
             fn health(&mut self) -> Result<(), Self::Error> {
                 (**self).health()
+            }
+            fn orient_spindle(&mut self, angle_deg: f64) -> Result<bool, Self::Error> {
+                (**self).orient_spindle(angle_deg)
             }
         }
     )*};

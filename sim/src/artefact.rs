@@ -27,6 +27,20 @@ pub trait Surface {
     /// while decreasing): the moment a point approaching the material comes closer
     /// than `r`. Grazing (tangent) touches and exits are not entries.
     fn first_entry(&self, c0: &Vector3<f64>, c1: &Vector3<f64>, r: f64) -> Option<f64>;
+
+    /// Unit normal of the surface nearest to `p`, away from the material: the
+    /// direction in which a ball centred at `p` is pushed by the contact.
+    fn normal(&self, p: &Vector3<f64>) -> Vector3<f64>;
+}
+
+/// `v` as a unit vector; `fallback` where it has no direction (a point on an axis).
+fn unit_or(v: Vector3<f64>, fallback: Vector3<f64>) -> Vector3<f64> {
+    let n = v.norm();
+    if n > 0.0 {
+        v / n
+    } else {
+        fallback
+    }
 }
 
 fn in_unit(t: f64) -> Option<f64> {
@@ -123,6 +137,10 @@ impl Surface for Plane {
         }
         in_unit((r - s0) / (s1 - s0))
     }
+
+    fn normal(&self, _p: &Vector3<f64>) -> Vector3<f64> {
+        self.normal.into_inner()
+    }
 }
 
 /// Solid sphere.
@@ -151,6 +169,10 @@ impl Surface for Sphere {
 
     fn first_entry(&self, c0: &Vector3<f64>, c1: &Vector3<f64>, r: f64) -> Option<f64> {
         radial_first_entry(&(c0 - self.center), &(c1 - c0), self.radius + r)
+    }
+
+    fn normal(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        unit_or(p - self.center, Vector3::z())
     }
 }
 
@@ -199,6 +221,10 @@ impl Surface for Cylinder {
         let w0 = self.perpendicular(&(c0 - self.point));
         radial_first_entry(&w0, &self.perpendicular(&(c1 - c0)), self.radius + r)
     }
+
+    fn normal(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        unit_or(self.perpendicular(&(p - self.point)), Vector3::z())
+    }
 }
 
 /// Any of the artefacts.
@@ -231,6 +257,14 @@ impl Surface for Artefact {
             Artefact::Plane(a) => a.first_entry(c0, c1, r),
             Artefact::Sphere(a) => a.first_entry(c0, c1, r),
             Artefact::Cylinder(a) => a.first_entry(c0, c1, r),
+        }
+    }
+
+    fn normal(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        match self {
+            Artefact::Plane(a) => a.normal(p),
+            Artefact::Sphere(a) => a.normal(p),
+            Artefact::Cylinder(a) => a.normal(p),
         }
     }
 }
@@ -278,6 +312,15 @@ impl Surface for ArtefactSet {
             .iter()
             .filter_map(|a| a.first_entry(c0, c1, r))
             .reduce(f64::min)
+    }
+
+    /// The normal of the nearest artefact (+Z without artefacts).
+    fn normal(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        self.items
+            .iter()
+            .map(|a| (a.distance(p), a))
+            .min_by(|x, y| x.0.total_cmp(&y.0))
+            .map_or(Vector3::z(), |(_, a)| a.normal(p))
     }
 }
 

@@ -161,6 +161,19 @@ impl TrueKinematics {
         Vector3::new(x, y, z) + head.translation.vector
     }
 
+    /// Head to machine: `T_h1 · … · T_hm` (the rotation the head gives the tool).
+    pub fn head_transform(&self, axes: &AxisPositions) -> Isometry3<f64> {
+        self.head.compose(axes)
+    }
+
+    /// A point fixed to the head, `v` from the ball centre of the ideal stylus with
+    /// the head at 0, in machine coordinates: `XYZ + T_h1 · … · T_hm · v`.
+    pub fn head_point_in_machine(&self, axes: &AxisPositions, v: &Vector3<f64>) -> Vector3<f64> {
+        let [x, y, z] = axes.xyz();
+        let head = self.head.compose(axes);
+        Vector3::new(x, y, z) + head.transform_point(&(*v).into()).coords
+    }
+
     /// Ball centre in table coordinates (where the artefacts are).
     pub fn ball_centre_in_table(&self, axes: &AxisPositions) -> Vector3<f64> {
         self.machine_to_table(axes, self.ball_centre_in_machine(axes))

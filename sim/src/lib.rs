@@ -9,6 +9,8 @@
 //! - [`backlash`]: dead band of a rotary axis.
 //! - [`artefact`]: plane, sphere, cylinder; exact segment contact.
 //! - [`probe`]: ball radius, pre-travel, noise, signal state.
+//! - [`stylus`]: the real stylus: direction-dependent pre-travel (lobing), the ball
+//!   centre's offset from the spindle axis and its length error.
 //! - [`world`]: all of it, stepped once per simulation step by the drive simulation.
 //! - [`drive`]: a simulated CiA 402 drive on CANopen (same codec as the master).
 //! - [`machine`]: all drives of a machine on a bus, stepped together per SYNC.
@@ -22,6 +24,7 @@ pub mod machine;
 pub mod plc;
 pub mod probe;
 pub mod scenario;
+pub mod stylus;
 pub mod world;
 
 pub use scenario::{Scenario, ScenarioError};

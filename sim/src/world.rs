@@ -15,7 +15,7 @@ use crate::probe::Probe;
 use crate::scenario::{effective_hirth, Scenario};
 use hal::axis::MAX_AXES;
 use hal::{Axis, AxisPositions};
-use nalgebra::Vector3;
+use nalgebra::{Rotation3, Vector3};
 
 /// Sub-steps of a step in which a rotary axis moves: the ball-centre path in table
 /// coordinates is then a curve, solved exactly on each chord.
@@ -52,6 +52,9 @@ pub struct World {
     rotary: [RotaryMechanics; 3],
     /// Whether state (backlash, signal) has been taken from a position yet.
     started: bool,
+    /// Spindle orientation, deg: turns the stylus (its offset and lobes) about the
+    /// tool axis.
+    spindle_deg: f64,
 }
 
 impl World {
@@ -74,7 +77,18 @@ impl World {
             probe: Probe::new(&scenario.probe, scenario.seed),
             rotary,
             started: false,
+            spindle_deg: 0.0,
         }
+    }
+
+    /// The spindle turns to `deg` (an oriented spindle stop): the stylus turns with it.
+    pub fn orient_spindle(&mut self, deg: f64) {
+        self.spindle_deg = deg;
+    }
+
+    /// Spindle orientation, deg.
+    pub fn spindle_deg(&self) -> f64 {
+        self.spindle_deg
     }
 
     pub fn kinematics(&self) -> &TrueKinematics {
@@ -95,8 +109,8 @@ impl World {
         for (m, axis) in self.rotary.iter_mut().zip(Axis::ROTARY) {
             m.backlash.reset(axes.get(axis).unwrap_or(0.0));
         }
-        let d = self.distance(axes);
-        self.probe.reset(d);
+        let (c, to_stylus) = (self.ball_centre_in_table(axes), self.to_stylus(axes));
+        self.probe.reset(&self.artefacts, &c, &to_stylus);
         self.started = true;
     }
 
@@ -113,9 +127,30 @@ impl World {
         out
     }
 
-    /// Ball centre in table coordinates with the axes at `axes` (encoder positions).
+    /// Ball centre in table coordinates with the axes at `axes` (encoder positions):
+    /// the real stylus's centre, off the ideal one by its offset and length error.
     pub fn ball_centre_in_table(&self, axes: &AxisPositions) -> Vector3<f64> {
-        self.kinematics.ball_centre_in_table(&self.mechanical(axes))
+        let mech = self.mechanical(axes);
+        let v = self.probe.stylus().centre(self.spindle_deg);
+        if v == Vector3::zeros() {
+            return self.kinematics.ball_centre_in_table(&mech);
+        }
+        let m = self.kinematics.head_point_in_machine(&mech, &v);
+        self.kinematics.machine_to_table(&mech, m)
+    }
+
+    /// Turns table-frame directions into the stylus frame with the axes at `axes`
+    /// (table rotation, head rotation, spindle orientation); the identity for an
+    /// isotropic stylus, which needs no directions.
+    pub fn to_stylus(&self, axes: &AxisPositions) -> Rotation3<f64> {
+        let stylus = self.probe.stylus();
+        if stylus.is_isotropic() {
+            return Rotation3::identity();
+        }
+        let mech = self.mechanical(axes);
+        let table = self.kinematics.table_transform(&mech).rotation;
+        let head = self.kinematics.head_transform(&mech).rotation;
+        stylus.from_tool_frame(self.spindle_deg) * (head.inverse() * table).to_rotation_matrix()
     }
 
     /// Signed distance of the ball centre to the nearest artefact surface, mm.
@@ -125,7 +160,9 @@ impl World {
 
     /// Is the probe deflected with the axes at `axes` (encoder positions)?
     pub fn deflected(&self, axes: &AxisPositions) -> bool {
-        self.probe.deflected_at(self.distance(axes))
+        let c = self.ball_centre_in_table(axes);
+        self.probe
+            .deflected_at(&self.artefacts, &c, &self.to_stylus(axes))
     }
 
     /// How far the ball is pressed into the material, mm (`R` minus the centre's
@@ -163,7 +200,8 @@ impl World {
             };
             self.update_backlash(&at);
             let c = self.ball_centre_in_table(&at);
-            if let Some(x) = self.probe.advance(&self.artefacts, &c_prev, &c) {
+            let to_stylus = self.to_stylus(&at);
+            if let Some(x) = self.probe.advance(&self.artefacts, &c_prev, &c, &to_stylus) {
                 edge.get_or_insert(((i - 1) as f64 + x) / n as f64);
             }
             c_prev = c;

@@ -101,10 +101,8 @@ fn a_jump_into_the_material_between_steps_rises_at_zero() {
 #[test]
 fn noise_is_reproducible_with_the_right_sigma() {
     let truth = ProbeTruth {
-        ball_radius: 3.0,
         noise: 0.002,
-        pretravel: 0.0,
-        table_radius: None,
+        ..ProbeTruth::ideal(3.0)
     };
     let draws = |seed| {
         let mut p = Probe::new(&truth, seed);

@@ -52,6 +52,9 @@ impl<T> Machine for Held<T> {
     fn health(&mut self) -> Result<(), MachineError> {
         self.machine.health()
     }
+    fn orient_spindle(&mut self, angle_deg: f64) -> Result<bool, MachineError> {
+        self.machine.orient_spindle(angle_deg)
+    }
 }
 
 /// CANopen master and simulated drives on the in-process bus with the machine's bit

@@ -9,6 +9,7 @@ pub mod conformance_modbus;
 pub mod loopback;
 pub mod probing_loop;
 pub mod spec451;
+pub mod world_machine;
 
 use sim::Scenario;
 use std::path::{Path, PathBuf};
@@ -95,6 +96,8 @@ pub fn cycles_config(sc: &Scenario) -> cycles::CyclesConfig {
     }
     // Cycles that set a preset write a temporary copy, never the shipped table.
     cfg.presets.path = temp_presets_path(&cfg.presets.path);
+    // So does cycle 460 with its probe table row.
+    cfg.calibrations.path = temp_presets_path(&cfg.calibrations.path);
     cfg
 }
 

@@ -313,4 +313,7 @@ impl<M: Machine<Error = MachineError> + ?Sized> Machine for ErrorNote<'_, M> {
     fn health(&mut self) -> Result<(), MachineError> {
         self.inner.health()
     }
+    fn orient_spindle(&mut self, angle_deg: f64) -> Result<bool, MachineError> {
+        self.inner.orient_spindle(angle_deg)
+    }
 }

@@ -194,6 +194,7 @@ impl MeasuringCycle for KinematicsParams {
             qs,
             stop: write_back.stop,
             kinematics: Some(Box::new(report)),
+            calibration: None,
             logs: vec![log],
         })
     }

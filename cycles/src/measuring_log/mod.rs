@@ -1,6 +1,7 @@
 //! The measuring logs the TNC writes next to the program (or in the run's output
 //! folder): `TCHPR431.TXT` for cycle 431 ([`plane`]), `TCHPR444.html` for cycle 444
-//! ([`probing3d`]); cycle 451's `TCHPRAUTO.html` is `crate::cycle451::measuring_log`.
+//! ([`probing3d`]); cycle 451's `TCHPRAUTO.html` is `crate::cycle451::measuring_log`,
+//! cycle 460's `TCHPR460.TXT` `crate::cycle460::measuring_log`.
 //! Here: what they share.
 
 pub mod plane;

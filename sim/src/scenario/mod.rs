@@ -13,6 +13,13 @@
 //! noise = 0.0            # mm, 1 sigma, along the probing direction (default 0)
 //! pretravel = 0.0        # mm (default 0)
 //! table_radius = 3.0     # optional: R the probe table holds; default ball_radius
+//! # A real (kinematic) probe; all optional, off by default (see crate::stylus):
+//! axis = "Z"             # the spindle's tool axis, X, Y or Z (default Z)
+//! pretravel_axial = 0.0  # mm, pushing the ball along the stylus (default pretravel)
+//! lobing = 0.0           # mm, amplitude of the seat's three lobes (<= pretravel)
+//! lobing_phase = 0.0     # deg, azimuth of the first lobe at spindle 0°
+//! offset = [0.0, 0.0]    # mm, ball centre off the spindle axis (main, minor) at 0°
+//! length_error = 0.0     # mm, ball centre further from the spindle than the table says
 //! [truth]                # ISO 230-7 names, mm and deg; every key optional
 //! EX0C = 0.012
 //! EC0C = 0.0             # zero-position error of C (also EA0A, EB0B)

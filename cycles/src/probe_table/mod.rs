@@ -1,6 +1,12 @@
 //! The touch-probe table (the TNC's tchprobe.tp): `[[probe]]` entries of the machine
-//! TOML. Read and validated here, not by hal, which accepts the section unread.
+//! TOML, read and validated here, not by hal, which accepts the section unread; and
+//! each probe's calibration ([`calibration`]), which cycle 460 measures and keeps in
+//! `<machine>.probes.toml` beside it ([`probes_file`]).
 
+pub mod calibration;
+pub mod probes_file;
+
+use calibration::Calibration;
 use serde::Deserialize;
 
 /// One entry of the touch-probe table.
@@ -24,14 +30,25 @@ pub struct ProbeEntry {
     pub track: bool,
     /// Retract distance after a contact, mm.
     pub mb: f64,
+    /// The probe's row of `probes.toml` (cycle 460), when it has one.
+    #[serde(skip)]
+    pub calibration: Option<Calibration>,
 }
 
 /// The plausible range of each length of an entry, mm: a stylus ball up to 50 mm
-/// radius; clearances and paths up to 1 m.
-pub const RADIUS_MM: (f64, f64) = (0.01, 50.0);
+/// radius ([`RADIUS_MM`]); clearances and paths up to 1 m.
+pub use calibration::RADIUS_MM;
 pub const PATH_MM: f64 = 1000.0;
 
 impl ProbeEntry {
+    /// What the cycles probe with: the calibrated row, else the nominal probe (R the
+    /// table's radius, no offset, no length correction).
+    pub fn calibration(&self) -> Calibration {
+        self.calibration
+            .clone()
+            .unwrap_or_else(|| Calibration::nominal(self.radius))
+    }
+
     /// The first field out of range, as (key, reason). Feeds are checked against the
     /// machine by [`crate::cycles_config::CyclesConfig`].
     pub fn invalid_field(&self) -> Option<(&'static str, String)> {

@@ -1,0 +1,194 @@
+//! Cycle 460 CALIBRATION OF TS ON A SPHERE: calibrates the active touch probe on a
+//! calibration sphere of known radius (Q407) and writes its row of the probe table
+//! (`probes.toml`, [`crate::probe_table::probes_file`]): the effective radius R, the
+//! ball centre's offset from the spindle axis (CAL_OF1, CAL_OF2 at CAL_ANG), with Q433
+//! the length L against Q434, and with Q455 the 3D table of the effective radius by
+//! direction.
+//!
+//! The offset needs the spindle turned by 180°: on a machine whose spindle cannot be
+//! oriented the cycle says that the offset cannot be separated from the sphere's
+//! position, and keeps the row's offset as it was.
+
+pub mod evaluate;
+pub mod measure;
+pub mod measuring_log;
+pub mod parameters;
+pub mod report;
+
+pub use parameters::{CalibrationParams, CYCLE_460};
+pub use report::{CalibrationReport, RowValues};
+
+use crate::cycle::{CycleContext, MeasuringCycle};
+use crate::cycle_block::CycleBlock;
+use crate::error::CycleError;
+use crate::measuring_log::timestamp_utc;
+use crate::probe_table::calibration::{Calibration, RING_ELEVATIONS};
+use crate::probe_table::probes_file::CalibrationRow;
+use crate::results::CycleOutput;
+use evaluate::table_3d;
+use hal::Machine;
+use measure::{Probed, Probing};
+use measuring_log::{write_calibration_log, CALIBRATION_LOG};
+use nalgebra::Vector3;
+use std::collections::BTreeMap;
+
+/// The unit vectors of (main, minor, tool) in machine coordinates.
+fn frame(call: &CycleBlock) -> [Vector3<f64>; 3] {
+    let axis = call.tool.axis;
+    [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]].map(|e| Vector3::from(axis.to_machine(e)))
+}
+
+/// The new calibration from what was probed, starting from `old`.
+pub fn evaluate(
+    p: &CalibrationParams,
+    probed: &Probed,
+    old: &Calibration,
+    frame: &[Vector3<f64>; 3],
+    origin_t: f64,
+) -> (Calibration, Vector3<f64>, Vec<String>) {
+    let mut notes = Vec::new();
+    let n = frame[2];
+    let eq = &probed.equator;
+    let plane = |v: &Vector3<f64>| [frame[0].dot(v), frame[1].dot(v)];
+    let rho = eq.iter().map(|r| r.radius).sum::<f64>() / eq.len() as f64;
+    let offset = if let [e0, e180] = &eq[..] {
+        let d = (e180.centre - e0.centre) / 2.0;
+        plane(&d)
+    } else {
+        notes.push(
+            "no orientable spindle: the stylus offset cannot be separated from the sphere's position (it needs the spindle at 0° and 180°); CAL_OF1/CAL_OF2 kept".to_string(),
+        );
+        old.offset
+    };
+    // The pole over the found centre fixes the equator's true height: the circle of
+    // a ring probed ε off it has radius sqrt(r² - ε²).
+    let pole_t = n.dot(&probed.pole);
+    let mut r = rho - p.sphere_radius;
+    for _ in 0..3 {
+        let eps = probed.equator_height - (pole_t - p.sphere_radius - r);
+        r = (rho * rho + eps * eps).sqrt() - p.sphere_radius;
+    }
+    let l = if p.calibrate_length {
+        pole_t - origin_t - p.length_datum - p.sphere_radius - r
+    } else {
+        notes.push("Q433=0: the length L kept".to_string());
+        old.l
+    };
+    // Sphere centre as the stylus at 0° sees it (latched coordinates).
+    let c0 = eq[0].centre;
+    let seen = frame[0] * frame[0].dot(&c0)
+        + frame[1] * frame[1].dot(&c0)
+        + n * (pole_t - p.sphere_radius - r);
+    let table = (p.points_3d > 0).then(|| {
+        table_3d(
+            &RING_ELEVATIONS,
+            p.points_3d,
+            p.reference_angle,
+            &probed.contacts_3d,
+            seen,
+            p.sphere_radius,
+            r,
+        )
+    });
+    let cal = Calibration {
+        r,
+        offset,
+        cal_ang: 0.0,
+        l,
+        table_3d: table,
+    };
+    // The true sphere centre: the latched one plus the stylus's shift.
+    let true_centre = seen + frame[0] * offset[0] + frame[1] * offset[1] - n * l;
+    (cal, true_centre, notes)
+}
+
+impl MeasuringCycle for CalibrationParams {
+    fn run<M: Machine>(
+        &self,
+        call: &CycleBlock,
+        machine: &mut M,
+        ctx: &mut CycleContext<'_>,
+    ) -> Result<CycleOutput, CycleError> {
+        let probe = call.tool.probe.clone();
+        let old = probe.calibration();
+        let frame = frame(call);
+        let origin_t = frame[2].dot(&Vector3::from(ctx.datum.origin()));
+        let probed = Probing {
+            rs: self.sphere_radius + old.r,
+            clear: probe.set_up + self.clearance,
+            machine,
+            ctx: &mut *ctx,
+            call,
+            p: self,
+            frame,
+        }
+        .run()?;
+        let (cal, centre, notes) = evaluate(self, &probed, &old, &frame, origin_t);
+        if let Some((key, why)) = cal.invalid_field() {
+            return Err(CycleError::Geometry(format!(
+                "cycle 460: the calibration is not plausible ({key}: {why}); the probe table was not changed"
+            )));
+        }
+        let stamp = timestamp_utc();
+        let row = CalibrationRow::new(
+            &probe.name,
+            &cal,
+            format!(
+                "{stamp}, cycle 460 on a sphere of radius {} mm",
+                self.sphere_radius
+            ),
+        );
+        let mut table = ctx.cfg.calibrations.clone();
+        table
+            .write_row(row, &ctx.cfg.probes)
+            .map_err(|e| CycleError::MeasuringLog {
+                path: e.path.display().to_string(),
+                message: format!(
+                    "the probe table row was not written ({}); the probe keeps its old calibration",
+                    e.reason()
+                ),
+            })?;
+        let file = table.path.clone();
+        ctx.note(
+            call.block,
+            format!(
+                "probe table row \"{}\" written: {}",
+                probe.name,
+                file.display()
+            ),
+        );
+        for n in &notes {
+            ctx.note(call.block, n.clone());
+        }
+        let max_dev = cal.table_3d.as_ref().map(|t| {
+            t.deviations
+                .iter()
+                .flatten()
+                .fold(t.pole.abs(), |m, v| m.max(v.abs()))
+        });
+        let report = CalibrationReport {
+            probe: probe.name.clone(),
+            sphere_radius: self.sphere_radius,
+            before: RowValues::of(&old),
+            after: RowValues::of(&cal),
+            sphere_centre: centre.into(),
+            offset_measured: probed.oriented,
+            length_measured: self.calibrate_length,
+            points_3d: self.points_3d,
+            max_deviation_3d: max_dev,
+            notes,
+            file: file.display().to_string(),
+        };
+        let log =
+            write_calibration_log(ctx.out_dir, &report, &probed, ctx.program).map_err(|e| {
+                CycleError::MeasuringLog {
+                    path: ctx.out_dir.join(CALIBRATION_LOG).display().to_string(),
+                    message: e.source.to_string(),
+                }
+            })?;
+        let mut out = CycleOutput::new(BTreeMap::new(), None);
+        out.logs.push(log);
+        out.calibration = Some(Box::new(report));
+        Ok(out)
+    }
+}
