@@ -55,6 +55,7 @@ pub use report::{AxisReport, KinematicsReport, PositionReport, SphereRecord};
 use crate::cycle::{CycleContext, MeasuringCycle};
 use crate::cycle_block::CycleBlock;
 use crate::error::CycleError;
+use crate::kinematics::error_uncertainty;
 use crate::kinematics::model::{ErrorSet, KinematicModel};
 use crate::kinematics_file::ActiveKinematics;
 use crate::results::CycleOutput;
@@ -95,6 +96,16 @@ impl MeasuringCycle for KinematicsParams {
         let input = identify::input(&plan, active_set, &measured);
         let result = identify::identify(m.ctx.estimator, &input)?;
         let estimator = m.ctx.estimator.name();
+        let u = identify::uncertainty(
+            &plan,
+            &m.model,
+            call.tool.axis,
+            call.tool.probe.repeatability(),
+            &measured,
+            &input,
+            &result,
+        )?;
+        let errors_u = error_uncertainty::by_name(&u);
 
         let ev = Evaluation {
             plan: &plan,
@@ -107,6 +118,17 @@ impl MeasuringCycle for KinematicsParams {
             .iter()
             .map(|(gi, positions)| ev.axis_report(&plan.axes[*gi], positions, &mut notes))
             .collect::<Result<Vec<_>, _>>()?;
+        let axes = axes
+            .into_iter()
+            .map(|mut a| {
+                a.errors_u = errors_u
+                    .iter()
+                    .filter(|(name, _)| a.errors_after.contains_key(*name))
+                    .map(|(n, v)| (n.clone(), *v))
+                    .collect();
+                a
+            })
+            .collect::<Vec<_>>();
         let offset = ev.reference_ball() - preset_measuring;
         let (q, qs) = ev.results(&axes, &offset);
         // Q431 = 2/3: the preset goes to the sphere centre measured at the reference.
@@ -160,6 +182,7 @@ impl MeasuringCycle for KinematicsParams {
             offset_error: arr(&offset),
             errors_before: result.before.to_map(&plan.present),
             errors_after: result.after.to_map(&plan.present),
+            errors_u,
             axes,
             notes,
         };
@@ -187,6 +210,7 @@ impl MeasuringCycle for KinematicsParams {
         Ok(CycleOutput {
             q,
             qs,
+            u: Default::default(),
             stop: write_back.stop,
             kinematics: Some(Box::new(report)),
             logs: vec![log],
