@@ -121,6 +121,11 @@ fn table(
 
 fn check(rows: &[Row]) {
     for r in rows {
+        // A quantity the probe's scatter does not reach (431's SPC depends only on
+        // the nominal X/Y of the points): u and the scatter are both 0.
+        if r.rms_u < 1e-6 && r.std < 1e-6 {
+            continue;
+        }
         let ratio = r.rms_u / r.std;
         assert!(
             (0.85..=1.15).contains(&ratio),
