@@ -77,8 +77,7 @@ pub(super) fn identify(
 pub(super) fn uncertainty(
     plan: &KinematicsPlan,
     model: &KinematicModel,
-    tool: ProbeAxis,
-    repeatability: f64,
+    (tool, repeatability): (ProbeAxis, f64),
     measured: &Measured,
     input: &IdentificationInput,
     result: &IdentificationResult,

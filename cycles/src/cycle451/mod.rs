@@ -96,15 +96,8 @@ impl MeasuringCycle for KinematicsParams {
         let input = identify::input(&plan, active_set, &measured);
         let result = identify::identify(m.ctx.estimator, &input)?;
         let estimator = m.ctx.estimator.name();
-        let u = identify::uncertainty(
-            &plan,
-            &m.model,
-            call.tool.axis,
-            call.tool.probe.repeatability(),
-            &measured,
-            &input,
-            &result,
-        )?;
+        let tool = (call.tool.axis, call.tool.probe.repeatability());
+        let u = identify::uncertainty(&plan, &m.model, tool, &measured, &input, &result)?;
         let errors_u = error_uncertainty::by_name(&u);
 
         let ev = Evaluation {
@@ -118,17 +111,7 @@ impl MeasuringCycle for KinematicsParams {
             .iter()
             .map(|(gi, positions)| ev.axis_report(&plan.axes[*gi], positions, &mut notes))
             .collect::<Result<Vec<_>, _>>()?;
-        let axes = axes
-            .into_iter()
-            .map(|mut a| {
-                a.errors_u = errors_u
-                    .iter()
-                    .filter(|(name, _)| a.errors_after.contains_key(*name))
-                    .map(|(n, v)| (n.clone(), *v))
-                    .collect();
-                a
-            })
-            .collect::<Vec<_>>();
+        let axes = with_uncertainties(axes, &errors_u);
         let offset = ev.reference_ball() - preset_measuring;
         let (q, qs) = ev.results(&axes, &offset);
         // Q431 = 2/3: the preset goes to the sphere centre measured at the reference.
@@ -216,6 +199,23 @@ impl MeasuringCycle for KinematicsParams {
             logs: vec![log],
         })
     }
+}
+
+/// Each axis's report with the uncertainties of its own errors.
+fn with_uncertainties(
+    axes: Vec<AxisReport>,
+    errors_u: &std::collections::BTreeMap<String, f64>,
+) -> Vec<AxisReport> {
+    axes.into_iter()
+        .map(|mut a| {
+            a.errors_u = errors_u
+                .iter()
+                .filter(|(name, _)| a.errors_after.contains_key(*name))
+                .map(|(n, v)| (n.clone(), *v))
+                .collect();
+            a
+        })
+        .collect()
 }
 
 /// The preset line of the result: what Q431 did, with the sphere centre.

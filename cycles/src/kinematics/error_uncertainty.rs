@@ -106,8 +106,7 @@ pub fn error_uncertainty(
     let mut col = 0;
     let mut pooled = ResidualSum::default();
     for (g, axis) in input.axes.iter().enumerate() {
-        for k in 0..axis.positions.len() {
-            let cn = &noise[g][k];
+        for (k, cn) in noise[g].iter().enumerate().take(axis.positions.len()) {
             pooled = pooled.pooled(cn.residual);
             for i in 0..3 {
                 for m in 0..3 {
