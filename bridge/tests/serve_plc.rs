@@ -1,6 +1,7 @@
 //! `probebridge serve` on the simulator with a pymodbus "PLC" (`tests/gateway/plc.py`,
 //! written from the register map in docs/gateway.md): programs 431, 444 and 451 started by
-//! number give the results of `probebridge run --json` to the registers' precision;
+//! number give the results of `probebridge run --json` (and their uncertainties) to
+//! the registers' precision;
 //! refusal while busy, abort mid-cycle, acknowledge after an error, a second
 //! connection refused, PLC heartbeat loss, SIGTERM and SIGHUP mid-cycle, a second
 //! SIGTERM during a slow stop, the lock and iceoryx2's root in the unit's runtime
@@ -177,6 +178,34 @@ fn assert_same_results(plc: &serde_json::Value, run: &serde_json::Value) {
         plc["real"].as_object().unwrap().len(),
         expected.len(),
         "no extra results: {plc}"
+    );
+    // The uncertainty block: every u of the run in its slot, nothing else.
+    let mut u: Vec<(String, f64)> = run
+        .get("u")
+        .and_then(|u| u.as_object())
+        .into_iter()
+        .flatten()
+        .map(|(k, v)| (k.clone(), v.as_f64().unwrap()))
+        .collect();
+    if let Some(k) = run.get("kinematics").and_then(|k| k.get("errors_u")) {
+        for (n, v) in k.as_object().unwrap() {
+            u.push((format!("after.{n}"), v.as_f64().unwrap()));
+        }
+    }
+    assert!(!u.is_empty(), "the run reports uncertainties: {run}");
+    for (name, v) in &u {
+        let got = plc["u"][name]
+            .as_f64()
+            .unwrap_or_else(|| panic!("u of {name} missing: {plc}"));
+        assert!(
+            (got - v).abs() <= 1e-6 * v.abs().max(1e-3),
+            "u of {name}: register {got}, run {v}"
+        );
+    }
+    assert_eq!(
+        plc["u"].as_object().unwrap().len(),
+        u.len(),
+        "no extra u: {plc}"
     );
 }
 

@@ -12,8 +12,9 @@ use crate::plane::{plane_angles, COLLINEAR_SIN};
 use crate::planned_move::PlannedMove;
 use crate::positioning::Positioner;
 use crate::results::CycleOutput;
+use crate::uncertainty::{fit_uncertainty, Fit, UncertaintyError};
 use hal::{Axis, AxisPositions, Machine, ProbeMove};
-use nalgebra::Vector3;
+use nalgebra::{DMatrix, Vector3};
 use std::collections::BTreeMap;
 
 const POINTS: [[&str; 3]; 3] = [
@@ -69,9 +70,11 @@ impl MeasuringCycle for PlaneParams {
         machine: &mut M,
         ctx: &mut CycleContext<'_>,
     ) -> Result<CycleOutput, CycleError> {
-        let record = measure(call, self, machine, ctx)?;
+        let mut record = measure(call, self, machine, ctx)?;
+        record.u = uncertainties(&record, call.tool.probe.repeatability())?;
         let q = results(&record);
         let mut out = CycleOutput::new(q, None);
+        out.u = record.u.clone();
         // Q281: 1 writes TCHPR431.TXT; 2 shows it and goes on only when confirmed.
         match self.protocol {
             1 => out
@@ -115,6 +118,56 @@ fn results(r: &PlaneRecord) -> BTreeMap<String, f64> {
     }
     q
 }
+
+/// The standard uncertainty (k = 1) of Q158, Q159, Q170..Q175. The observations are
+/// the three probe-axis coordinates, one contact each: three points determine the
+/// plane exactly and leave no degree of freedom, so `σ` is the probe's repeatability
+/// ([`crate::uncertainty`]); the angles follow by propagation through the plane's
+/// formulas (central differences).
+pub fn uncertainties(
+    r: &PlaneRecord,
+    repeatability: f64,
+) -> Result<BTreeMap<String, f64>, CycleError> {
+    let what = format!("cycle 431 (block {})", r.block);
+    let fail = |e: UncertaintyError| CycleError::Geometry(e.to_string());
+    // Parameters: the three coordinates; residual z_i - θ_i, exactly 0.
+    let j = DMatrix::<f64>::from_diagonal_element(3, 3, -1.0);
+    let u = fit_uncertainty(&Fit::new(&what, &j, &[0.0; 3], repeatability)).map_err(fail)?;
+    let angles = |z: [f64; 3]| -> Result<[f64; 5], CycleError> {
+        let mut m = r.measured;
+        for (p, z) in m.iter_mut().zip(z) {
+            p[2] = z;
+        }
+        let a = plane_angles(m[0].into(), m[1].into(), m[2].into())
+            .map_err(|e| CycleError::Geometry(format!("{what}: {e}")))?;
+        Ok([a.proj_a, a.proj_b, a.spa, a.spb, a.spc])
+    };
+    let z = r.measured.map(|p| p[2]);
+    let mut g = DMatrix::<f64>::zeros(5, 3);
+    for i in 0..3 {
+        let (mut plus, mut minus) = (z, z);
+        plus[i] += ANGLE_STEP;
+        minus[i] -= ANGLE_STEP;
+        let (ap, am) = (angles(plus)?, angles(minus)?);
+        for k in 0..5 {
+            // Across ±180° an angle wraps: the difference is the short way round.
+            let d = (ap[k] - am[k] + 540.0).rem_euclid(360.0) - 180.0;
+            g[(k, i)] = d / (2.0 * ANGLE_STEP);
+        }
+    }
+    let ua = u.propagate(&what, &g).map_err(fail)?.u();
+    let mut out = BTreeMap::new();
+    for (name, v) in ["Q158", "Q159", "Q170", "Q171", "Q172"].into_iter().zip(ua) {
+        out.insert(name.to_string(), v);
+    }
+    for (name, v) in ["Q173", "Q174", "Q175"].into_iter().zip(u.u()) {
+        out.insert(name.to_string(), v);
+    }
+    Ok(out)
+}
+
+/// Central-difference step of the plane's angles by a point's coordinate, mm.
+const ANGLE_STEP: f64 = 1e-6;
 
 /// Where and how the probe comes to each point, machine coordinates.
 struct Approach {
@@ -269,5 +322,6 @@ fn measure<M: Machine>(
         nominal: p.points,
         measured,
         angles,
+        u: BTreeMap::new(),
     })
 }

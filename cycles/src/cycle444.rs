@@ -13,8 +13,9 @@ use crate::positioning::Positioner;
 use crate::progress::ProgressSink;
 use crate::results::CycleOutput;
 use crate::tolerance::{Tolerance, WorkpieceStatus};
+use crate::uncertainty::{fit_uncertainty, Fit, UncertaintyError};
 use hal::{Axis, AxisPositions, Machine, ProbeMove};
-use nalgebra::Vector3;
+use nalgebra::{DMatrix, Vector3};
 use std::collections::BTreeMap;
 
 /// Validated parameters; coordinates as (main, minor, tool axis), mm.
@@ -103,7 +104,9 @@ impl MeasuringCycle for Probing3dParams {
         ctx: &mut CycleContext<'_>,
     ) -> Result<CycleOutput, CycleError> {
         let origin = Vector3::from(ctx.datum.origin());
-        let (q, record) = measure(call, self, origin, machine, &mut *ctx.progress)?;
+        let (q, mut record) = measure(call, self, origin, machine, &mut *ctx.progress)?;
+        record.u = uncertainties(&record, call.tool.probe.repeatability())?;
+        let u = record.u.clone();
         let stop = stop_message(self.reaction, record.status, record.deviation_3d);
         ctx.probing3d.push(record);
         let log = write_probing3d_log(ctx.out_dir, &ctx.probing3d, ctx.program).map_err(|e| {
@@ -113,9 +116,35 @@ impl MeasuringCycle for Probing3dParams {
             }
         })?;
         let mut out = CycleOutput::new(q, stop);
+        out.u = u;
         out.logs.push(log);
         Ok(out)
     }
+}
+
+/// The standard uncertainty (k = 1) of Q151..Q153, Q161..Q164. One contact is the one
+/// observation: its trigger scatters along the probing direction, the normal, with
+/// the probe's repeatability (no degree of freedom: [`crate::uncertainty`]'s floor).
+/// The point moves along the normal by it, each axis by its share of the normal.
+pub fn uncertainties(
+    r: &Probing3dRecord,
+    repeatability: f64,
+) -> Result<BTreeMap<String, f64>, CycleError> {
+    let what = format!("cycle 444 (block {})", r.block);
+    let fail = |e: UncertaintyError| CycleError::Geometry(e.to_string());
+    // The parameter: where along the normal the point lies; residual exactly 0.
+    let j = DMatrix::<f64>::from_element(1, 1, -1.0);
+    let u = fit_uncertainty(&Fit::new(&what, &j, &[0.0], repeatability)).map_err(fail)?;
+    let n = r.normal;
+    let g = DMatrix::from_row_slice(4, 1, &[n[0], n[1], n[2], 1.0]);
+    let v = u.propagate(&what, &g).map_err(fail)?.u();
+    let mut out = BTreeMap::new();
+    for (i, axis) in ["1", "2", "3"].into_iter().enumerate() {
+        out.insert(format!("Q15{axis}"), v[i]);
+        out.insert(format!("Q16{axis}"), v[i]);
+    }
+    out.insert("Q164".into(), v[3]);
+    Ok(out)
 }
 
 /// Where and how the probe comes to the point, machine coordinates.
@@ -332,6 +361,7 @@ fn measure<M: Machine>(
         deviation_3d,
         tolerance: p.tolerance,
         status,
+        u: BTreeMap::new(),
     };
     Ok((q, record))
 }

@@ -60,6 +60,7 @@ pub mod q_params;
 pub mod results;
 pub mod runner;
 pub mod tolerance;
+pub mod uncertainty;
 
 pub use cycles_config::CyclesConfig;
 pub use diagnostic::{Diagnostic, ProgramErrors};

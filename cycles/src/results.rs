@@ -30,6 +30,10 @@ pub struct CycleResult {
     pub status: Status,
     /// Why it failed, or why the program stopped after it (Q309, no confirmation).
     pub message: Option<String>,
+    /// The standard uncertainty (k = 1) of results in `q`, by the same name, mm and
+    /// degrees (see `docs/cycles.md`, "Uncertainty").
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub u: BTreeMap<String, f64>,
     /// Cycle 451: every measuring position, its sphere, the errors before and after.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kinematics: Option<Box<KinematicsReport>>,
@@ -52,6 +56,7 @@ impl CycleResult {
             qs: BTreeMap::new(),
             status: Status::Error,
             message: Some(message.into()),
+            u: BTreeMap::new(),
             kinematics: None,
         }
     }
@@ -62,6 +67,8 @@ impl CycleResult {
 pub struct CycleOutput {
     pub q: BTreeMap<String, f64>,
     pub qs: BTreeMap<String, String>,
+    /// The standard uncertainty (k = 1) of results in `q`, by name.
+    pub u: BTreeMap<String, f64>,
     /// The program stops after this cycle, with this message (Q309, no confirmation).
     pub stop: Option<String>,
     /// Cycle 451's report.
@@ -141,7 +148,10 @@ impl ProgramReport {
             }
             out.push('\n');
             for (k, v) in &c.q {
-                out.push_str(&format!("  {k} = {v:+.4}\n"));
+                match c.u.get(k) {
+                    Some(u) => out.push_str(&format!("  {k} = {v:+.4} ± {u:.5}\n")),
+                    None => out.push_str(&format!("  {k} = {v:+.4}\n")),
+                }
             }
             for (k, v) in &c.qs {
                 out.push_str(&format!("  {k} = \"{v}\"\n"));

@@ -192,6 +192,7 @@ fn report_json_has_the_agreed_shape() {
         qs: Default::default(),
         status: Status::Ok,
         message: None,
+        u: Default::default(),
         kinematics: None,
     });
     assert_eq!(

@@ -6,6 +6,7 @@
 pub mod alloc_count;
 pub mod conformance;
 pub mod conformance_modbus;
+pub mod kinematic_machine;
 pub mod loopback;
 pub mod probing_loop;
 pub mod spec451;

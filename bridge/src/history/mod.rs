@@ -154,6 +154,7 @@ impl Rows {
                         cycle: c.cycle,
                         name: name.clone(),
                         value: *value,
+                        u: c.u.get(name).copied(),
                     },
                 ));
             }
@@ -164,6 +165,7 @@ impl Rows {
                         name: name.clone(),
                         before: *before,
                         after: k.errors_after.get(name).copied().unwrap_or(*before),
+                        u: k.errors_u.get(name).copied(),
                     });
                 }
                 for a in &k.axes {
@@ -227,6 +229,9 @@ pub struct ResultRow {
     pub cycle: u16,
     pub name: String,
     pub value: f64,
+    /// Its standard uncertainty (k = 1); None: none reported (or recorded before).
+    #[serde(default)]
+    pub u: Option<f64>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -235,6 +240,10 @@ pub struct IsoErrorRow {
     pub name: String,
     pub before: f64,
     pub after: f64,
+    /// The standard uncertainty (k = 1) of `after`; None: not identified (or
+    /// recorded before uncertainties were).
+    #[serde(default)]
+    pub u: Option<f64>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -416,6 +425,9 @@ pub fn to_text(runs: &[RunRow]) -> String {
         for e in &r.iso_errors {
             let name = printable(&e.name);
             s.push_str(&format!("  {name} {:+.4}->{:+.4}", e.before, e.after));
+            if let Some(u) = e.u {
+                s.push_str(&format!("±{u:.4}"));
+            }
         }
         s.push('\n');
     }
@@ -455,6 +467,7 @@ mod tests {
                 qs: Default::default(),
                 status: Status::Ok,
                 message: None,
+                u: [("Q158".to_string(), 0.0002)].into_iter().collect(),
                 kinematics: None,
             }],
             stopped: None,
@@ -500,6 +513,7 @@ mod tests {
         assert_eq!((r.status.as_str(), r.request_seq), ("done", Some(3)));
         assert_eq!(r.results.len(), 2);
         assert_eq!(r.results[0].name, "Q158");
+        assert_eq!((r.results[0].u, r.results[1].u), (Some(0.0002), None));
         assert_eq!(r.parameters, [1.5, -2.25, 0.0, 0.0, 0.0, 0.0, 0.0, 7.0]);
         assert_eq!(r.protocols, vec!["/tmp/TCHPR431.TXT".to_string()]);
         assert!(h
@@ -526,5 +540,56 @@ mod tests {
             "aborted"
         );
         assert!(to_text(&all).contains("431.h"));
+    }
+
+    #[test]
+    fn a_history_from_before_the_uncertainties_gains_their_columns() {
+        let dir = std::env::temp_dir().join(format!("pb-history-old-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("old.sqlite");
+        {
+            // The tables as the first schema made them, with a completed 451 run.
+            let c = rusqlite::Connection::open(&path).unwrap();
+            c.execute_batch(
+                "CREATE TABLE runs (id INTEGER PRIMARY KEY, started TEXT NOT NULL, finished TEXT, machine TEXT NOT NULL, source TEXT NOT NULL, request_seq INTEGER, program_number INTEGER, program TEXT NOT NULL, status TEXT NOT NULL, message TEXT, protocols TEXT NOT NULL DEFAULT '[]', max_modification REAL);
+                 CREATE TABLE results (run_id INTEGER NOT NULL REFERENCES runs (id), position INTEGER NOT NULL, block INTEGER NOT NULL, cycle INTEGER NOT NULL, name TEXT NOT NULL, value REAL NOT NULL);
+                 CREATE TABLE iso_errors (run_id INTEGER NOT NULL REFERENCES runs (id), block INTEGER NOT NULL, name TEXT NOT NULL, before REAL NOT NULL, after REAL NOT NULL);
+                 INSERT INTO runs VALUES (1, '2026-01-01T00:00:00Z', '2026-01-01T00:10:00Z', 'table-ac', 'run', NULL, NULL, '451.h', 'done', NULL, '[]', 0.03);
+                 INSERT INTO results VALUES (1, 0, 3, 451, 'Q141', 0.002);
+                 INSERT INTO iso_errors VALUES (1, 3, 'EX0C', 0.0, 0.012);",
+            )
+            .unwrap();
+        }
+        let mut h = History::open(&HistoryTarget::Sqlite(path.clone())).unwrap();
+        let runs = h.list(&Filter::default()).unwrap();
+        assert_eq!(runs.len(), 1);
+        assert_eq!(
+            (runs[0].results[0].value, runs[0].results[0].u),
+            (0.002, None)
+        );
+        assert_eq!(
+            (runs[0].iso_errors[0].after, runs[0].iso_errors[0].u),
+            (0.012, None)
+        );
+        // A new run on the migrated file stores its uncertainties; opening it again
+        // migrates nothing twice.
+        let id = h
+            .begin(&RunStart {
+                machine: "table-ac",
+                source: "run",
+                request_seq: None,
+                program_number: None,
+                program: Path::new("/p/431.h"),
+                max_modification: None,
+                parameters: &[],
+            })
+            .unwrap();
+        h.finish(id, "done", &report()).unwrap();
+        drop(h);
+        let mut h = History::open(&HistoryTarget::Sqlite(path)).unwrap();
+        let runs = h.list(&Filter::default()).unwrap();
+        assert_eq!(runs[1].results[0].u, Some(0.0002));
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -34,14 +34,16 @@ CREATE TABLE IF NOT EXISTS results (
     block BIGINT NOT NULL,
     cycle INTEGER NOT NULL,
     name TEXT NOT NULL,
-    value DOUBLE PRECISION NOT NULL
+    value DOUBLE PRECISION NOT NULL,
+    u DOUBLE PRECISION
 );
 CREATE TABLE IF NOT EXISTS iso_errors (
     run_id BIGINT NOT NULL REFERENCES runs (id),
     block BIGINT NOT NULL,
     name TEXT NOT NULL,
     before DOUBLE PRECISION NOT NULL,
-    after DOUBLE PRECISION NOT NULL
+    after DOUBLE PRECISION NOT NULL,
+    u DOUBLE PRECISION
 );
 CREATE TABLE IF NOT EXISTS parameters (
     run_id BIGINT NOT NULL REFERENCES runs (id),
@@ -55,6 +57,9 @@ CREATE TABLE IF NOT EXISTS axis_dispersion (
     before DOUBLE PRECISION NOT NULL,
     after DOUBLE PRECISION NOT NULL
 );
+-- Histories from before the standard uncertainties: the column added, NULL in old rows.
+ALTER TABLE results ADD COLUMN IF NOT EXISTS u DOUBLE PRECISION;
+ALTER TABLE iso_errors ADD COLUMN IF NOT EXISTS u DOUBLE PRECISION;
 ";
 
 /// Held while one gateway creates the tables, so that two starting at once do not
@@ -143,7 +148,7 @@ impl PgStore {
     async fn details(client: &Client, run: &mut RunRow) -> Result<(), tokio_postgres::Error> {
         run.results = client
             .query(
-                "SELECT block, cycle, name, value FROM results WHERE run_id = $1 ORDER BY position, name",
+                "SELECT block, cycle, name, value, u FROM results WHERE run_id = $1 ORDER BY position, name",
                 &[&run.id],
             )
             .await?
@@ -153,11 +158,12 @@ impl PgStore {
                 cycle: r.get::<_, i32>(1) as u16,
                 name: r.get(2),
                 value: r.get(3),
+                u: r.get(4),
             })
             .collect();
         run.iso_errors = client
             .query(
-                "SELECT block, name, before, after FROM iso_errors WHERE run_id = $1 ORDER BY block, name",
+                "SELECT block, name, before, after, u FROM iso_errors WHERE run_id = $1 ORDER BY block, name",
                 &[&run.id],
             )
             .await?
@@ -167,6 +173,7 @@ impl PgStore {
                 name: r.get(1),
                 before: r.get(2),
                 after: r.get(3),
+                u: r.get(4),
             })
             .collect();
         run.dispersion = client
@@ -256,15 +263,15 @@ impl Store for PgStore {
             }
             for (position, r) in &rows.results {
                 tx.execute(
-                    "INSERT INTO results (run_id, position, block, cycle, name, value) VALUES ($1, $2, $3, $4, $5, $6)",
-                    &[&id, &(*position as i32), &i64::from(r.block), &i32::from(r.cycle), &r.name, &r.value],
+                    "INSERT INTO results (run_id, position, block, cycle, name, value, u) VALUES ($1, $2, $3, $4, $5, $6, $7)",
+                    &[&id, &(*position as i32), &i64::from(r.block), &i32::from(r.cycle), &r.name, &r.value, &r.u],
                 )
                 .await?;
             }
             for e in &rows.iso_errors {
                 tx.execute(
-                    "INSERT INTO iso_errors (run_id, block, name, before, after) VALUES ($1, $2, $3, $4, $5)",
-                    &[&id, &i64::from(e.block), &e.name, &e.before, &e.after],
+                    "INSERT INTO iso_errors (run_id, block, name, before, after, u) VALUES ($1, $2, $3, $4, $5, $6)",
+                    &[&id, &i64::from(e.block), &e.name, &e.before, &e.after, &e.u],
                 )
                 .await?;
             }

@@ -281,6 +281,7 @@ mod tests {
                     cycle: 431,
                     name: "Q158".into(),
                     value: 0.5,
+                    u: Some(0.0003),
                 },
             )],
             iso_errors: Vec::new(),

@@ -28,14 +28,16 @@ CREATE TABLE IF NOT EXISTS results (
     block INTEGER NOT NULL,
     cycle INTEGER NOT NULL,
     name TEXT NOT NULL,
-    value REAL NOT NULL
+    value REAL NOT NULL,
+    u REAL
 );
 CREATE TABLE IF NOT EXISTS iso_errors (
     run_id INTEGER NOT NULL REFERENCES runs (id),
     block INTEGER NOT NULL,
     name TEXT NOT NULL,
     before REAL NOT NULL,
-    after REAL NOT NULL
+    after REAL NOT NULL,
+    u REAL
 );
 CREATE TABLE IF NOT EXISTS parameters (
     run_id INTEGER NOT NULL REFERENCES runs (id),
@@ -50,6 +52,36 @@ CREATE TABLE IF NOT EXISTS axis_dispersion (
     after REAL NOT NULL
 );
 ";
+
+/// Columns added since the first schema, as (table, column, type): a history written
+/// before them gains them (NULL in its old rows) when it is opened.
+const ADDED_COLUMNS: [(&str, &str, &str); 2] =
+    [("results", "u", "REAL"), ("iso_errors", "u", "REAL")];
+
+/// Adds the [`ADDED_COLUMNS`] a file lacks, in one transaction (SQLite has no
+/// `ADD COLUMN IF NOT EXISTS`).
+fn migrate(conn: &Connection) -> rusqlite::Result<()> {
+    let has = |table: &str, column: &str| -> rusqlite::Result<bool> {
+        let mut stmt = conn.prepare(&format!("PRAGMA table_info({table})"))?;
+        let names = stmt.query_map([], |r| r.get::<_, String>(1))?;
+        for n in names {
+            if n? == column {
+                return Ok(true);
+            }
+        }
+        Ok(false)
+    };
+    let mut missing = Vec::new();
+    for (table, column, kind) in ADDED_COLUMNS {
+        if !has(table, column)? {
+            missing.push(format!("ALTER TABLE {table} ADD COLUMN {column} {kind};"));
+        }
+    }
+    if missing.is_empty() {
+        return Ok(());
+    }
+    conn.execute_batch(&format!("BEGIN IMMEDIATE; {} COMMIT;", missing.join(" ")))
+}
 
 pub struct SqliteStore {
     conn: Connection,
@@ -68,12 +100,13 @@ impl SqliteStore {
         conn.pragma_update(None, "journal_mode", "WAL")
             .map_err(text)?;
         conn.execute_batch(SCHEMA).map_err(text)?;
+        migrate(&conn).map_err(text)?;
         Ok(Self { conn })
     }
 
     fn results(&self, id: i64) -> rusqlite::Result<Vec<ResultRow>> {
         let mut stmt = self.conn.prepare_cached(
-            "SELECT block, cycle, name, value FROM results WHERE run_id = ?1 ORDER BY position, name",
+            "SELECT block, cycle, name, value, u FROM results WHERE run_id = ?1 ORDER BY position, name",
         )?;
         let rows = stmt.query_map([id], |r| {
             Ok(ResultRow {
@@ -81,6 +114,7 @@ impl SqliteStore {
                 cycle: r.get(1)?,
                 name: r.get(2)?,
                 value: r.get(3)?,
+                u: r.get(4)?,
             })
         })?;
         rows.collect()
@@ -88,7 +122,7 @@ impl SqliteStore {
 
     fn iso_errors(&self, id: i64) -> rusqlite::Result<Vec<IsoErrorRow>> {
         let mut stmt = self.conn.prepare_cached(
-            "SELECT block, name, before, after FROM iso_errors WHERE run_id = ?1 ORDER BY block, name",
+            "SELECT block, name, before, after, u FROM iso_errors WHERE run_id = ?1 ORDER BY block, name",
         )?;
         let rows = stmt.query_map([id], |r| {
             Ok(IsoErrorRow {
@@ -96,6 +130,7 @@ impl SqliteStore {
                 name: r.get(1)?,
                 before: r.get(2)?,
                 after: r.get(3)?,
+                u: r.get(4)?,
             })
         })?;
         rows.collect()
@@ -216,15 +251,15 @@ impl Store for SqliteStore {
         }
         for (position, r) in &rows.results {
             tx.execute(
-                "INSERT INTO results (run_id, position, block, cycle, name, value) VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
-                params![id, position, r.block, r.cycle, r.name, r.value],
+                "INSERT INTO results (run_id, position, block, cycle, name, value, u) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+                params![id, position, r.block, r.cycle, r.name, r.value, r.u],
             )
             .map_err(text)?;
         }
         for e in &rows.iso_errors {
             tx.execute(
-                "INSERT INTO iso_errors (run_id, block, name, before, after) VALUES (?1, ?2, ?3, ?4, ?5)",
-                params![id, e.block, e.name, e.before, e.after],
+                "INSERT INTO iso_errors (run_id, block, name, before, after, u) VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+                params![id, e.block, e.name, e.before, e.after, e.u],
             )
             .map_err(text)?;
         }

@@ -8,6 +8,7 @@ use super::handshake::{
     machine_error_kind, Outcome, ERROR_KIND_CYCLE, ERROR_KIND_NOT_KEPT, ERROR_KIND_PROGRAM,
 };
 use super::machine_link::MachineLink;
+use super::register_map::uncertainty_key;
 use crate::history::recorder::{Kept, Recorder};
 use crate::ipc::{EstimatorChild, IpcEstimator};
 use crate::session::Session;
@@ -253,7 +254,8 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
 }
 
 /// The results the registers show: the last cycle's Q parameters, and for 451 the
-/// errors before and after by ISO name.
+/// errors before and after by ISO name; with their standard uncertainties
+/// ([`uncertainty_key`]).
 pub fn last_results(report: &ProgramReport) -> (u16, BTreeMap<String, f64>) {
     let Some(last) = report.cycles.iter().rev().find(|c| c.status == Status::Ok) else {
         return (0, BTreeMap::new());
@@ -263,12 +265,18 @@ pub fn last_results(report: &ProgramReport) -> (u16, BTreeMap<String, f64>) {
 
 pub fn result_values(c: &CycleResult) -> BTreeMap<String, f64> {
     let mut v = c.q.clone();
+    for (name, u) in &c.u {
+        v.insert(uncertainty_key(name), *u);
+    }
     if let Some(k) = &c.kinematics {
         for (name, e) in &k.errors_before {
             v.insert(format!("before.{name}"), *e);
         }
         for (name, e) in &k.errors_after {
             v.insert(format!("after.{name}"), *e);
+        }
+        for (name, u) in &k.errors_u {
+            v.insert(uncertainty_key(&format!("after.{name}")), *u);
         }
     }
     v

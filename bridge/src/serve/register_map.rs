@@ -9,6 +9,11 @@
 //!   REAL (IEEE 754 single) and as scaled DINT, and the result sequence again. A PLC
 //!   reading the block in several requests takes the results only when both copies
 //!   equal its request sequence.
+//! - uncertainty block (`UNCERT_BASE`, read-only, appended after the result block
+//!   without moving it): the result sequence, the standard uncertainty (k = 1) of each
+//!   result slot as REAL in the same slot order (NaN where the result has none: the
+//!   errors before optimisation, the dispersions, a missing result), and the sequence
+//!   again.
 //!
 //! Reads and writes must lie inside one block; writes only inside the request block.
 
@@ -51,6 +56,18 @@ pub const SLOTS: usize = 66;
 pub const RES_DINT: u16 = RES_REAL + 2 * SLOTS as u16;
 pub const RES_SEQ_TAIL: u16 = RES_DINT + 2 * SLOTS as u16;
 pub const RESULT_LEN: u16 = RES_SEQ_TAIL - RESULT_BASE + 1;
+
+pub const UNCERT_BASE: u16 = RES_SEQ_TAIL + 1;
+pub const UNC_SEQ_HEAD: u16 = UNCERT_BASE;
+pub const UNC_REAL: u16 = UNC_SEQ_HEAD + 1;
+pub const UNC_SEQ_TAIL: u16 = UNC_REAL + 2 * SLOTS as u16;
+pub const UNCERT_LEN: u16 = UNC_SEQ_TAIL - UNCERT_BASE + 1;
+
+/// The key of a slot's standard uncertainty in the values of
+/// [`RegisterMap::set_results`]: `u.` and the slot's name (`u.Q158`, `u.after.EX0C`).
+pub fn uncertainty_key(slot: &str) -> String {
+    format!("u.{slot}")
+}
 
 /// Register counts a single request may carry (Modbus application protocol 6.3/6.12).
 pub const MAX_READ: u16 = 125;
@@ -151,7 +168,7 @@ pub struct RegisterMap {
 impl RegisterMap {
     pub fn new(order: WordOrder, int_scale: f64) -> Self {
         let mut m = Self {
-            regs: vec![0; usize::from(RES_SEQ_TAIL) + 1],
+            regs: vec![0; usize::from(UNC_SEQ_TAIL) + 1],
             order,
             int_scale,
         };
@@ -165,6 +182,7 @@ impl RegisterMap {
             (REQUEST_BASE, REQUEST_LEN),
             (STATE_BASE, STATE_LEN),
             (RESULT_BASE, RESULT_LEN),
+            (UNCERT_BASE, UNCERT_LEN),
         ]
         .into_iter()
         .find(|&(base, len)| addr >= base && end <= u32::from(base) + u32::from(len))
@@ -246,9 +264,16 @@ impl RegisterMap {
 
     /// Writes the results of the run of request `seq` (the cycle they come from is in
     /// the state block) (`values` by slot name; missing
-    /// slots read NaN and [`DINT_MISSING`]), the result sequence last at both ends.
+    /// slots read NaN and [`DINT_MISSING`]) and their uncertainties (by
+    /// [`uncertainty_key`]; missing: NaN), the result sequence last at both ends of
+    /// both blocks.
     pub fn set_results(&mut self, seq: u16, values: &BTreeMap<String, f64>) {
         for (i, name) in slot_names().iter().enumerate() {
+            let u = values.get(&uncertainty_key(name)).copied();
+            let [a, b] = self.order.split(u.map_or(f32::NAN, |u| u as f32).to_bits());
+            let r = usize::from(UNC_REAL) + 2 * i;
+            self.regs[r] = a;
+            self.regs[r + 1] = b;
             let v = values.get(name).copied();
             let real = v.map_or(f32::NAN, |v| v as f32);
             let dint = v.map_or(DINT_MISSING, |v| self.scaled(v));
@@ -261,8 +286,9 @@ impl RegisterMap {
             self.regs[d] = a;
             self.regs[d + 1] = b;
         }
-        self.regs[usize::from(RES_SEQ_HEAD)] = seq;
-        self.regs[usize::from(RES_SEQ_TAIL)] = seq;
+        for at in [RES_SEQ_HEAD, RES_SEQ_TAIL, UNC_SEQ_HEAD, UNC_SEQ_TAIL] {
+            self.regs[usize::from(at)] = seq;
+        }
     }
 
     fn scaled(&self, v: f64) -> i32 {
@@ -298,6 +324,42 @@ mod tests {
         assert_eq!(names[36], "before.EY0A");
         assert_eq!(names[51], "after.EY0A");
         assert_eq!(names[65], "after.EC0C");
+        // The uncertainty block comes after, every earlier register where it was.
+        assert_eq!(
+            (UNCERT_BASE, UNC_REAL, UNC_SEQ_TAIL, UNCERT_LEN),
+            (330, 331, 463, 134)
+        );
+    }
+
+    #[test]
+    fn golden_uncertainties_in_the_slot_order() {
+        let values: BTreeMap<String, f64> = [
+            ("Q158".to_string(), 5.0),
+            (uncertainty_key("Q158"), 0.5),
+            ("after.EX0C".into(), 0.012),
+            (uncertainty_key("after.EX0C"), 0.25),
+        ]
+        .into_iter()
+        .collect();
+        let mut m = RegisterMap::new(WordOrder::HighFirst, 10_000.0);
+        m.set_results(9, &values);
+        // Q158 is slot 17, after.EX0C slot 61; 0.5f32 = 0x3F00_0000, 0.25 = 0x3E80_0000.
+        assert_eq!(m.read(UNC_REAL + 2 * 17, 2).unwrap(), vec![0x3F00, 0x0000]);
+        assert_eq!(m.read(UNC_REAL + 2 * 61, 2).unwrap(), vec![0x3E80, 0x0000]);
+        // No uncertainty: NaN; the results themselves stay where they were.
+        assert_eq!(m.read(UNC_REAL, 2).unwrap(), vec![0x7FC0, 0x0000]);
+        assert_eq!(m.read(RES_REAL + 2 * 17, 2).unwrap(), vec![0x40A0, 0x0000]);
+        assert_eq!((m.get(UNC_SEQ_HEAD), m.get(UNC_SEQ_TAIL)), (9, 9));
+        // One block per read: across the two it is refused.
+        assert_eq!(
+            m.read(RES_SEQ_TAIL, 2),
+            Err(MapException::IllegalDataAddress)
+        );
+        assert!(m.read(UNCERT_BASE, 125).is_ok());
+        assert_eq!(
+            m.read(UNC_SEQ_TAIL, 2),
+            Err(MapException::IllegalDataAddress)
+        );
     }
 
     #[test]

@@ -55,6 +55,7 @@ fn report(run: &StoredRun) -> ProgramReport {
             qs: Default::default(),
             status: Status::Ok,
             message: None,
+            u: Default::default(),
             kinematics: Some(Box::new(serde_json::from_value(kinematics).unwrap())),
         }],
         ..ProgramReport::default()

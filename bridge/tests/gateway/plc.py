@@ -14,6 +14,7 @@ from pymodbus.exceptions import ModbusException
 REQ, SEQ, PROGRAM, FLAGS, PARAMS, HEARTBEAT = 0, 1, 2, 3, 4, 20
 ACK_SEQ, ACK_CODE, REASON, STATE, BITS, PROGRESS, ERR_KIND, ERR_CODE, POINT = range(32, 41)
 RES_HEAD, RES_REAL, RES_DINT, RES_TAIL = 64, 65, 197, 329
+UNC_HEAD, UNC_REAL, UNC_TAIL = 330, 331, 463
 START, ABORT, ACK = 1, 2, 3
 IDLE, BUSY, DONE, ERROR, ABORTED = range(5)
 NAMES = (
@@ -91,6 +92,18 @@ class Plc:
                 dint[name] = v
         return real, dint
 
+    def uncertainties(self, seq):
+        regs = self.read(UNC_HEAD, 125) + self.read(UNC_HEAD + 125, UNC_TAIL - UNC_HEAD + 1 - 125)
+        head, tail = regs[0], regs[UNC_TAIL - UNC_HEAD]
+        check(head == tail == seq, f"uncertainty sequence {head}/{tail} for request {seq}")
+        u = {}
+        for i, name in enumerate(NAMES):
+            a = UNC_REAL - UNC_HEAD + 2 * i
+            f = struct.unpack(">f", struct.pack(">HH", regs[a], regs[a + 1]))[0]
+            if f == f:
+                u[name] = f
+        return u
+
 
 # Parameters 1..8 of every start of `run`: recorded with the run in the history.
 PARAMS = (1.5, -2.25, 0.0, 0.0, 0.0, 0.0, 0.0, 1000.125)
@@ -104,8 +117,9 @@ def run(plc, program):
     check(st[3] == DONE, f"program {program} done: {st}")
     check(st[4] & 0b100100 == 0b100100, f"done and results-valid bits: {st[4]:#x}")
     real, dint = plc.results(seq)
+    u = plc.uncertainties(seq)
     cycle = plc.read(43, 1)[0]
-    return {"cycle": cycle, "real": real, "dint": dint}
+    return {"cycle": cycle, "real": real, "dint": dint, "u": u}
 
 
 def busy_abort(plc, program, other, again):

@@ -112,6 +112,7 @@ impl Evaluation<'_> {
             positioning_error_std: std,
             errors_before: result.before.to_map(&[ap.axis]),
             errors_after: result.after.to_map(&[ap.axis]),
+            errors_u: BTreeMap::new(),
             positions: self.positions(positions, st),
         })
     }

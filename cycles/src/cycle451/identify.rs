@@ -4,12 +4,15 @@
 use super::measure::{arr, Measured, Sphere};
 use super::plan::KinematicsPlan;
 use crate::error::CycleError;
+use crate::kinematics::error_uncertainty::{error_uncertainty, CentreNoise};
 use crate::kinematics::identification::{
     AxisMeasurement, IdentificationInput, IdentificationResult, MeasuredPosition,
 };
-use crate::kinematics::model::{Angles, ErrorSet};
+use crate::kinematics::model::{Angles, ErrorSet, KinematicModel};
 use crate::kinematics::Estimator;
+use crate::probe_axis::ProbeAxis;
 use nalgebra::Vector3;
+use std::collections::BTreeMap;
 
 /// Mean angles, centre and radius of the spheres of one position (both approaches with
 /// Q432, else the one).
@@ -64,5 +67,41 @@ pub(super) fn identify(
 ) -> Result<IdentificationResult, CycleError> {
     estimator
         .identify(input)
+        .map_err(|e| CycleError::Geometry(e.to_string()))
+}
+
+/// The standard uncertainty (k = 1) of every identified error, by slot: the probe's
+/// scatter through each sphere fit (pole along the tool axis at the position's angles,
+/// Q423 points around the equator) and the identification
+/// ([`crate::kinematics::error_uncertainty`]).
+pub(super) fn uncertainty(
+    plan: &KinematicsPlan,
+    model: &KinematicModel,
+    (tool, repeatability): (ProbeAxis, f64),
+    measured: &Measured,
+    input: &IdentificationInput,
+    result: &IdentificationResult,
+) -> Result<BTreeMap<usize, f64>, CycleError> {
+    let mut unit = Vector3::zeros();
+    unit[tool.tool_index()] = 1.0;
+    let noise: Vec<Vec<CentreNoise>> = measured
+        .iter()
+        .map(|(_, positions)| {
+            positions
+                .iter()
+                .map(|(_, spheres)| {
+                    let each: Vec<CentreNoise> = spheres
+                        .iter()
+                        .map(|s| {
+                            let n = model.tool_vector(&s.angles, unit);
+                            CentreNoise::pole_and_equator(n, plan.params.points, s.record.rms)
+                        })
+                        .collect();
+                    CentreNoise::mean(&each)
+                })
+                .collect()
+        })
+        .collect();
+    error_uncertainty(input, result, &noise, repeatability)
         .map_err(|e| CycleError::Geometry(e.to_string()))
 }

@@ -103,16 +103,20 @@ pub fn kinematics_log_html(
         axis_section(&mut s, a, &r.incidence);
     }
 
-    let _ = writeln!(s, "<h2>All errors (mm, deg)</h2>\n<table><tr><th class=\"l\">error</th><th>before</th><th>after</th><th>change</th></tr>");
+    let _ = writeln!(s, "<h2>All errors (mm, deg)</h2>\n<table><tr><th class=\"l\">error</th><th>before</th><th>after &#177; standard uncertainty (k = 1)</th><th>change</th></tr>");
     for (name, before) in &r.errors_before {
         let after = r.errors_after.get(name).copied().unwrap_or(0.0);
         let _ = writeln!(
             s,
-            "<tr><td class=\"l\">{name}</td><td>{before:+.6}</td><td>{after:+.6}</td><td>{:+.6}</td></tr>",
+            "<tr><td class=\"l\">{name}</td><td>{before:+.6}</td><td>{after:+.6}{}</td><td>{:+.6}</td></tr>",
+            plus_minus(&r.errors_u, name),
             after - before
         );
     }
     let _ = writeln!(s, "</table>");
+    if !r.errors_u.is_empty() {
+        let _ = writeln!(s, "<p>&#177; u: the standard uncertainty (k = 1) of each identified error, from the scatter of the probed points through the sphere fits and the identification. It does not cover the sphere's own form error, temperature, or an uncalibrated probe.</p>");
+    }
     if !r.notes.is_empty() {
         let _ = writeln!(s, "<h2>Notes</h2><ul>");
         for n in &r.notes {
@@ -122,6 +126,12 @@ pub fn kinematics_log_html(
     }
     let _ = writeln!(s, "</body></html>");
     s
+}
+
+/// ` &#177; u` of error `name`, when it has one.
+fn plus_minus(u: &std::collections::BTreeMap<String, f64>, name: &str) -> String {
+    u.get(name)
+        .map_or_else(String::new, |u| format!(" &#177; {u:.6}"))
 }
 
 fn error(map: &std::collections::BTreeMap<String, f64>, axis: Axis, part: ErrorPart) -> f64 {
@@ -166,38 +176,46 @@ fn axis_section(
             .map_or_else(|| "not measured".into(), |b| format!("{b:+.5} deg")),
         String::new(),
     );
-    let pos = |m: &std::collections::BTreeMap<String, f64>| {
+    let none = std::collections::BTreeMap::new();
+    let name = |part| ErrorSet::name(ErrorSet::index(axis, part));
+    let pos = |m: &std::collections::BTreeMap<String, f64>, u| {
         let e = ErrorSet::from_map(m);
         let q = Joint::new(axis, a.pivot, e.axis(axis)).point;
+        let [p0, p1] = [ErrorPart::Position(0), ErrorPart::Position(1)];
         format!(
-            "X{:+.6} Y{:+.6} Z{:+.6} mm ({}={:+.6} {}={:+.6})",
+            "X{:+.6} Y{:+.6} Z{:+.6} mm ({}={:+.6}{} {}={:+.6}{})",
             q.x,
             q.y,
             q.z,
-            ErrorSet::name(ErrorSet::index(axis, ErrorPart::Position(0))),
-            error(m, axis, ErrorPart::Position(0)),
-            ErrorSet::name(ErrorSet::index(axis, ErrorPart::Position(1))),
-            error(m, axis, ErrorPart::Position(1)),
+            name(p0),
+            error(m, axis, p0),
+            plus_minus(u, name(p0)),
+            name(p1),
+            error(m, axis, p1),
+            plus_minus(u, name(p1)),
         )
     };
     row(
         "Axis position (a point of the axis line relative to the start of the kinematic chain)",
-        pos(&a.errors_before),
-        pos(&a.errors_after),
+        pos(&a.errors_before, &none),
+        pos(&a.errors_after, &a.errors_u),
     );
-    let ori = |m: &std::collections::BTreeMap<String, f64>| {
+    let ori = |m: &std::collections::BTreeMap<String, f64>, u| {
+        let [o0, o1] = [ErrorPart::Orientation(0), ErrorPart::Orientation(1)];
         format!(
-            "{}={:+.6} {}={:+.6} deg",
-            ErrorSet::name(ErrorSet::index(axis, ErrorPart::Orientation(0))),
-            error(m, axis, ErrorPart::Orientation(0)),
-            ErrorSet::name(ErrorSet::index(axis, ErrorPart::Orientation(1))),
-            error(m, axis, ErrorPart::Orientation(1)),
+            "{}={:+.6}{} {}={:+.6}{} deg",
+            name(o0),
+            error(m, axis, o0),
+            plus_minus(u, name(o0)),
+            name(o1),
+            error(m, axis, o1),
+            plus_minus(u, name(o1)),
         )
     };
     row(
         "Angular position error",
-        ori(&a.errors_before),
-        ori(&a.errors_after),
+        ori(&a.errors_before, &none),
+        ori(&a.errors_after, &a.errors_u),
     );
     row(
         "Standard deviation (dispersion)",
@@ -209,17 +227,18 @@ fn axis_section(
         format!("{:.6} mm", a.max_before),
         format!("{:.6} mm", a.max_after),
     );
-    let zero = |m: &std::collections::BTreeMap<String, f64>| {
+    let zero = |m: &std::collections::BTreeMap<String, f64>, u| {
         format!(
-            "{}={:+.6} deg",
-            ErrorSet::name(ErrorSet::index(axis, ErrorPart::Zero)),
-            error(m, axis, ErrorPart::Zero)
+            "{}={:+.6}{} deg",
+            name(ErrorPart::Zero),
+            error(m, axis, ErrorPart::Zero),
+            plus_minus(u, name(ErrorPart::Zero)),
         )
     };
     row(
         "Angular error (zero position)",
-        zero(&a.errors_before),
-        zero(&a.errors_after),
+        zero(&a.errors_before, &none),
+        zero(&a.errors_after, &a.errors_u),
     );
     row(
         "Positioning error: mean / standard deviation about 0",

@@ -57,6 +57,7 @@ pub use report::{AxisReport, KinematicsReport, PositionReport, SphereRecord};
 use crate::cycle::{CycleContext, MeasuringCycle};
 use crate::cycle_block::CycleBlock;
 use crate::error::CycleError;
+use crate::kinematics::error_uncertainty;
 use crate::kinematics::model::{ErrorSet, KinematicModel};
 use crate::kinematics_file::ActiveKinematics;
 use crate::results::CycleOutput;
@@ -100,6 +101,9 @@ impl MeasuringCycle for KinematicsParams {
         let input = identify::input(&plan, active_set, &measured);
         let result = identify::identify(m.ctx.estimator, &input)?;
         let estimator = m.ctx.estimator.name();
+        let tool = (call.tool.axis, call.tool.probe.repeatability());
+        let u = identify::uncertainty(&plan, &m.model, tool, &measured, &input, &result)?;
+        let errors_u = error_uncertainty::by_name(&u);
 
         let ev = Evaluation {
             plan: &plan,
@@ -112,6 +116,7 @@ impl MeasuringCycle for KinematicsParams {
             .iter()
             .map(|(gi, positions)| ev.axis_report(&plan.axes[*gi], positions, &mut notes))
             .collect::<Result<Vec<_>, _>>()?;
+        let axes = with_uncertainties(axes, &errors_u);
         let offset = ev.reference_ball() - preset_measuring;
         let (q, qs) = ev.results(&axes, &offset);
         // Q431 = 2/3: the preset goes to the sphere centre measured at the reference.
@@ -165,6 +170,7 @@ impl MeasuringCycle for KinematicsParams {
             offset_error: arr(&offset),
             errors_before: result.before.to_map(&plan.present),
             errors_after: result.after.to_map(&plan.present),
+            errors_u,
             axes,
             notes,
         };
@@ -192,12 +198,30 @@ impl MeasuringCycle for KinematicsParams {
         Ok(CycleOutput {
             q,
             qs,
+            u: Default::default(),
             stop: write_back.stop,
             kinematics: Some(Box::new(report)),
             calibration: None,
             logs: vec![log],
         })
     }
+}
+
+/// Each axis's report with the uncertainties of its own errors.
+fn with_uncertainties(
+    axes: Vec<AxisReport>,
+    errors_u: &std::collections::BTreeMap<String, f64>,
+) -> Vec<AxisReport> {
+    axes.into_iter()
+        .map(|mut a| {
+            a.errors_u = errors_u
+                .iter()
+                .filter(|(name, _)| a.errors_after.contains_key(*name))
+                .map(|(n, v)| (n.clone(), *v))
+                .collect();
+            a
+        })
+        .collect()
 }
 
 /// The preset line of the result: what Q431 did, with the sphere centre.

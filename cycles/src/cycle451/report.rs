@@ -65,6 +65,10 @@ pub struct AxisReport {
     /// The axis's errors by ISO name (location errors and zero error).
     pub errors_before: BTreeMap<String, f64>,
     pub errors_after: BTreeMap<String, f64>,
+    /// The standard uncertainty (k = 1) of each identified error in `errors_after`
+    /// (the errors the optimisation was free to change), mm or deg.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub errors_u: BTreeMap<String, f64>,
     pub positions: Vec<PositionReport>,
 }
 
@@ -99,6 +103,9 @@ pub struct KinematicsReport {
     /// All errors of the machine's rotary axes, by ISO name.
     pub errors_before: BTreeMap<String, f64>,
     pub errors_after: BTreeMap<String, f64>,
+    /// The standard uncertainty (k = 1) of each identified error, mm or deg.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub errors_u: BTreeMap<String, f64>,
     pub axes: Vec<AxisReport>,
     pub notes: Vec<String>,
 }
@@ -121,8 +128,12 @@ impl KinematicsReport {
             ));
             for (name, before) in &a.errors_before {
                 let after = a.errors_after.get(name).copied().unwrap_or(0.0);
+                let u = a
+                    .errors_u
+                    .get(name)
+                    .map_or_else(String::new, |u| format!(" ± {u:.6}"));
                 s.push_str(&format!(
-                    "    {name} {before:+.6} -> {after:+.6}{}\n",
+                    "    {name} {before:+.6} -> {after:+.6}{u}{}\n",
                     if after != *before { " *" } else { "" }
                 ));
             }

@@ -275,7 +275,7 @@ pub fn objective(input: &IdentificationInput, errors: &ErrorSet) -> f64 {
     residuals(input, errors).iter().map(|r| r * r).sum()
 }
 
-fn residuals(input: &IdentificationInput, errors: &ErrorSet) -> Vec<f64> {
+pub(crate) fn residuals(input: &IdentificationInput, errors: &ErrorSet) -> Vec<f64> {
     let model = KinematicModel::new(&input.chain, errors);
     let mut r = Vec::new();
     for g in &input.axes {
@@ -314,7 +314,12 @@ const JACOBIAN_STEP: f64 = 1e-4;
 /// for which the measurements still determine every free error.
 const RANK_TOLERANCE: f64 = 1e-7;
 
-fn jacobian(input: &IdentificationInput, e: &ErrorSet, free: &[usize], rows: usize) -> Mat<f64> {
+pub(crate) fn jacobian(
+    input: &IdentificationInput,
+    e: &ErrorSet,
+    free: &[usize],
+    rows: usize,
+) -> Mat<f64> {
     let mut j = Mat::<f64>::zeros(rows, free.len());
     for (c, &slot) in free.iter().enumerate() {
         let mut plus = *e;

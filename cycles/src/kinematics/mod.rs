@@ -4,6 +4,7 @@
 //! format ([`qs_string`]).
 
 pub mod codec;
+pub mod error_uncertainty;
 pub mod estimator;
 pub mod identification;
 pub mod model;

@@ -19,6 +19,8 @@ pub struct PlaneRecord {
     /// Measured points (main, minor, Q173..Q175).
     pub measured: [[f64; 3]; 3],
     pub angles: PlaneAngles,
+    /// Standard uncertainty (k = 1) by result parameter (Q158 ...).
+    pub u: std::collections::BTreeMap<String, f64>,
 }
 
 /// The text of `TCHPR431.TXT`.
@@ -36,25 +38,41 @@ pub fn plane_log_text(r: &PlaneRecord, program: Option<&Path>, when: &str) -> St
         "Point  Nominal {0:>2}/{1}/{2}                      Measured {2}    Q",
         names[0], names[1], names[2]
     );
+    // "± u": the standard uncertainty (k = 1), when the cycle reported one.
+    let pm = |q: &str, decimals: usize| {
+        r.u.get(q)
+            .map_or_else(String::new, |u| format!(" ± {u:.decimals$}"))
+    };
     for (i, (n, m)) in r.nominal.iter().zip(&r.measured).enumerate() {
+        let q = format!("Q{}", 173 + i);
         let _ = writeln!(
             s,
-            "{:>5}  {:+12.4} {:+12.4} {:+12.4}   {:+12.4}   Q{}",
+            "{:>5}  {:+12.4} {:+12.4} {:+12.4}   {:+12.4}   {q}{}",
             i + 1,
             n[0],
             n[1],
             n[2],
             m[2],
-            173 + i
+            pm(&q, 4)
         );
     }
     let a = &r.angles;
     let _ = writeln!(s);
-    let _ = writeln!(s, "Spatial angle A  Q170 = {:+.4} deg", a.spa);
-    let _ = writeln!(s, "Spatial angle B  Q171 = {:+.4} deg", a.spb);
-    let _ = writeln!(s, "Spatial angle C  Q172 = {:+.4} deg", a.spc);
-    let _ = writeln!(s, "Projection A     Q158 = {:+.4} deg", a.proj_a);
-    let _ = writeln!(s, "Projection B     Q159 = {:+.4} deg", a.proj_b);
+    for (label, q, v) in [
+        ("Spatial angle A ", "Q170", a.spa),
+        ("Spatial angle B ", "Q171", a.spb),
+        ("Spatial angle C ", "Q172", a.spc),
+        ("Projection A    ", "Q158", a.proj_a),
+        ("Projection B    ", "Q159", a.proj_b),
+    ] {
+        let _ = writeln!(s, "{label} {q} = {v:+.4}{} deg", pm(q, 4));
+    }
+    if !r.u.is_empty() {
+        let _ = writeln!(
+            s,
+            "(± standard uncertainty, k = 1: the probe's scatter only, not the form of the plane or temperature)"
+        );
+    }
     let _ = writeln!(
         s,
         "Plane normal     ({:+.6}, {:+.6}, {:+.6})",

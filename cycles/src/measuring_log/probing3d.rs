@@ -28,6 +28,8 @@ pub struct Probing3dRecord {
     pub deviation_3d: f64,
     pub tolerance: Option<Tolerance>,
     pub status: WorkpieceStatus,
+    /// Standard uncertainty (k = 1) by result parameter (Q151 ...).
+    pub u: std::collections::BTreeMap<String, f64>,
 }
 
 fn colour_style(status: WorkpieceStatus) -> String {
@@ -35,6 +37,12 @@ fn colour_style(status: WorkpieceStatus) -> String {
         WorkpieceStatus::Undefined => String::new(),
         s => format!(" style=\"background:{}\"", s.colour()),
     }
+}
+
+/// ` &#177; u` (the standard uncertainty, k = 1) of result `q`, when reported.
+fn plus_minus(r: &Probing3dRecord, q: &str) -> String {
+    r.u.get(q)
+        .map_or_else(String::new, |u| format!(" &#177; {u:.4}"))
 }
 
 /// The HTML protocol of all 444 points of a run. Per axis: the probing direction
@@ -87,8 +95,12 @@ pub fn probing3d_log_html(
             };
             let _ = writeln!(
                 s,
-                "<tr><th>{}</th><td>{:+.4}</td><td>{:+.4}</td>{limits}<td{style}>{:+.4}</td></tr>",
-                name, r.direction[i], r.nominal[i], r.actual[i]
+                "<tr><th>{}</th><td>{:+.4}</td><td>{:+.4}</td>{limits}<td{style}>{:+.4}{}</td></tr>",
+                name,
+                r.direction[i],
+                r.nominal[i],
+                r.actual[i],
+                plus_minus(r, &format!("Q15{}", i + 1))
             );
         }
         let _ = writeln!(s, "</table>");
@@ -98,8 +110,9 @@ pub fn probing3d_log_html(
         );
         let _ = writeln!(
             s,
-            "<p{style}>3D deviation Q164 = {:+.4} mm ({limits}); status Q183 = {} ({})</p>",
+            "<p{style}>3D deviation Q164 = {:+.4}{} mm ({limits}); status Q183 = {} ({})</p>",
             r.deviation_3d,
+            plus_minus(r, "Q164"),
             r.status.q183(),
             r.status
         );

@@ -33,7 +33,22 @@ pub struct ProbeEntry {
     /// The probe's row of `probes.toml` (cycle 460), when it has one.
     #[serde(skip)]
     pub calibration: Option<Calibration>,
+    /// The probe's repeatability as its maker states it: 2 σ of one contact along the
+    /// probing direction, mm. Half of it is the floor of every result's standard
+    /// uncertainty where the fit has few degrees of freedom ([`crate::uncertainty`]).
+    #[serde(default = "default_repeatability")]
+    pub repeatability_2sigma: f64,
 }
+
+/// Kinematic touch probes (TS 460, OMP40 class) state 1 µm (2 σ).
+pub const DEFAULT_REPEATABILITY_2SIGMA: f64 = 0.001;
+
+fn default_repeatability() -> f64 {
+    DEFAULT_REPEATABILITY_2SIGMA
+}
+
+/// The largest repeatability taken as plausible, mm (2 σ).
+pub const MAX_REPEATABILITY: f64 = 1.0;
 
 /// The plausible range of each length of an entry, mm: a stylus ball up to 50 mm
 /// radius ([`RADIUS_MM`]); clearances and paths up to 1 m.
@@ -47,6 +62,11 @@ impl ProbeEntry {
         self.calibration
             .clone()
             .unwrap_or_else(|| Calibration::nominal(self.radius))
+    }
+
+    /// The standard uncertainty (1 σ) of one contact: half the stated repeatability.
+    pub fn repeatability(&self) -> f64 {
+        self.repeatability_2sigma / 2.0
     }
 
     /// The first field out of range, as (key, reason). Feeds are checked against the
@@ -63,6 +83,15 @@ impl ProbeEntry {
             return Some((
                 "dist",
                 format!("{} is outside (0, {PATH_MM}] mm", self.dist),
+            ));
+        }
+        if !(self.repeatability_2sigma > 0.0 && self.repeatability_2sigma <= MAX_REPEATABILITY) {
+            return Some((
+                "repeatability_2sigma",
+                format!(
+                    "{} is outside (0, {MAX_REPEATABILITY}] mm",
+                    self.repeatability_2sigma
+                ),
             ));
         }
         for (f, v) in [("set_up", self.set_up), ("mb", self.mb)] {

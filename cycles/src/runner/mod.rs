@@ -378,6 +378,7 @@ fn run_cycle<M: Machine>(
                 qs: out.qs,
                 status: Status::Ok,
                 message: out.stop,
+                u: out.u,
                 kinematics: out.kinematics,
             }
         }

@@ -4,7 +4,7 @@
 
 use super::series::{Point, Series, Verdict};
 use super::style::escape;
-use super::text::{date, num, plain, signed, tick_label, tick_step};
+use super::text::{date, num, plain, plain_u, signed, tick_label, tick_step};
 use std::fmt::Write;
 
 const W: f64 = 620.0;
@@ -18,7 +18,10 @@ const MIN_SPAN: f64 = 2.0;
 
 /// The y view: fitted to the data, widened to a tolerance line only when it is near.
 fn y_range(s: &Series) -> (f64, f64) {
-    let vals = s.points.iter().flat_map(|p| [p.before, p.after]);
+    let vals = s.points.iter().flat_map(|p| {
+        let u = p.u.unwrap_or(0.0);
+        [p.before, p.after - u, p.after + u]
+    });
     let (lo, hi) = vals.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
         (lo.min(v), hi.max(v))
     });
@@ -238,6 +241,8 @@ fn plot(html: &mut String, s: &Series, v: &Verdict, view: &View) {
             );
         }
     }
+    error_bars(html, s, view);
+    moved_marks(html, s, v, view);
     for &i in &v.alarms {
         let (p, x) = (&s.points[i], xs[i]);
         let change = signed(p.after - s.points[i - 1].after);
@@ -257,6 +262,45 @@ fn plot(html: &mut String, s: &Series, v: &Verdict, view: &View) {
         );
     }
     html.push_str("</svg>");
+}
+
+/// `after ± u` (k = 1) of every run that has a u, with caps.
+fn error_bars(html: &mut String, s: &Series, view: &View) {
+    let unit = s.unit.label();
+    for (p, x) in s.points.iter().zip(&view.xs) {
+        let Some(u) = p.u else { continue };
+        let (top, bottom) = (view.y(p.after + u), view.y(p.after - u));
+        let _ = write!(
+            html,
+            "<path class=\"ebar\" data-run=\"{}\" d=\"M{x:.1},{top:.1}V{bottom:.1}M{:.1},{top:.1}h8M{:.1},{bottom:.1}h8\"><title>{} ± {} {unit} (standard uncertainty, k = 1)</title></path>",
+            p.run,
+            x - 4.0,
+            x - 4.0,
+            signed(p.after),
+            plain_u(u),
+        );
+    }
+}
+
+/// A square around each run whose change since the previous run exceeds 2 combined
+/// standard uncertainties: a change of the machine, not noise of the measurement.
+fn moved_marks(html: &mut String, s: &Series, v: &Verdict, view: &View) {
+    let unit = s.unit.label();
+    for &i in &v.moved {
+        let (p, x) = (&s.points[i], view.xs[i]);
+        let y = view.y(p.after);
+        let change = p.after - s.points[i - 1].after;
+        let uc = s.change_u(i).unwrap_or(0.0);
+        let _ = write!(
+            html,
+            "<rect class=\"moved\" data-run=\"{}\" x=\"{:.1}\" y=\"{:.1}\" width=\"14\" height=\"14\"><title>changed by {} {unit} since the previous run, more than 2 combined standard uncertainties (2 u_c = {} {unit})</title></rect>",
+            p.run,
+            x - 7.0,
+            y - 7.0,
+            signed(change),
+            plain_u(2.0 * uc),
+        );
+    }
 }
 
 /// Tolerance lines wholly outside the view: an arrow with the distance.
@@ -303,9 +347,10 @@ fn stats(html: &mut String, s: &Series, v: &Verdict) {
     let Some(last) = s.points.last() else { return };
     let _ = write!(
         html,
-        "<div class=\"stats\"><div>latest ({}):</div><div class=\"value latest\">{} {u}</div><div>before optimisation {} {u}</div>",
+        "<div class=\"stats\"><div>latest ({}):</div><div class=\"value latest\">{}{} {u}</div><div>before optimisation {} {u}</div>",
         escape(&date(&last.started)),
         signed(last.after),
+        last.u.map_or_else(String::new, |x| format!(" &#177; {}", plain_u(x))),
         signed(last.before),
     );
     match (v.change, s.points.iter().rev().nth(1)) {
@@ -327,6 +372,20 @@ fn stats(html: &mut String, s: &Series, v: &Verdict) {
             }
         }
         _ => html.push_str("<div>first run</div>"),
+    }
+    if let Some(uc) = s.change_u(s.points.len().saturating_sub(1)) {
+        let moved = v.moved.last().is_some_and(|&i| i + 1 == s.points.len());
+        let _ = write!(
+            html,
+            "<div class=\"{}\">{} (2 u_c = {} {u})</div>",
+            if moved { "bad moved" } else { "ok" },
+            if moved {
+                "a change: more than 2 combined uncertainties"
+            } else {
+                "within 2 combined uncertainties: noise"
+            },
+            plain_u(2.0 * uc)
+        );
     }
     if let (Some(t), Some(ok)) = (last.tol, v.in_tolerance) {
         let _ = write!(

@@ -93,12 +93,14 @@ mod tests {
                         name: "EX0C".into(),
                         before: 0.0,
                         after: ex0c(i),
+                        u: None,
                     },
                     IsoErrorRow {
                         block: 11,
                         name: "EB0C".into(),
                         before: 0.0,
                         after: 0.0001,
+                        u: None,
                     },
                 ],
                 max_modification: Some(0.03),
@@ -193,5 +195,37 @@ mod tests {
         assert!(pages[0].1.contains("href=\"trend-1.html\">head-bc<"));
         assert!(pages[2].1.contains("Calibration trend: table-ac"));
         assert!(pages[2].1.contains("href=\"trend.html\">all machines"));
+    }
+
+    #[test]
+    fn error_bars_and_a_change_beyond_two_combined_uncertainties() {
+        // EX0C 10, 10.5, 13 µm with u = 0.5 µm: 0.5 µm is noise (2 u_c = 1.41 µm),
+        // 2.5 µm is a change, below the 5 µm alarm.
+        let values = [0.010, 0.0105, 0.013];
+        let mut r = runs("table-ac", 3, |i| values[i]);
+        for run in &mut r {
+            run.iso_errors[0].u = Some(0.0005);
+        }
+        let html = trend_html(&r);
+        assert_eq!(html.matches("class=\"ebar\"").count(), 3, "{html}");
+        assert!(
+            html.contains("+10.0 ± 0.50 µm (standard uncertainty, k = 1)"),
+            "{html}"
+        );
+        assert_eq!(
+            html.matches("class=\"moved\" data-run").count(),
+            1,
+            "{html}"
+        );
+        assert!(html.contains("class=\"moved\" data-run=\"3\""));
+        assert!(html.contains("more than 2 combined standard uncertainties (2 u_c = 1.4 µm)"));
+        assert_eq!(html.matches("class=\"alarm-ring\"").count(), 0);
+        assert!(
+            html.contains("+13.0 &#177; 0.50"),
+            "the summary's latest value with u"
+        );
+        // Without uncertainties (runs recorded before them): no bars, no marks.
+        let html = trend_html(&runs("table-ac", 3, |i| values[i]));
+        assert!(!html.contains("class=\"ebar\"") && !html.contains("class=\"moved\" data-run"));
     }
 }

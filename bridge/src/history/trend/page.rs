@@ -6,7 +6,7 @@ use super::alarm::Alarm;
 use super::chart::chart;
 use super::series::{collect, done_runs, machines, Series, Verdict};
 use super::style::{escape, head, Style};
-use super::text::{date, num, plain, signed};
+use super::text::{date, num, plain, plain_u, signed};
 use std::fmt::Write;
 
 /// The index of several machines: per machine its runs, latest run, the errors out
@@ -118,7 +118,7 @@ pub fn machine_page(
     rows.sort_by(|a, b| b.1.weight(&b.2).total_cmp(&a.1.weight(&a.2)));
     headline(&mut html, &rows);
     summary(&mut html, &rows);
-    html.push_str("<p><span class=\"swatch before\"></span>before optimisation (kinematics in use) <span class=\"swatch after\"></span>after optimisation (identified by cycle 451) <span class=\"swatch tol\"></span>tolerance (maxModification)</p>\n");
+    html.push_str("<p><span class=\"swatch before\"></span>before optimisation (kinematics in use) <span class=\"swatch after\"></span>after optimisation (identified by cycle 451) <span class=\"swatch tol\"></span>tolerance (maxModification) <span class=\"swatch ebar\"></span>&#177; standard uncertainty (k = 1) <span class=\"swatch moved\"></span>changed by more than 2 combined standard uncertainties since the previous run</p>\n");
     let (errs, disp): (Vec<_>, Vec<_>) = rows
         .iter()
         .partition(|(_, s, _)| !s.title.starts_with("dispersion "));
@@ -215,6 +215,11 @@ fn summary(html: &mut String, rows: &[(usize, &Series, Verdict)]) {
         } else if !v.alarms.is_empty() {
             state.push(format!("alarm in {} earlier run(s)", v.alarms.len()));
         }
+        if v.moved.last().is_some_and(|&a| a + 1 == s.points.len()) {
+            state.push(
+                "<span class=\"moved\">changed by more than 2 combined uncertainties</span>".into(),
+            );
+        }
         if state.is_empty() {
             state.push("ok".into());
         }
@@ -222,11 +227,19 @@ fn summary(html: &mut String, rows: &[(usize, &Series, Verdict)]) {
             html,
             "<tr{class} data-series=\"{i}\"><td class=\"l\"><a href=\"#chart-{i}\">{}</a></td><td>{} {u}</td><td>{}</td><td>{} {u}</td><td>{tol}</td><td class=\"l\">{}</td></tr>",
             escape(&s.title),
-            signed(last.after),
+            with_u(last.after, last.u),
             v.change.map_or("first run".into(), |c| format!("{} {u}", signed(c))),
             signed(v.drift),
             state.join(", "),
         );
     }
     html.push_str("</table>\n");
+}
+
+/// A value with its standard uncertainty when recorded (`+12.0 &#177; 0.45`).
+fn with_u(v: f64, u: Option<f64>) -> String {
+    match u {
+        Some(u) => format!("{} &#177; {}", signed(v), plain_u(u)),
+        None => signed(v),
+    }
 }

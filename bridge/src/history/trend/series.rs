@@ -51,6 +51,9 @@ pub(super) struct Point {
     pub(super) t: Option<i64>,
     pub(super) before: f64,
     pub(super) after: f64,
+    /// The standard uncertainty (k = 1) of `after`, in the series' unit (None: not
+    /// recorded).
+    pub(super) u: Option<f64>,
     /// maxModification in the series' unit (errors only).
     pub(super) tol: Option<f64>,
 }
@@ -71,6 +74,9 @@ pub(super) struct Verdict {
     pub(super) drift: f64,
     /// Indices of the runs whose change exceeds the alarm.
     pub(super) alarms: Vec<usize>,
+    /// Indices of the runs whose change exceeds 2 combined standard uncertainties
+    /// (of this run and the previous): a change, not noise.
+    pub(super) moved: Vec<usize>,
     /// The latest correction (after - before) within maxModification.
     pub(super) in_tolerance: Option<bool>,
     pub(super) threshold: f64,
@@ -83,8 +89,15 @@ impl Series {
         let alarms = (1..p.len())
             .filter(|&i| (p[i].after - p[i - 1].after).abs() > threshold)
             .collect();
+        let moved = (1..p.len())
+            .filter(|&i| {
+                let change = (p[i].after - p[i - 1].after).abs();
+                combined(p[i].u, p[i - 1].u).is_some_and(|uc| change > 2.0 * uc)
+            })
+            .collect();
         let last = p.last();
         Verdict {
+            moved,
             change: (p.len() >= 2).then(|| p[p.len() - 1].after - p[p.len() - 2].after),
             drift: match (p.first(), last) {
                 (Some(a), Some(b)) => b.after - a.after,
@@ -94,6 +107,14 @@ impl Series {
             in_tolerance: last.and_then(|l| l.tol.map(|t| (l.after - l.before).abs() <= t)),
             threshold,
         }
+    }
+
+    /// The combined standard uncertainty of the change from run `i - 1` to run `i`.
+    pub(super) fn change_u(&self, i: usize) -> Option<f64> {
+        let p = &self.points;
+        (i >= 1 && i < p.len())
+            .then(|| combined(p[i].u, p[i - 1].u))
+            .flatten()
     }
 
     /// How strongly it moved, in alarms: the order of the summary.
@@ -115,12 +136,13 @@ pub(super) fn collect(runs: &[RunRow], machine: &str) -> Vec<Series> {
     let mut errors: BTreeMap<&str, Vec<Point>> = BTreeMap::new();
     let mut dispersion: BTreeMap<&str, Vec<Point>> = BTreeMap::new();
     for r in done_runs(runs, machine) {
-        let point = |unit: Unit, before: f64, after: f64, tol: Option<f64>| Point {
+        let point = |unit: Unit, before: f64, after: f64, u: Option<f64>, tol: Option<f64>| Point {
             run: r.id,
             started: r.started.clone(),
             t: parse_utc(&r.started),
             before: before * unit.scale(),
             after: after * unit.scale(),
+            u: u.map(|u| u * unit.scale()),
             tol: tol.map(|t| t * unit.scale()),
         };
         for e in &r.iso_errors {
@@ -129,15 +151,19 @@ pub(super) fn collect(runs: &[RunRow], machine: &str) -> Vec<Series> {
                 u,
                 e.before,
                 e.after,
+                e.u,
                 r.max_modification,
             ));
         }
         for d in &r.dispersion {
             // Dispersion is a length (mm).
-            dispersion
-                .entry(&d.axis)
-                .or_default()
-                .push(point(Unit::Um, d.before, d.after, None));
+            dispersion.entry(&d.axis).or_default().push(point(
+                Unit::Um,
+                d.before,
+                d.after,
+                None,
+                None,
+            ));
         }
     }
     let errors = errors.into_iter().map(|(name, points)| Series {
@@ -151,6 +177,11 @@ pub(super) fn collect(runs: &[RunRow], machine: &str) -> Vec<Series> {
         points,
     });
     errors.chain(dispersion).collect()
+}
+
+/// `sqrt(a² + b²)` of two independent standard uncertainties, when both are known.
+pub(super) fn combined(a: Option<f64>, b: Option<f64>) -> Option<f64> {
+    Some(a?.hypot(b?))
 }
 
 /// The machines of the history with a completed run, in order: the index's pages.

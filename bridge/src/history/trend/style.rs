@@ -29,7 +29,10 @@ svg text{font-size:11px;fill:#333}svg .title{font-size:14px;font-weight:bold}\
 .swatch{display:inline-block;width:2em;height:0;border-top:3px solid;vertical-align:middle;margin-right:0.3em}\
 .swatch.before{border-color:#c0392b;border-top-style:dashed}.swatch.after{border-color:#1e8449}\
 .swatch.tol{border-color:#e67e22;border-top-style:dashed}\
-.status td{text-align:left}nav a{margin-right:1em}";
+.status td{text-align:left}nav a{margin-right:1em}\
+.ebar{fill:none;stroke:#1e8449;stroke-width:1.2}.moved{fill:none;stroke:#6c3483;stroke-width:2}\
+.stats .moved{color:#6c3483;font-weight:bold}.swatch.ebar{border-color:#1e8449;border-top-width:1px;width:0.6em}\
+.swatch.moved{border:2px solid #6c3483;width:0.7em;height:0.7em;vertical-align:middle}";
 
 pub(super) fn head(html: &mut String, title: &str, style: Style) {
     let _ = write!(

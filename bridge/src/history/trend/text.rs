@@ -46,6 +46,17 @@ pub(super) fn plain(v: f64) -> String {
     format!("{v:.1}")
 }
 
+/// A standard uncertainty: two significant figures, at least 0.01 (µm or arcsec).
+pub(super) fn plain_u(v: f64) -> String {
+    if v >= 10.0 {
+        format!("{v:.0}")
+    } else if v >= 1.0 {
+        format!("{v:.1}")
+    } else {
+        format!("{v:.2}")
+    }
+}
+
 /// A configured number as typed (5, 2.5).
 pub(super) fn num(v: f64) -> String {
     format!("{v}")
