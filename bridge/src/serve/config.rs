@@ -23,6 +23,9 @@ pub struct GatewayConfig {
     pub history: HistorySection,
     #[serde(default)]
     pub web: WebSection,
+    /// The OPC UA face: off unless the section is there.
+    #[serde(default)]
+    pub opcua: Option<super::opcua::config::OpcuaSection>,
 }
 
 /// The read-only web face (trend page, measuring protocols, status): off unless
@@ -298,6 +301,9 @@ impl GatewayConfig {
         {
             anchor(p);
         }
+        if let Some(o) = cfg.opcua.as_mut() {
+            o.anchor(base);
+        }
         cfg.validate()?;
         Ok(cfg)
     }
@@ -402,6 +408,9 @@ impl GatewayConfig {
             ));
         }
         self.allow()?;
+        if let Some(o) = &self.opcua {
+            o.validate().map_err(|(key, why)| self.invalid(key, why))?;
+        }
         Ok(())
     }
 
