@@ -158,7 +158,7 @@ run431() {
 check "plc-runs-431" run431
 check "history-done" test "$(history_last_status)" = done
 
-# 4b. The OPC UA face, as the gateway page deploys it: the users file (argon2id hashes,
+# 4b. The OPC UA face, as docs/opcua.md and docs/deploy.md deploy it: the users file (argon2id hashes,
 #     mode 600, the service's user), [opcua] in gateway.toml; its port answers, its
 #     certificate is made in the state directory on the first start (key mode 600) and
 #     kept over a restart; the PLC's 431 still runs with it on.
