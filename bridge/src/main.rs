@@ -166,6 +166,12 @@ enum Cmd {
         #[arg(long, default_value = probebridge::serve::config::DEFAULT_PATH)]
         config: PathBuf,
     },
+    /// A line of the OPC UA face's users file (`NAME:argon2id hash`) for NAME, the
+    /// password read from the first line of standard input.
+    OpcuaUser {
+        /// The user's name (letters, digits, _ - . @).
+        name: String,
+    },
     /// The recorded measurements of a gateway (its history file).
     History {
         /// The history file, or a PostgreSQL server's `postgres://` URL; default: the
@@ -342,6 +348,7 @@ fn main() -> ExitCode {
         })
         .map(|()| 0),
         Cmd::Serve { config } => probebridge::serve::run(&config),
+        Cmd::OpcuaUser { name } => commands::opcua_user::run(&name).map(|()| 0),
         Cmd::Bench(BenchCmd::Trigger(args)) => commands::bench::trigger::run(&args).map(|()| 0),
     };
     // After a stop signal the session is closed (axes braked, drives disabled) and

@@ -158,6 +158,27 @@ run431() {
 check "plc-runs-431" run431
 check "history-done" test "$(history_last_status)" = done
 
+# 4b. The OPC UA face, as docs/opcua.md and docs/deploy.md deploy it: the users file (argon2id hashes,
+#     mode 600, the service's user), [opcua] in gateway.toml; its port answers, its
+#     certificate is made in the state directory on the first start (key mode 600) and
+#     kept over a restart; the PLC's 431 still runs with it on.
+ua=/var/lib/probebridge/opcua
+install -d -m 700 -o probebridge -g probebridge "$ua"
+printf '%s\n' 'a long pass phrase' | /usr/local/bin/probebridge opcua-user mes \
+    | install -m 600 -o probebridge -g probebridge /dev/stdin "$ua/users"
+printf '\n[opcua]\nlisten = "opc.tcp://127.0.0.1:4840"\nmay_start = true\n' >>/etc/probebridge/gateway.toml
+systemctl restart probebridge
+check "opcua-restarted-active" test "$(systemctl is-active probebridge)" = active
+check "opcua-port-answers" bash -c 'exec 3<>/dev/tcp/127.0.0.1/4840'
+check "opcua-certificate-made" test -s "$ua/pki/own/cert.der"
+check "opcua-key-600-probebridge" test "$(stat -c %a:%U "$ua/pki/private/private.pem")" = 600:probebridge
+ls -lR "$ua"
+cert_before=$(sha256sum <"$ua/pki/own/cert.der")
+systemctl restart probebridge
+check "opcua-certificate-kept" test "$(sha256sum <"$ua/pki/own/cert.der")" = "$cert_before"
+check "opcua-in-journal" grep -q "OPC UA face ready" <<<"$(journalctl -u probebridge --no-pager)"
+check "plc-runs-431-with-opcua" run431
+
 # 5. SIGKILL.
 pid=$(prop MainPID)
 shm_before=$(find /dev/shm -name 'iox2_*' | wc -l)

@@ -25,6 +25,9 @@ pub struct GatewayConfig {
     pub web: WebSection,
     #[serde(default)]
     pub estimator: EstimatorSection,
+    /// The OPC UA face: off unless the section is there.
+    #[serde(default)]
+    pub opcua: Option<super::opcua::config::OpcuaSection>,
 }
 
 /// `[estimator]`: the estimator process the gateway starts.
@@ -310,6 +313,9 @@ impl GatewayConfig {
         {
             anchor(p);
         }
+        if let Some(o) = cfg.opcua.as_mut() {
+            o.anchor(base);
+        }
         cfg.validate()?;
         Ok(cfg)
     }
@@ -414,6 +420,9 @@ impl GatewayConfig {
             ));
         }
         self.allow()?;
+        if let Some(o) = &self.opcua {
+            o.validate().map_err(|(key, why)| self.invalid(key, why))?;
+        }
         Ok(())
     }
 

@@ -1,7 +1,8 @@
-//! What the PLC face and the machine thread share: the register map, the handshake,
-//! the connection that owns the writes, and the queue of one job to the machine thread.
+//! What the faces (PLC, OPC UA) and the machine thread share: the register map, the
+//! handshake, the connection that owns the writes, the queue of one job to the machine
+//! thread, and what the OPC UA face shows of the runs.
 
-use super::handshake::{AbortReason, Action, Handshake, Outcome, Refusal, State};
+use super::handshake::{AbortReason, Action, Face, Handshake, Outcome, Refusal, State};
 use super::ownership::{Ownership, Takeover};
 use super::register_map::{MapException, RegisterMap};
 use crate::history::recorder::Recorder;
@@ -14,7 +15,7 @@ use std::net::IpAddr;
 use std::path::PathBuf;
 use std::sync::mpsc::Sender;
 use std::sync::{Arc, Mutex, MutexGuard};
-use std::time::Instant;
+use std::time::{Instant, SystemTime};
 
 /// A measurement for the machine thread.
 pub struct Job {
@@ -26,6 +27,35 @@ pub struct Job {
     pub params: [f32; super::register_map::REQ_PARAM_COUNT],
     /// The run's row in the history (written before the start was taken).
     pub record: Option<i64>,
+}
+
+/// A command of the OPC UA face (it has no request block): start, abort or acknowledge.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FaceCommand {
+    pub code: u16,
+    pub program: u16,
+    pub params: [f32; super::register_map::REQ_PARAM_COUNT],
+    pub confirm: bool,
+    /// Who asked (the OPC UA user), for the log.
+    pub who: String,
+}
+
+/// A run as the OPC UA face shows it: the program, who started it, when it started
+/// and ended, how.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunInfo {
+    pub program: u16,
+    pub face: Face,
+    pub started: SystemTime,
+    pub ended: Option<SystemTime>,
+    pub outcome: Option<Outcome>,
+}
+
+/// The last results of one cycle number (431, 444, 451): when, and the values by name.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CycleResults {
+    pub at: SystemTime,
+    pub values: BTreeMap<String, f64>,
 }
 
 pub enum ToMachine {
@@ -59,7 +89,20 @@ pub struct Core {
     heartbeat: u16,
     /// Where runs are recorded (none: history off).
     history: Option<Recorder>,
+    /// The current or last run (none yet).
+    run: Option<RunInfo>,
+    /// The last results of each cycle number.
+    by_cycle: BTreeMap<u16, CycleResults>,
+    /// Ticks on every change of what the faces show (the OPC UA face waits on it).
+    changed: tokio::sync::watch::Sender<u64>,
+    /// The states passed through since the OPC UA face last looked (a run on the
+    /// simulator can start and end before it looks): at most [`MAX_TRANSITIONS`].
+    transitions: std::collections::VecDeque<State>,
+    last_state: State,
 }
+
+/// State transitions kept for the OPC UA face; the oldest go first beyond it.
+const MAX_TRANSITIONS: usize = 64;
 
 pub type Shared = Arc<Mutex<Core>>;
 
@@ -88,6 +131,11 @@ impl Core {
             owner,
             heartbeat: 0,
             history: None,
+            run: None,
+            by_cycle: BTreeMap::new(),
+            changed: tokio::sync::watch::Sender::new(0),
+            transitions: std::collections::VecDeque::new(),
+            last_state: State::Idle,
         };
         c.publish();
         c
@@ -103,6 +151,25 @@ impl Core {
             self.hs.set_not_recorded(h.pending() > 0);
         }
         self.map.set_state(self.hs.view());
+        let state = self.hs.state();
+        if state != self.last_state {
+            if self.transitions.len() >= MAX_TRANSITIONS {
+                self.transitions.pop_front();
+            }
+            self.transitions.push_back(state);
+            self.last_state = state;
+        }
+        self.changed.send_modify(|n| *n = n.wrapping_add(1));
+    }
+
+    /// The states passed through since the last call, oldest first.
+    pub fn take_transitions(&mut self) -> Vec<State> {
+        self.transitions.drain(..).collect()
+    }
+
+    /// A receiver that sees each change of what the faces show.
+    pub fn watch(&self) -> tokio::sync::watch::Receiver<u64> {
+        self.changed.subscribe()
     }
 
     /// A write of connection `conn` from `ip`: the first connection that writes owns
@@ -156,7 +223,14 @@ impl Core {
             let program = resolve_program(folder, cfg, n)?;
             // The run is in the history as `running` before the start is taken.
             let record = match history {
-                Some(h) => Some(begin_run(h, cfg, &req, &program)?),
+                Some(h) => Some(begin_run(
+                    h,
+                    cfg,
+                    RunOrigin::Plc { seq: req.seq },
+                    n,
+                    &req.params,
+                    &program,
+                )?),
                 None => None,
             };
             Ok((program, record))
@@ -175,9 +249,6 @@ impl Core {
                 program: (program, record),
                 confirm,
             }) => {
-                self.job_generation = self.abort.generation();
-                // The old results stop matching any request before the run starts.
-                self.map.set_results(seq.wrapping_sub(1), &BTreeMap::new());
                 tracing::info!(
                     seq,
                     program = req.program,
@@ -192,15 +263,7 @@ impl Core {
                     params: req.params,
                     record,
                 };
-                if self.jobs.send(ToMachine::Run(Box::new(job))).is_err() {
-                    self.hs.finish(
-                        Outcome::Error {
-                            kind: super::handshake::ERROR_KIND_CYCLE,
-                            code: 0,
-                        },
-                        0,
-                    );
-                }
+                self.start(job, Face::Plc);
             }
             Some(Action::Abort) => {
                 tracing::info!(seq = req.seq, "abort requested by the PLC");
@@ -209,6 +272,107 @@ impl Core {
             None => {}
         }
         self.publish();
+    }
+
+    /// Hands a taken start to the machine thread.
+    fn start(&mut self, job: Job, face: Face) {
+        self.job_generation = self.abort.generation();
+        // The old results stop matching any request before the run starts.
+        self.map
+            .set_results(job.seq.wrapping_sub(1), &BTreeMap::new());
+        self.run = Some(RunInfo {
+            program: job.number,
+            face,
+            started: SystemTime::now(),
+            ended: None,
+            outcome: None,
+        });
+        if self.jobs.send(ToMachine::Run(Box::new(job))).is_err() {
+            let outcome = Outcome::Error {
+                kind: super::handshake::ERROR_KIND_CYCLE,
+                code: 0,
+            };
+            self.hs.finish(outcome, 0);
+            self.end_run(outcome);
+        }
+    }
+
+    fn end_run(&mut self, outcome: Outcome) {
+        if let Some(r) = self.run.as_mut() {
+            r.ended = Some(SystemTime::now());
+            r.outcome = Some(outcome);
+        }
+    }
+
+    /// A command of the OPC UA face, by the PLC's rules (one measurement at a time,
+    /// the same refusals, the same abort flag); `Err` says why it was refused.
+    pub fn command(&mut self, cmd: &FaceCommand) -> Result<(), Refusal> {
+        let now = Instant::now();
+        let (folder, cfg, history) = (&self.programs, &self.cycles, &self.history);
+        let answer = self
+            .hs
+            .command(cmd.code, cmd.program, cmd.params, cmd.confirm, now, |n| {
+                let program = resolve_program(folder, cfg, n)?;
+                let record = match history {
+                    Some(h) => Some(begin_run(
+                        h,
+                        cfg,
+                        RunOrigin::OpcUa,
+                        n,
+                        &cmd.params,
+                        &program,
+                    )?),
+                    None => None,
+                };
+                Ok((program, record))
+            });
+        match &answer {
+            Ok(Some(Action::Start { .. })) => {}
+            Ok(_) => tracing::info!(
+                code = cmd.code,
+                who = %cmd.who,
+                "OPC UA face: request taken"
+            ),
+            Err(r) => tracing::info!(
+                code = cmd.code,
+                program = cmd.program,
+                who = %cmd.who,
+                reason = *r as u16,
+                "OPC UA face: request refused ({})",
+                r.describe()
+            ),
+        }
+        let result = answer.as_ref().map(|_| ()).map_err(|r| *r);
+        match answer {
+            Ok(Some(Action::Start {
+                seq,
+                program: (program, record),
+                confirm,
+            })) => {
+                tracing::info!(
+                    program = cmd.program,
+                    params = ?cmd.params,
+                    who = %cmd.who,
+                    "measurement started over OPC UA"
+                );
+                let job = Job {
+                    seq,
+                    number: cmd.program,
+                    program,
+                    confirm,
+                    params: cmd.params,
+                    record,
+                };
+                self.start(job, Face::OpcUa);
+            }
+            Ok(Some(Action::Abort)) => {
+                tracing::info!(who = %cmd.who, "abort requested over OPC UA");
+                self.request_abort(AbortReason::Request);
+            }
+            Ok(None) | Err(_) => {}
+        }
+        self.publish();
+        result
     }
 
     /// Aborts the running measurement (the first reason wins). A shutdown also stops
@@ -270,7 +434,26 @@ impl Core {
             &empty
         };
         self.map.set_results(seq, values);
+        self.end_run(outcome);
         self.publish();
+    }
+
+    /// The results of each cycle of a run that ended done (before [`Core::finish`]).
+    pub fn set_cycle_results(&mut self, cycles: Vec<(u16, BTreeMap<String, f64>)>) {
+        let at = SystemTime::now();
+        for (cycle, values) in cycles {
+            self.by_cycle.insert(cycle, CycleResults { at, values });
+        }
+    }
+
+    /// The current or last run.
+    pub fn run(&self) -> Option<&RunInfo> {
+        self.run.as_ref()
+    }
+
+    /// The last results of each cycle number.
+    pub fn cycle_results(&self) -> &BTreeMap<u16, CycleResults> {
+        &self.by_cycle
     }
 
     pub fn set_machine_ok(&mut self, ok: bool) {
@@ -287,25 +470,39 @@ impl Core {
     }
 }
 
+/// Which face a recorded run came from: the PLC's request sequence, or OPC UA.
+#[derive(Clone, Copy, Debug)]
+enum RunOrigin {
+    Plc { seq: u16 },
+    OpcUa,
+}
+
 /// Writes the `running` row of a start; a failure refuses it ("history unavailable").
+/// The history's source is "serve" for the PLC's starts, "opcua" for OPC UA's.
 fn begin_run(
     history: &Recorder,
     cfg: &CyclesConfig,
-    req: &super::register_map::Request,
+    origin: RunOrigin,
+    number: u16,
+    params: &[f32],
     program: &Program,
 ) -> Result<i64, Refusal> {
+    let (source, request_seq) = match origin {
+        RunOrigin::Plc { seq } => ("serve", Some(seq)),
+        RunOrigin::OpcUa => ("opcua", None),
+    };
     history
         .begin(NewRun {
             machine: cfg.machine.name.clone(),
-            source: "serve".into(),
-            request_seq: Some(req.seq),
-            program_number: Some(req.program),
+            source: source.into(),
+            request_seq,
+            program_number: Some(number),
             program: program.path.clone().unwrap_or_default(),
             max_modification: Some(cfg.parameters.max_modification),
-            parameters: req.params.iter().map(|&p| f64::from(p)).collect(),
+            parameters: params.iter().map(|&p| f64::from(p)).collect(),
         })
         .map_err(|e| {
-            tracing::error!(seq = req.seq, "start refused: {e}");
+            tracing::error!(?origin, "start refused: {e}");
             Refusal::HistoryUnavailable
         })
 }

@@ -11,6 +11,14 @@ pub const CODE_ABORT: u16 = 2;
 pub const CODE_ACKNOWLEDGE: u16 = 3;
 pub const REFUSED: u16 = 0x8000;
 
+/// The face a measurement was started from: the PLC's heartbeat supervises only the
+/// runs the PLC started.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Face {
+    Plc,
+    OpcUa,
+}
+
 /// The state register.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u16)]
@@ -66,6 +74,23 @@ pub enum Refusal {
     MachineNotReady = 8,
     /// The run's `running` row could not be written (nothing moved).
     HistoryUnavailable = 9,
+}
+
+impl Refusal {
+    /// The reason in words, as the README's reason table says it.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Refusal::Busy => "a measurement is running",
+            Refusal::UnknownCode => "unknown request code",
+            Refusal::UnknownProgram => "no such program in the program folder",
+            Refusal::InvalidProgram => "the program does not parse or does not fit the machine",
+            Refusal::ErrorPending => "the last run ended in an error: acknowledge it first",
+            Refusal::NotBusy => "no measurement is running",
+            Refusal::BadRequest => "a parameter is not a finite number",
+            Refusal::MachineNotReady => "the machine is not up",
+            Refusal::HistoryUnavailable => "the run could not be recorded in the history",
+        }
+    }
 }
 
 /// Why a running measurement was aborted (the error kind register).
@@ -155,6 +180,7 @@ pub struct Handshake {
     machine_ok: bool,
     not_recorded: bool,
     busy_seq: u16,
+    busy_face: Face,
     plc_heartbeat: u16,
     heartbeat_seen: Instant,
     heartbeat_timeout: Option<Duration>,
@@ -169,6 +195,7 @@ impl Handshake {
             machine_ok: false,
             not_recorded: false,
             busy_seq: 0,
+            busy_face: Face::Plc,
             plc_heartbeat: 0,
             heartbeat_seen: now,
             heartbeat_timeout,
@@ -253,18 +280,62 @@ impl Handshake {
             }
         }
         if let Some(Action::Start { seq, .. }) = &action {
-            self.state = State::Busy;
-            self.busy_seq = *seq;
-            self.heartbeat_seen = now;
-            self.view.program = req.program;
-            self.view.progress_permille = 0;
-            self.view.point = 0;
-            self.view.error_kind = 0;
-            self.view.error_code = 0;
-            self.view.cycle = 0;
+            self.begin(*seq, req.program, Face::Plc, now);
         }
         self.refresh_bits();
         action
+    }
+
+    /// A command of a face that has no request block (OPC UA's methods): decided by
+    /// the same rules as the PLC's requests, answered to the caller; the PLC's
+    /// acknowledge registers stay the PLC's. A run started so has a result sequence
+    /// the PLC's current request does not have, so its results never pass for the
+    /// PLC's own.
+    pub fn command<P>(
+        &mut self,
+        code: u16,
+        program: u16,
+        params: [f32; super::register_map::REQ_PARAM_COUNT],
+        confirm: bool,
+        now: Instant,
+        resolve: impl FnOnce(u16) -> Result<P, Refusal>,
+    ) -> Result<Option<Action<P>>, Refusal> {
+        let req = Request {
+            code,
+            seq: self.last_seq.wrapping_sub(1),
+            program,
+            flags: if confirm {
+                super::register_map::FLAG_CONFIRM
+            } else {
+                0
+            },
+            params,
+            plc_heartbeat: self.plc_heartbeat,
+        };
+        let (answer, action) = self.decide(&req, resolve);
+        if let Some(Action::Start { seq, .. }) = &action {
+            self.begin(*seq, program, Face::OpcUa, now);
+        }
+        self.refresh_bits();
+        answer.map(|()| action)
+    }
+
+    fn begin(&mut self, seq: u16, program: u16, face: Face, now: Instant) {
+        self.state = State::Busy;
+        self.busy_seq = seq;
+        self.busy_face = face;
+        self.heartbeat_seen = now;
+        self.view.program = program;
+        self.view.progress_permille = 0;
+        self.view.point = 0;
+        self.view.error_kind = 0;
+        self.view.error_code = 0;
+        self.view.cycle = 0;
+    }
+
+    /// The face the running (or last) measurement was started from.
+    pub fn busy_face(&self) -> Face {
+        self.busy_face
     }
 
     fn decide<P>(
@@ -344,7 +415,11 @@ impl Handshake {
     /// Is the PLC heartbeat stale while busy (the motion must be aborted)?
     pub fn heartbeat_lost(&self, now: Instant) -> bool {
         match self.heartbeat_timeout {
-            Some(t) => self.state == State::Busy && now.duration_since(self.heartbeat_seen) > t,
+            Some(t) => {
+                self.state == State::Busy
+                    && self.busy_face == Face::Plc
+                    && now.duration_since(self.heartbeat_seen) > t
+            }
             None => false,
         }
     }
@@ -442,6 +517,46 @@ mod tests {
         bad.params[3] = f32::NAN;
         h.on_request(&bad, now, Ok::<_, Refusal>);
         assert_eq!(h.view().reason, Refusal::BadRequest as u16);
+    }
+
+    #[test]
+    fn a_command_follows_the_same_rules_and_leaves_the_plc_acknowledge_alone() {
+        let (mut h, now) = ready();
+        h.on_request(&req(CODE_ACKNOWLEDGE, 7, 0), now, Ok::<_, Refusal>);
+        let before = h.view().clone();
+        let a = h.command(CODE_START, 431, [0.0; 8], true, now, Ok::<_, Refusal>);
+        assert!(matches!(a, Ok(Some(Action::Start { seq: 6, .. }))), "{a:?}");
+        assert_eq!(h.state(), State::Busy);
+        assert_eq!(h.busy_face(), Face::OpcUa);
+        assert_eq!(
+            (h.view().ack_seq, h.view().ack_code, h.view().reason),
+            (before.ack_seq, before.ack_code, before.reason)
+        );
+        // The PLC's start while it runs: busy, in the PLC's registers.
+        h.on_request(&req(CODE_START, 8, 0), now, Ok::<_, Refusal>);
+        assert_eq!(h.view().reason, Refusal::Busy as u16);
+        // A second start of the face: busy, to the caller.
+        assert_eq!(
+            h.command(CODE_START, 431, [0.0; 8], false, now, Ok::<_, Refusal>),
+            Err(Refusal::Busy)
+        );
+        // The PLC's heartbeat does not supervise the face's run.
+        assert!(!h.heartbeat_lost(now + Duration::from_secs(5)));
+        assert_eq!(
+            h.command(CODE_ABORT, 0, [0.0; 8], false, now, Ok::<_, Refusal>),
+            Ok(Some(Action::Abort))
+        );
+        h.finish(Outcome::Aborted(AbortReason::Request), 0);
+        assert_eq!(
+            h.command(CODE_ABORT, 0, [0.0; 8], false, now, Ok::<_, Refusal>),
+            Err(Refusal::NotBusy)
+        );
+        let mut nan = [0.0; 8];
+        nan[2] = f32::INFINITY;
+        assert_eq!(
+            h.command(CODE_START, 431, nan, false, now, Ok::<_, Refusal>),
+            Err(Refusal::BadRequest)
+        );
     }
 
     #[test]

@@ -250,7 +250,18 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
             }
         }
     }
-    lock(shared).finish(outcome, cycle, &values);
+    let mut core = lock(shared);
+    if outcome == Outcome::Done {
+        core.set_cycle_results(
+            report
+                .cycles
+                .iter()
+                .filter(|c| c.status == Status::Ok)
+                .map(|c| (c.cycle, result_values(c)))
+                .collect(),
+        );
+    }
+    core.finish(outcome, cycle, &values);
 }
 
 /// The results the registers show: the last cycle's Q parameters, and for 451 the

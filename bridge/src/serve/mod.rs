@@ -11,6 +11,7 @@ pub mod handshake;
 pub mod machine_link;
 pub mod machine_thread;
 pub mod modbus_face;
+pub mod opcua;
 pub mod ownership;
 pub mod peer_allow;
 pub mod register_map;
@@ -27,6 +28,8 @@ use std::path::Path;
 use std::sync::atomic::{AtomicI32, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
+use tracing_subscriber::layer::SubscriberExt;
+use tracing_subscriber::util::SubscriberInitExt;
 
 /// The signal that asked the service to stop (0: none).
 static STOP_SIGNAL: AtomicI32 = AtomicI32::new(0);
@@ -86,12 +89,33 @@ fn init_logging() {
         Ok("error") => tracing::Level::ERROR,
         _ => tracing::Level::INFO,
     };
+    // The OPC UA stack logs each connection and each dropped notification of a client
+    // that does not publish: only its errors, unless debugging.
+    let stack = if level >= tracing::Level::DEBUG {
+        level
+    } else {
+        tracing::Level::ERROR
+    };
+    let targets = [
+        "opcua_server",
+        "opcua_core",
+        "opcua_crypto",
+        "opcua_types",
+        "opcua_nodes",
+    ]
+    .into_iter()
+    .fold(
+        tracing_subscriber::filter::Targets::new().with_default(level),
+        |t, name| t.with_target(name, stack),
+    );
     // The journal stamps every line itself: no time, no colours, level and message.
     let _ = tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
         .without_time()
         .with_target(false)
         .with_max_level(level)
+        .finish()
+        .with(targets)
         .try_init();
 }
 
@@ -120,6 +144,8 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
             config_path.display()
         )
     })?;
+    // The OPC UA face's files and port too: found wrong before the machine moves.
+    let opcua = opcua::prepare(&cfg)?;
     let (machine_cfg, scenario) =
         crate::session::resolve_machine(&cfg.machine_options()).map_err(|e| e.to_string())?;
     let cycles = machine_state(&mut cfg, &machine_cfg, scenario.as_ref())?;
@@ -178,13 +204,22 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     // Tests and scripts read the bound address (port 0 takes any) from this line.
     crate::say!("probebridge serve: listening on {}", face.local_addr);
     let web = web_face::start_configured(&cfg, &shared, &machine_cfg.name)?;
+    let mut opcua = match opcua {
+        Some(o) => Some(o.start(&opcua::Context {
+            cfg: &cfg,
+            shared: &shared,
+            machine: &machine_cfg.name,
+            bus: bus_name(&cfg),
+        })?),
+        None => None,
+    };
     let _ = std::io::stdout().flush();
     notifier.notify(&format!(
         "READY=1\nSTATUS=idle, PLC face on {}",
         face.local_addr
     ));
 
-    let end = supervise(&shared, &notifier, &mut face);
+    let end = supervise(&shared, &notifier, &mut face, opcua.as_mut());
     end.log();
     notifier.notify("STOPPING=1\nSTATUS=stopping");
     {
@@ -196,8 +231,16 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     let _ = machine.join();
     match &end {
         // A stalled face's thread may never return: leave it.
-        End::FaceDied(_) => face.abandon(),
-        End::Signal(_) => drop(face),
+        End::FaceDied(..) => {
+            face.abandon();
+            if let Some(o) = opcua.take() {
+                o.abandon();
+            }
+        }
+        End::Signal(_) => {
+            drop(face);
+            drop(opcua);
+        }
     }
     if let Some(h) = &history {
         h.stop();
@@ -206,7 +249,18 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     tracing::info!(state = lock(&shared).state().name(), "stopped");
     match end {
         End::Signal(_) => Ok(0),
-        End::FaceDied(why) => Err(format!("the PLC face is dead: {why}")),
+        End::FaceDied(name, why) => Err(format!("the {name} is dead: {why}")),
+    }
+}
+
+/// How the machine is reached, in words (the OPC UA face's Monitoring/Bus).
+fn bus_name(cfg: &GatewayConfig) -> String {
+    let m = &cfg.machine;
+    match (&m.can, &m.modbus, &m.scenario) {
+        (Some(can), _, _) => format!("CANopen on {can}"),
+        (None, Some(modbus), _) => format!("Modbus {modbus}"),
+        (None, None, Some(_)) => "simulator".into(),
+        (None, None, None) => "CANopen".into(),
     }
 }
 
@@ -269,8 +323,8 @@ fn open_history(
 /// Why the service loop ended.
 enum End {
     Signal(i32),
-    /// The PLC face ended or stalled: the service must not live on deaf.
-    FaceDied(String),
+    /// A face (its name) ended or stalled: the service must not live on deaf.
+    FaceDied(&'static str, String),
 }
 
 impl End {
@@ -281,50 +335,55 @@ impl End {
                 "stopping on {}: aborting a running measurement, closing the machine",
                 signal_name(*signal)
             ),
-            End::FaceDied(why) => tracing::error!(
-                "the PLC face is dead ({why}): stopping, for systemd to restart the service"
+            End::FaceDied(name, why) => tracing::error!(
+                "the {name} is dead ({why}): stopping, for systemd to restart the service"
             ),
         }
     }
 }
 
-/// The service loop: ticks the handshake, keeps systemd's watchdog fed while the PLC
-/// face serves, says the state in STATUS. Returns why the service ends.
+/// The service loop: ticks the handshake, keeps systemd's watchdog fed while the
+/// faces serve, says the state in STATUS. Returns why the service ends.
 fn supervise(
     shared: &gateway::Shared,
     notifier: &sd_notify::Notifier,
     face: &mut modbus_face::PlcFace,
+    mut opcua: Option<&mut opcua::OpcuaFace>,
 ) -> End {
     let watchdog = sd_notify::Notifier::watchdog_interval();
     let mut last_watchdog = Instant::now();
     let mut last = (State::Idle, true);
-    let mut stall_said = false;
+    let mut stall_said = [false; 2];
     loop {
         let sig = STOP_SIGNAL.load(Ordering::Acquire);
         if sig != 0 {
             return End::Signal(sig);
         }
-        let face_ok = match face.health() {
-            modbus_face::FaceHealth::Serving => {
-                stall_said = false;
-                true
-            }
-            modbus_face::FaceHealth::Stalled(d) if d >= FACE_DEAD => {
-                return End::FaceDied(format!("it has not run for {} ms", d.as_millis()))
-            }
-            modbus_face::FaceHealth::Stalled(d) => {
-                if !stall_said {
-                    tracing::error!(
-                        "the PLC face has not run for {} ms: no longer feeding the watchdog",
-                        d.as_millis()
-                    );
-                    notifier.notify("STATUS=PLC face not answering");
-                    stall_said = true;
+        let healths = [
+            ("PLC face", Some(face.health())),
+            ("OPC UA face", opcua.as_mut().map(|f| f.health())),
+        ];
+        let mut face_ok = true;
+        for ((name, health), said) in healths.into_iter().zip(stall_said.iter_mut()) {
+            match health {
+                None | Some(modbus_face::FaceHealth::Serving) => *said = false,
+                Some(modbus_face::FaceHealth::Stalled(d)) if d >= FACE_DEAD => {
+                    return End::FaceDied(name, format!("it has not run for {} ms", d.as_millis()))
                 }
-                false
+                Some(modbus_face::FaceHealth::Stalled(d)) => {
+                    if !*said {
+                        tracing::error!(
+                            "the {name} has not run for {} ms: no longer feeding the watchdog",
+                            d.as_millis()
+                        );
+                        notifier.notify(&format!("STATUS={name} not answering"));
+                        *said = true;
+                    }
+                    face_ok = false;
+                }
+                Some(modbus_face::FaceHealth::Ended(why)) => return End::FaceDied(name, why),
             }
-            modbus_face::FaceHealth::Ended(why) => return End::FaceDied(why),
-        };
+        }
         let now = Instant::now();
         let (state, machine_ok) = {
             let mut core = lock(shared);

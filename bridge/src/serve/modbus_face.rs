@@ -340,7 +340,7 @@ fn admit(
 
 /// TCP keepalive and a user timeout: a peer that lost power is found dead in about
 /// 10 s instead of holding its socket ESTABLISHED for hours.
-fn keepalive(stream: &TcpStream, peer: SocketAddr) {
+pub(super) fn keepalive(stream: &TcpStream, peer: SocketAddr) {
     let fd = stream.as_raw_fd();
     let set = |level, name, value: libc::c_int| {
         // SAFETY: setsockopt on a socket we own, with a c_int of the right size.

@@ -1,0 +1,108 @@
+//! The methods of Production: StartProgram, Abort, Acknowledge. Each goes through the
+//! gateway's core by the PLC face's rules (one measurement at a time, the same abort
+//! flag) and answers with the PLC face's reason: 0 taken, else the reason register's
+//! value, and the reason in words. Who may call them the authenticator decides (a
+//! user of the users file; StartProgram only with `may_start`).
+
+use super::auth::{ABORT, ACKNOWLEDGE, START_PROGRAM};
+use crate::serve::gateway::{lock, FaceCommand, Shared};
+use crate::serve::handshake::{CODE_ABORT, CODE_ACKNOWLEDGE, CODE_START};
+use crate::serve::register_map::REQ_PARAM_COUNT;
+use opcua::server::node_manager::memory::SimpleNodeManager;
+use opcua::types::{NodeId, StatusCode, Variant};
+
+/// Registers the three methods' callbacks.
+pub fn register(manager: &SimpleNodeManager, ns: u16, shared: &Shared) {
+    for (name, code) in [
+        (START_PROGRAM, CODE_START),
+        (ABORT, CODE_ABORT),
+        (ACKNOWLEDGE, CODE_ACKNOWLEDGE),
+    ] {
+        let shared = shared.clone();
+        manager.inner().add_method_callback(
+            NodeId::new(ns, format!("Machine.Production.{name}")),
+            move |args| {
+                let cmd = if code == CODE_START {
+                    start_arguments(args)?
+                } else {
+                    FaceCommand {
+                        code,
+                        program: 0,
+                        params: [0.0; REQ_PARAM_COUNT],
+                        confirm: false,
+                        who: "OPC UA".into(),
+                    }
+                };
+                let answer = lock(&shared).command(&cmd);
+                Ok(match answer {
+                    Ok(()) => vec![Variant::from(0u16), Variant::from("taken")],
+                    Err(r) => vec![Variant::from(r as u16), Variant::from(r.describe())],
+                })
+            },
+        );
+    }
+}
+
+/// StartProgram(Number, Parameters, Confirm): a number 0..65535, at most 8 parameters
+/// (the rest 0), a flag. A wrong argument is the caller's error (BadInvalidArgument),
+/// not a refusal of the gateway.
+fn start_arguments(args: &[Variant]) -> Result<FaceCommand, StatusCode> {
+    let number = args
+        .first()
+        .and_then(Variant::as_f64)
+        .filter(|n| n.fract() == 0.0 && (0.0..=65535.0).contains(n))
+        .ok_or(StatusCode::BadInvalidArgument)? as u16;
+    let mut params = [0.0f32; REQ_PARAM_COUNT];
+    match args.get(1) {
+        None | Some(Variant::Empty) => {}
+        Some(v) => {
+            let list = v.as_array().ok_or(StatusCode::BadInvalidArgument)?;
+            if list.len() > REQ_PARAM_COUNT {
+                return Err(StatusCode::BadInvalidArgument);
+            }
+            for (p, x) in params.iter_mut().zip(list) {
+                // A non-finite parameter goes through, for the core to refuse it as
+                // the PLC face does (reason 7).
+                *p = x.as_f64().ok_or(StatusCode::BadInvalidArgument)? as f32;
+            }
+        }
+    }
+    let confirm = match args.get(2) {
+        None | Some(Variant::Empty) => false,
+        Some(Variant::Boolean(b)) => *b,
+        Some(_) => return Err(StatusCode::BadInvalidArgument),
+    };
+    if args.len() > 3 {
+        return Err(StatusCode::BadTooManyArguments);
+    }
+    Ok(FaceCommand {
+        code: CODE_START,
+        program: number,
+        params,
+        confirm,
+        who: "OPC UA".into(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn start_arguments_are_checked() {
+        let params = Variant::from(vec![1.5f32, -2.25]);
+        let cmd = start_arguments(&[Variant::from(431u16), params, Variant::from(true)]).unwrap();
+        assert_eq!(cmd.program, 431);
+        assert_eq!(&cmd.params[..3], &[1.5, -2.25, 0.0]);
+        assert!(cmd.confirm);
+        assert_eq!(
+            start_arguments(&[Variant::from(70000i32)]),
+            Err(StatusCode::BadInvalidArgument)
+        );
+        assert_eq!(
+            start_arguments(&[Variant::from(431u16), Variant::from(vec![0.0f64; 9])]),
+            Err(StatusCode::BadInvalidArgument)
+        );
+        assert_eq!(start_arguments(&[]), Err(StatusCode::BadInvalidArgument));
+    }
+}

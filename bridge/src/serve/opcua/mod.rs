@@ -1,0 +1,502 @@
+//! The OPC UA face of the gateway (`[opcua]`, off unless configured): the machine's
+//! state, its results and its history to the factory's MES and SCADA, and methods to
+//! start, abort and acknowledge by the PLC face's rules. Built on async-opcua's server
+//! (pure-Rust crypto), on a tokio runtime of its own thread like the other faces.
+//!
+//! Security: endpoints Basic256Sha256 Sign and SignAndEncrypt (and `none` only where
+//! configured); the server's certificate is made on first start in the state
+//! directory and kept; client certificates are trusted by moving them from `rejected/`
+//! to `trusted/`. Anonymous clients read; users of the users file (argon2id hashes)
+//! call the methods.
+//!
+//! Robustness as the PLC face: a connection cap at the door ([`front`]), bounded
+//! session, subscription and notification queues (a client that subscribes and never
+//! publishes costs at most `max_queued_notifications` messages per subscription), and
+//! a heartbeat the service loop watches: a face that stalls or ends ends the service.
+
+pub mod address_space;
+pub mod auth;
+pub mod config;
+pub mod front;
+pub mod methods;
+pub mod users;
+pub mod values;
+
+use super::gateway::Shared;
+use super::modbus_face::FaceHealth;
+use opcua::crypto::SecurityPolicy;
+use opcua::server::diagnostics::NamespaceMetadata;
+use opcua::server::node_manager::memory::{simple_node_manager, SimpleNodeManager};
+use opcua::server::{ServerBuilder, ANONYMOUS_USER_TOKEN_ID};
+use opcua::types::{BuildInfo, DateTime, MessageSecurityMode};
+use std::net::SocketAddr;
+use std::os::unix::fs::{DirBuilderExt, PermissionsExt};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// How often the face ticks its heartbeat.
+const BEAT: Duration = Duration::from_millis(100);
+/// How often the server looks at its subscriptions: a change reaches a subscriber
+/// within about this plus the client's publishing interval.
+const SUBSCRIPTION_TICK_MS: u64 = 10;
+/// Fault injection for the service's supervision tests (never set in production):
+/// `end` ends the face 1 s after start.
+pub const FAULT_ENV: &str = "PROBEBRIDGE_FAULT_OPCUA_FACE";
+
+/// The face's certificate files below the PKI folder (async-opcua's layout).
+const OWN_CERT: &str = "own/cert.der";
+const OWN_KEY: &str = "private/private.pem";
+
+pub struct OpcuaFace {
+    pub local_addr: SocketAddr,
+    pub endpoint_url: String,
+    pub certificate: PathBuf,
+    stop: Option<tokio::sync::oneshot::Sender<()>>,
+    thread: Option<JoinHandle<Result<(), String>>>,
+    epoch: Instant,
+    beat: Arc<AtomicU64>,
+}
+
+/// What the face needs from the rest of the service once the machine is up.
+pub struct Context<'a> {
+    pub cfg: &'a super::config::GatewayConfig,
+    pub shared: &'a Shared,
+    pub machine: &'a str,
+    /// How the machine is reached, for Monitoring/Bus.
+    pub bus: String,
+}
+
+/// Where the state directory puts the face's files unless `[opcua]` says otherwise.
+fn state_paths(section: &config::OpcuaSection) -> Result<(PathBuf, PathBuf), String> {
+    let need_state = section.pki.is_none() || section.users.is_none();
+    let state = if need_state {
+        Some(crate::state_dir::state_dir(None)?.join("opcua"))
+    } else {
+        None
+    };
+    let pki = section
+        .pki
+        .clone()
+        .or_else(|| state.as_ref().map(|s| s.join("pki")))
+        .unwrap_or_default();
+    let users = section
+        .users
+        .clone()
+        .or_else(|| state.as_ref().map(|s| s.join("users")))
+        .unwrap_or_default();
+    Ok((pki, users))
+}
+
+/// Makes `dir` (and its parents), only for the service's user.
+fn private_dir(dir: &Path) -> std::io::Result<()> {
+    std::fs::DirBuilder::new()
+        .recursive(true)
+        .mode(0o700)
+        .create(dir)
+}
+
+/// The face as configured, checked and bound before the machine is opened (a port
+/// in use, a users file others may read: said at once, nothing moved).
+pub struct Prepared {
+    section: config::OpcuaSection,
+    securities: Vec<config::Security>,
+    pki: PathBuf,
+    users: users::Users,
+    listener: std::net::TcpListener,
+    local_addr: SocketAddr,
+    host: String,
+}
+
+/// Checks `[opcua]` (none: `None`): the state folder, the users file, the port.
+pub fn prepare(cfg: &super::config::GatewayConfig) -> Result<Option<Prepared>, String> {
+    let Some(section) = &cfg.opcua else {
+        return Ok(None);
+    };
+    let file = cfg.path.display();
+    let bind = section
+        .bind()
+        .map_err(|(k, why)| format!("{file}: {k}: {why}"))?;
+    let securities = section
+        .securities()
+        .map_err(|(k, why)| format!("{file}: {k}: {why}"))?;
+    let (pki, users_path) = state_paths(section).map_err(|e| format!("{file}: opcua: {e}"))?;
+    private_dir(&pki).map_err(|e| {
+        format!(
+            "{file}: opcua.pki: cannot make the folder {}: {e}",
+            pki.display()
+        )
+    })?;
+    let users = users::Users::load(&users_path).map_err(|e| format!("{file}: opcua.users: {e}"))?;
+    if users.is_empty() {
+        tracing::warn!(
+            users = %users_path.display(),
+            "OPC UA face: no users: the methods cannot be called (make the file with \
+             `probebridge opcua-user NAME`)"
+        );
+    } else {
+        tracing::info!(users = users.len(), file = %users_path.display(), "OPC UA face: users");
+    }
+    let listener = std::net::TcpListener::bind(bind)
+        .and_then(|l| l.set_nonblocking(true).map(|()| l))
+        .map_err(|e| format!("{file}: opcua.listen: cannot bind {bind}: {e}"))?;
+    let local_addr = listener.local_addr().map_err(|e| e.to_string())?;
+    Ok(Some(Prepared {
+        host: section.advertised_host(bind),
+        section: section.clone(),
+        securities,
+        pki,
+        users,
+        listener,
+        local_addr,
+    }))
+}
+
+impl Prepared {
+    /// Starts the face (the machine is up) and says its endpoint on stdout.
+    pub fn start(self, ctx: &Context) -> Result<OpcuaFace, String> {
+        let file = ctx.cfg.path.display();
+        let section = &self.section;
+        let endpoint_url = format!("opc.tcp://{}:{}/", self.host, self.local_addr.port());
+        let setup = Setup {
+            server: ServerArgs {
+                section: section.clone(),
+                securities: self.securities.clone(),
+                machine: ctx.machine.to_string(),
+                host: self.host.clone(),
+                port: self.local_addr.port(),
+                pki: self.pki.clone(),
+                auth: auth::Auth::new(self.users, section.anonymous, section.may_start),
+            },
+            shared: ctx.shared.clone(),
+            identity: address_space::Identity {
+                machine: ctx.machine.to_string(),
+                manufacturer: section.manufacturer.clone(),
+                model: section.model.clone(),
+                serial_number: section.serial_number.clone(),
+                bus: ctx.bus.clone(),
+            },
+            history: ctx.cfg.history(),
+            last_runs: section.last_runs,
+            max_connections: section.max_connections,
+            listener: self.listener,
+        };
+        let face = OpcuaFace::start(setup, &self.pki, self.local_addr, endpoint_url)
+            .map_err(|e| format!("{file}: opcua: {e}"))?;
+        tracing::info!(
+            endpoint = %face.endpoint_url,
+            certificate = %face.certificate.display(),
+            "OPC UA face ready"
+        );
+        crate::say!("probebridge serve: OPC UA face on {}", face.endpoint_url);
+        Ok(face)
+    }
+}
+
+fn server_builder(
+    section: &config::OpcuaSection,
+    securities: &[config::Security],
+    machine: &str,
+    host: &str,
+    port: u16,
+    pki: &Path,
+) -> ServerBuilder {
+    let version = env!("CARGO_PKG_VERSION");
+    let mut b = ServerBuilder::new()
+        .application_name(format!("probebridge {machine}"))
+        .application_uri(format!("urn:probebridge:{host}:{machine}"))
+        .product_uri("urn:probebridge")
+        .build_info(BuildInfo {
+            product_uri: "urn:probebridge".into(),
+            manufacturer_name: "probebridge".into(),
+            product_name: "probebridge gateway".into(),
+            software_version: version.into(),
+            build_number: version.into(),
+            build_date: DateTime::now(),
+        })
+        .with_node_manager(simple_node_manager(
+            NamespaceMetadata {
+                namespace_uri: address_space::NAMESPACE.to_owned(),
+                ..Default::default()
+            },
+            "probebridge",
+        ))
+        .create_sample_keypair(true)
+        .certificate_path(OWN_CERT)
+        .private_key_path(OWN_KEY)
+        .pki_dir(pki)
+        .trust_client_certs(section.trust_client_certs)
+        .host(host)
+        .port(port)
+        .discovery_urls(vec!["/".to_owned()])
+        .max_sessions(section.max_sessions)
+        .max_session_timeout_ms(section.session_timeout_ms)
+        .subscription_poll_interval_ms(SUBSCRIPTION_TICK_MS)
+        .diagnostics_enabled(false);
+    {
+        let s = &mut b.limits_mut().subscriptions;
+        s.max_subscriptions_per_session = section.max_subscriptions_per_session;
+        s.max_monitored_items_per_sub = section.max_monitored_items_per_subscription;
+        s.max_queued_notifications = section.max_queued_notifications;
+        s.min_publishing_interval_ms = SUBSCRIPTION_TICK_MS as f64;
+        s.min_sampling_interval_ms = SUBSCRIPTION_TICK_MS as f64;
+    }
+    let tokens: &[&str] = &[ANONYMOUS_USER_TOKEN_ID];
+    for sec in securities {
+        let (id, policy, mode) = match sec {
+            config::Security::None => ("none", SecurityPolicy::None, MessageSecurityMode::None),
+            config::Security::Sign => (
+                config::SIGN,
+                SecurityPolicy::Basic256Sha256,
+                MessageSecurityMode::Sign,
+            ),
+            config::Security::SignAndEncrypt => (
+                config::SIGN_ENCRYPT,
+                SecurityPolicy::Basic256Sha256,
+                MessageSecurityMode::SignAndEncrypt,
+            ),
+        };
+        b = b.add_endpoint(id, ("/", policy, mode, tokens));
+    }
+    b
+}
+
+/// What the server is built from (on the face's thread: the builder is not Send).
+struct ServerArgs {
+    section: config::OpcuaSection,
+    securities: Vec<config::Security>,
+    machine: String,
+    host: String,
+    port: u16,
+    pki: PathBuf,
+    auth: auth::Auth,
+}
+
+/// What the face's thread is given.
+struct Setup {
+    server: ServerArgs,
+    shared: Shared,
+    identity: address_space::Identity,
+    history: Option<crate::history::HistoryTarget>,
+    last_runs: usize,
+    max_connections: usize,
+    listener: std::net::TcpListener,
+}
+
+impl OpcuaFace {
+    fn start(
+        setup: Setup,
+        pki: &Path,
+        local_addr: SocketAddr,
+        endpoint_url: String,
+    ) -> Result<Self, String> {
+        let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
+        let epoch = Instant::now();
+        let beat = Arc::new(AtomicU64::new(0));
+        let fault = std::env::var(FAULT_ENV).unwrap_or_default();
+        let thread = {
+            let beat = beat.clone();
+            std::thread::Builder::new()
+                .name("probebridge-opcua-face".into())
+                .spawn(move || -> Result<(), String> {
+                    let rt = tokio::runtime::Builder::new_current_thread()
+                        .enable_all()
+                        .build()
+                        .map_err(|e| format!("cannot start its runtime: {e}"))?;
+                    rt.block_on(serve(setup, ready_tx, rx, (beat, epoch), fault))
+                })
+                .map_err(|e| e.to_string())?
+        };
+        let certificate = pki.join(OWN_CERT);
+        let mut face = Self {
+            local_addr,
+            endpoint_url,
+            certificate: certificate.clone(),
+            stop: Some(tx),
+            thread: Some(thread),
+            epoch,
+            beat,
+        };
+        match ready_rx.recv() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return Err(e),
+            Err(_) => {
+                let why = match face.health() {
+                    FaceHealth::Ended(why) => why,
+                    _ => "it ended while starting".into(),
+                };
+                return Err(why);
+            }
+        }
+        // The certificate is made on first start and kept; its key is the service's.
+        let key = pki.join(OWN_KEY);
+        if !certificate.is_file() || !key.is_file() {
+            return Err(format!(
+                "opcua.pki: no certificate {} with its key {} (none could be made: see the \
+                 lines above)",
+                certificate.display(),
+                key.display()
+            ));
+        }
+        std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o600))
+            .map_err(|e| format!("opcua.pki: {}: {e}", key.display()))?;
+        Ok(face)
+    }
+
+    pub fn health(&mut self) -> FaceHealth {
+        if self.thread.as_ref().is_some_and(|t| t.is_finished()) {
+            let why = match self.thread.take().map(JoinHandle::join) {
+                Some(Ok(Err(e))) => e,
+                Some(Ok(Ok(()))) => "its loop returned".into(),
+                Some(Err(_)) => "its thread panicked".into(),
+                None => "gone".into(),
+            };
+            return FaceHealth::Ended(why);
+        }
+        if self.thread.is_none() {
+            return FaceHealth::Ended("gone".into());
+        }
+        let last = Duration::from_millis(self.beat.load(Ordering::Acquire));
+        let silent = self.epoch.elapsed().saturating_sub(last);
+        if silent > BEAT * 10 {
+            FaceHealth::Stalled(silent)
+        } else {
+            FaceHealth::Serving
+        }
+    }
+
+    /// Leaves a stalled face's thread behind instead of waiting for it on drop.
+    pub fn abandon(mut self) {
+        self.stop.take();
+        self.thread.take();
+    }
+}
+
+impl Drop for OpcuaFace {
+    fn drop(&mut self) {
+        if let Some(tx) = self.stop.take() {
+            let _ = tx.send(());
+        }
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// The face's runtime: builds the server and its nodes, says on `ready` whether it
+/// came up, then serves until `stop`.
+async fn serve(
+    setup: Setup,
+    ready: std::sync::mpsc::Sender<Result<(), String>>,
+    stop: tokio::sync::oneshot::Receiver<()>,
+    (beat, epoch): (Arc<AtomicU64>, Instant),
+    fault: String,
+) -> Result<(), String> {
+    let up = bring_up(setup).await;
+    let (server_task, front_task, publisher_task, handle) = match up {
+        Ok(parts) => parts,
+        Err(e) => {
+            let _ = ready.send(Err(e.clone()));
+            return Err(e);
+        }
+    };
+    let _ = ready.send(Ok(()));
+    let ticker = tokio::spawn(async move {
+        let mut every = tokio::time::interval(BEAT);
+        loop {
+            every.tick().await;
+            beat.store(epoch.elapsed().as_millis() as u64, Ordering::Release);
+        }
+    });
+    let faulty = async {
+        if fault.is_empty() {
+            std::future::pending::<()>().await;
+        }
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        tracing::warn!("{FAULT_ENV}={fault}: injecting the fault");
+    };
+    let result = tokio::select! {
+        _ = stop => Ok(()),
+        r = server_task => Err(format!("the OPC UA server ended: {}", match r {
+            Ok(Ok(())) => "it returned".to_string(),
+            Ok(Err(e)) => e,
+            Err(e) => e.to_string(),
+        })),
+        r = front_task => Err(format!("its door ended: {r:?}")),
+        r = publisher_task => Err(format!("its values stopped: {r:?}")),
+        () = faulty => Err(format!("ended by {FAULT_ENV}={fault}")),
+    };
+    ticker.abort();
+    handle.cancel();
+    result
+}
+
+type Parts = (
+    tokio::task::JoinHandle<Result<(), String>>,
+    tokio::task::JoinHandle<()>,
+    tokio::task::JoinHandle<()>,
+    opcua::server::ServerHandle,
+);
+
+async fn bring_up(setup: Setup) -> Result<Parts, String> {
+    let public_port = setup
+        .listener
+        .local_addr()
+        .map_err(|e| e.to_string())?
+        .port();
+    let a = setup.server;
+    let (server, handle) = server_builder(
+        &a.section,
+        &a.securities,
+        &a.machine,
+        &a.host,
+        a.port,
+        &a.pki,
+    )
+    .with_authenticator(Arc::new(a.auth))
+    .build()
+    .map_err(|e| format!("the OPC UA server: {e}"))?;
+    let manager = handle
+        .node_managers()
+        .get_of_type::<SimpleNodeManager>()
+        .ok_or("the OPC UA server has no node manager of the machine")?;
+    let ns = handle
+        .get_namespace_index(address_space::NAMESPACE)
+        .ok_or("the OPC UA server has no namespace of the machine")?;
+    let nodes = {
+        let mut space = manager.address_space().write();
+        address_space::build(&mut space, ns, &setup.identity, setup.last_runs)
+    };
+    methods::register(&manager, ns, &setup.shared);
+    let internal = tokio::net::TcpListener::bind((std::net::Ipv4Addr::LOCALHOST, 0))
+        .await
+        .map_err(|e| format!("cannot bind the server's loopback port: {e}"))?;
+    let internal_addr = internal.local_addr().map_err(|e| e.to_string())?;
+    let info = handle.info().clone();
+    let server_task = tokio::spawn(server.run_with(internal));
+    // The server takes its listener's port for the endpoints it describes; clients
+    // must be told the door's. It stores it once, before its first accept.
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while info.port.load(Ordering::Acquire) != internal_addr.port() {
+        if Instant::now() > deadline || server_task.is_finished() {
+            return Err("the OPC UA server did not start".into());
+        }
+        tokio::time::sleep(Duration::from_millis(1)).await;
+    }
+    info.port.store(public_port, Ordering::Release);
+    let listener = tokio::net::TcpListener::from_std(setup.listener)
+        .map_err(|e| format!("cannot listen: {e}"))?;
+    let front_task = tokio::spawn(front::serve(listener, internal_addr, setup.max_connections));
+    let publisher = values::Publisher::new(
+        nodes,
+        manager,
+        handle.subscriptions().clone(),
+        setup.history,
+        setup.identity.machine.clone(),
+    );
+    let publisher_task = tokio::spawn(publisher.run(setup.shared.clone()));
+    Ok((server_task, front_task, publisher_task, handle))
+}

@@ -1,0 +1,294 @@
+//! Keeps the machine's variables up to date: on every change the gateway's core
+//! announces, the face takes a snapshot under the core's lock, and writes only the
+//! variables whose value changed (each change reaches a subscriber once). The last
+//! runs are read from the history when a run has ended.
+
+use super::address_space::{Nodes, RUN_FIELDS};
+use crate::history::{Filter, History, HistoryTarget, RunRow};
+use crate::serve::gateway::{lock, RunInfo, Shared};
+use crate::serve::handshake::{Face, Outcome, State, BIT_NOT_RECORDED};
+use opcua::server::node_manager::memory::SimpleNodeManager;
+use opcua::server::SubscriptionCache;
+use opcua::types::{DataValue, DateTime, NodeId, Variant};
+use std::collections::HashMap;
+use std::str::FromStr;
+use std::sync::Arc;
+use std::time::SystemTime;
+
+/// Where the values go.
+pub struct Publisher {
+    pub nodes: Nodes,
+    pub manager: Arc<SimpleNodeManager>,
+    pub subscriptions: Arc<SubscriptionCache>,
+    pub history: Option<HistoryTarget>,
+    pub machine: String,
+    /// The values last written, to write only changes.
+    last: HashMap<NodeId, Variant>,
+}
+
+/// 100 ns ticks between 1601-01-01 (OPC UA's epoch) and 1970-01-01.
+const UNIX_EPOCH_TICKS: i64 = 116_444_736_000_000_000;
+
+fn date_time(t: SystemTime) -> Variant {
+    match t.duration_since(SystemTime::UNIX_EPOCH) {
+        Ok(d) => Variant::from(DateTime::from(
+            UNIX_EPOCH_TICKS + i64::try_from(d.as_nanos() / 100).unwrap_or(0),
+        )),
+        Err(_) => Variant::Empty,
+    }
+}
+
+fn date_time_text(s: Option<&str>) -> Variant {
+    s.and_then(|s| DateTime::from_str(s).ok())
+        .map_or(Variant::Empty, Variant::from)
+}
+
+fn item_state(state: State, machine_ok: bool) -> &'static str {
+    match (machine_ok, state) {
+        (false, _) => "OutOfService",
+        (true, State::Busy) => "Executing",
+        (true, _) => "NotExecuting",
+    }
+}
+
+/// OPC 40501-1's program states for a run.
+fn program_state(run: &RunInfo) -> &'static str {
+    match run.outcome {
+        None => "Running",
+        Some(Outcome::Done) => "Ended",
+        Some(Outcome::Error { .. } | Outcome::Aborted(_)) => "Aborted",
+    }
+}
+
+impl Publisher {
+    pub fn new(
+        nodes: Nodes,
+        manager: Arc<SimpleNodeManager>,
+        subscriptions: Arc<SubscriptionCache>,
+        history: Option<HistoryTarget>,
+        machine: String,
+    ) -> Self {
+        Self {
+            nodes,
+            manager,
+            subscriptions,
+            history,
+            machine,
+            last: HashMap::new(),
+        }
+    }
+
+    /// The state and results as they are now: (node, value) for every variable.
+    fn snapshot(&mut self, shared: &Shared) -> (Vec<(NodeId, Variant)>, Option<RunInfo>) {
+        let mut core = lock(shared);
+        let passed = core.take_transitions();
+        let v = core.hs.view().clone();
+        let (state, machine_ok) = (core.state(), core.machine_ok());
+        let run = core.run().cloned();
+        let cycles = core.cycle_results().clone();
+        let heartbeat = core
+            .map
+            .read(super::super::register_map::ST_GATEWAY_HEARTBEAT, 1);
+        drop(core);
+        // Each state the run passed through reaches a subscriber, in order, even when
+        // it did not last until this look.
+        let (state_id, code_id) = (
+            self.nodes.state["RunState"].clone(),
+            self.nodes.state["RunStateCode"].clone(),
+        );
+        for st in passed.iter().filter(|&&st| st != state) {
+            self.write(vec![
+                (state_id.clone(), Variant::from(st.name())),
+                (code_id.clone(), Variant::from(*st as u16)),
+            ]);
+        }
+        let s = |name: &str| self.nodes.state[name].clone();
+        let mut out = vec![
+            (
+                s("CurrentState"),
+                Variant::from(item_state(state, machine_ok)),
+            ),
+            (s("MachineOk"), Variant::from(machine_ok)),
+            (s("RunState"), Variant::from(state.name())),
+            (s("RunStateCode"), Variant::from(state as u16)),
+            (s("ProgressPermille"), Variant::from(v.progress_permille)),
+            (s("Point"), Variant::from(v.point)),
+            (s("ErrorKind"), Variant::from(v.error_kind)),
+            (s("ErrorCode"), Variant::from(v.error_code)),
+            (
+                s("ResultsNotRecorded"),
+                Variant::from(v.bits & BIT_NOT_RECORDED != 0),
+            ),
+            (s("Heartbeat"), Variant::from(heartbeat.map_or(0, |h| h[0]))),
+        ];
+        if let Some(r) = &run {
+            out.extend([
+                (s("Name"), Variant::from(format!("{:03}", r.program))),
+                (s("Number"), Variant::from(r.program)),
+                (s("State"), Variant::from(program_state(r))),
+                (
+                    s("StartedBy"),
+                    Variant::from(match r.face {
+                        Face::Plc => "plc",
+                        Face::OpcUa => "opcua",
+                    }),
+                ),
+                (s("StartTime"), date_time(r.started)),
+                (s("EndTime"), r.ended.map_or(Variant::Empty, date_time)),
+                (s("Cycle"), Variant::from(v.cycle)),
+            ]);
+        }
+        for (cycle, nodes) in &self.nodes.cycles {
+            let Some(res) = cycles.get(cycle) else {
+                continue;
+            };
+            out.push((nodes.time.clone(), date_time(res.at)));
+            let names: Vec<String> = res.values.keys().cloned().collect();
+            let values: Vec<f64> = res.values.values().copied().collect();
+            out.push((nodes.names.clone(), Variant::from(names)));
+            out.push((nodes.values.clone(), Variant::from(values)));
+            for (name, id) in &nodes.by_name {
+                let value = res
+                    .values
+                    .get(name)
+                    .map_or(Variant::Empty, |&x| Variant::from(x));
+                out.push((id.clone(), value));
+            }
+        }
+        (out, run)
+    }
+
+    /// Writes what changed since the last call; the runs shown, when a run has ended
+    /// since (`runs`: the history's last runs, newest first).
+    fn write(&mut self, values: Vec<(NodeId, Variant)>) {
+        let changed: Vec<(NodeId, Variant)> = values
+            .into_iter()
+            .filter(|(id, v)| self.last.get(id) != Some(v))
+            .collect();
+        if changed.is_empty() {
+            return;
+        }
+        let now = DateTime::now();
+        // The server's timestamp only: with a source timestamp the stack merges the
+        // changes of one sampling interval into the last, and a subscriber would miss a
+        // state that lasted less than that.
+        let items: Vec<(NodeId, DataValue)> = changed
+            .iter()
+            .map(|(id, v)| {
+                let dv = DataValue {
+                    value: Some(v.clone()),
+                    status: Some(opcua::types::StatusCode::Good),
+                    server_timestamp: Some(now),
+                    ..DataValue::null()
+                };
+                (id.clone(), dv)
+            })
+            .collect();
+        if let Err(e) = self.manager.set_values(
+            &self.subscriptions,
+            items.iter().map(|(id, dv)| (id, None, dv.clone())),
+        ) {
+            tracing::error!("OPC UA face: cannot set the values: {e}");
+            return;
+        }
+        self.last.extend(changed);
+    }
+
+    fn runs_values(&self, runs: &[RunRow]) -> Vec<(NodeId, Variant)> {
+        let mut out = Vec::new();
+        for (i, nodes) in self.nodes.runs.iter().enumerate() {
+            let r = runs.get(i);
+            for (name, _, _) in RUN_FIELDS {
+                let value = match r {
+                    None => Variant::Empty,
+                    Some(r) => run_field(r, name),
+                };
+                out.push((nodes.fields[name].clone(), value));
+            }
+        }
+        out
+    }
+
+    /// Runs until the core's announcements end (the service stops).
+    pub async fn run(mut self, shared: Shared) {
+        let mut changes = lock(&shared).watch();
+        let mut ended_seen: Option<Option<SystemTime>> = None;
+        loop {
+            let (values, run) = self.snapshot(&shared);
+            self.write(values);
+            let ended = run.as_ref().map(|r| r.ended);
+            // The history has a run's end before the core says it ended.
+            if ended_seen != Some(ended.flatten()) && !self.nodes.runs.is_empty() {
+                ended_seen = Some(ended.flatten());
+                if let Some(runs) = self.last_runs().await {
+                    let values = self.runs_values(&runs);
+                    self.write(values);
+                }
+            }
+            if changes.changed().await.is_err() {
+                return;
+            }
+        }
+    }
+
+    async fn last_runs(&self) -> Option<Vec<RunRow>> {
+        let target = self.history.clone()?;
+        let (machine, n) = (self.machine.clone(), self.nodes.runs.len());
+        let read = tokio::task::spawn_blocking(move || {
+            let mut h = History::open(&target).map_err(|e| e.to_string())?;
+            h.list(&Filter {
+                machine: Some(machine),
+                since: None,
+            })
+            .map_err(|e| e.to_string())
+        })
+        .await;
+        match read {
+            Ok(Ok(mut runs)) => {
+                runs.sort_by_key(|r| std::cmp::Reverse(r.id));
+                runs.truncate(n);
+                Some(runs)
+            }
+            Ok(Err(e)) => {
+                tracing::warn!("OPC UA face: cannot read the last runs: {e}");
+                None
+            }
+            Err(e) => {
+                tracing::warn!("OPC UA face: cannot read the last runs: {e}");
+                None
+            }
+        }
+    }
+}
+
+/// One field of a run of the history.
+fn run_field(r: &RunRow, name: &str) -> Variant {
+    match name {
+        "Id" => Variant::from(r.id),
+        "Status" => Variant::from(r.status.as_str()),
+        "Source" => Variant::from(r.source.as_str()),
+        "ProgramNumber" => r.program_number.map_or(Variant::Empty, Variant::from),
+        "Program" => Variant::from(r.program.as_str()),
+        "Started" => date_time_text(Some(&r.started)),
+        "Finished" => date_time_text(r.finished.as_deref()),
+        "Message" => r.message.as_deref().map_or(Variant::Empty, Variant::from),
+        "Parameters" => Variant::from(r.parameters.clone()),
+        "ResultNames" | "ResultValues" => {
+            let mut pairs: Vec<(String, f64)> = r
+                .results
+                .iter()
+                .map(|x| (format!("{}.{}", x.cycle, x.name), x.value))
+                .collect();
+            for e in &r.iso_errors {
+                pairs.push((format!("before.{}", e.name), e.before));
+                pairs.push((format!("after.{}", e.name), e.after));
+            }
+            if name == "ResultNames" {
+                Variant::from(pairs.into_iter().map(|p| p.0).collect::<Vec<_>>())
+            } else {
+                Variant::from(pairs.into_iter().map(|p| p.1).collect::<Vec<_>>())
+            }
+        }
+        _ => Variant::Empty,
+    }
+}

@@ -1,0 +1,615 @@
+//! `probebridge serve`'s OPC UA face on the simulator, played against by Python's
+//! asyncua as the factory's MES (`tests/gateway/mes.py`, written from the gateway
+//! page's address-space table) next to the pymodbus PLC (`tests/gateway/plc.py`):
+//! browse by browse names, read identification and state, subscribe (the change
+//! latencies, measured with the client's clock, are printed; only a generous bound is
+//! asserted), StartProgram of a 431 as a user over Basic256Sha256 SignAndEncrypt with
+//! the results of the PLC face and of the history, refusals (anonymous, wrong
+//! password, the PLC's run), an abort of a 451, a subscriber that never publishes,
+//! the connection cap, asyncua's `uals`/`uaread`; the configuration's errors; the
+//! face's death ending the service.
+//!
+//! Python with pymodbus and asyncua: `PROBEBRIDGE_PYTHON`, else
+//! `/opt/probebridge-venv/bin/python` (`scripts/install-test-peers`). Skipped with a
+//! line saying why where it is not there, never in CI.
+
+#[allow(dead_code)] // run_program: the CLI tests'.
+mod common;
+#[path = "common/pymodbus_venv.rs"]
+mod pymodbus_venv;
+
+use common::*;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::os::unix::fs::PermissionsExt;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+const MAX_QUEUED: usize = 5;
+const MAX_CONNECTIONS: usize = 4;
+
+/// The venv's python, with asyncua (and pymodbus, for the PLC).
+fn python() -> Option<PathBuf> {
+    let py = pymodbus_venv::python()?;
+    let ok = Command::new(&py)
+        .args(["-c", "import asyncua"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if ok {
+        return Some(py);
+    }
+    assert!(
+        std::env::var_os("CI").is_none(),
+        "{}: no asyncua in CI; scripts/install-test-peers should have installed it",
+        py.display()
+    );
+    eprintln!(
+        "SKIPPED: {} has no asyncua (run scripts/install-test-peers)",
+        py.display()
+    );
+    None
+}
+
+/// A running `probebridge serve` with both faces; SIGTERM on drop.
+struct Serve {
+    child: Child,
+    plc_port: u16,
+    url: String,
+    dir: PathBuf,
+}
+
+/// The machine of demo-sphere.toml (its `machine`, configs/machines/table-ac.toml).
+const MACHINE: &str = "table-ac";
+
+impl Serve {
+    /// `opcua`: keys added to the `[opcua]` section; `envs` to the environment; with
+    /// `users`, the users file with the MES's user.
+    fn start(
+        name: &str,
+        scenario: &str,
+        programs: &[(u16, &str)],
+        opcua: &str,
+        envs: &[(&str, &str)],
+        users: bool,
+    ) -> Self {
+        let dir = tmpdir(&format!("opcua-{name}"));
+        if users {
+            write_users(&dir);
+        }
+        let folder = dir.join("programs");
+        std::fs::create_dir_all(&folder).unwrap();
+        for (n, p) in programs {
+            std::fs::copy(
+                configs().join("programs").join(p),
+                folder.join(format!("{n}.h")),
+            )
+            .unwrap();
+        }
+        let config = dir.join("gateway.toml");
+        std::fs::write(
+            &config,
+            format!(
+                "[machine]\nscenario = {:?}\nservice = \"pbua-{name}-{}\"\nkinematics = {:?}\n\
+                 [programs]\nfolder = \"programs\"\n[history]\nsqlite = {:?}\n\
+                 [plc]\nlisten = \"127.0.0.1:0\"\nheartbeat_timeout_ms = 0\n\
+                 [opcua]\nlisten = \"opc.tcp://127.0.0.1:0\"\npki = \"pki\"\nusers = \"users\"\n\
+                 manufacturer = \"ACME Werkzeugmaschinen\"\nmodel = \"RT-5\"\n\
+                 serial_number = \"SN-0451\"\n{opcua}",
+                configs().join("scenarios").join(scenario).to_str().unwrap(),
+                std::process::id(),
+                dir.join("kinematics.toml").to_str().unwrap(),
+                dir.join("history.sqlite").to_str().unwrap(),
+            ),
+        )
+        .unwrap();
+        Self::spawn(dir, &config, envs)
+    }
+
+    fn spawn(dir: PathBuf, config: &Path, envs: &[(&str, &str)]) -> Self {
+        let log = std::fs::File::create(dir.join("serve.log")).unwrap();
+        let mut child = bin()
+            .envs(envs.iter().copied())
+            .args(["serve", "--config", config.to_str().unwrap()])
+            .stdout(Stdio::piped())
+            .stderr(log)
+            .spawn()
+            .unwrap();
+        // Readiness: the lines the service says once each face is up.
+        let mut out = BufReader::new(child.stdout.take().unwrap());
+        let (mut plc_port, mut url) = (None, None);
+        while url.is_none() {
+            let mut line = String::new();
+            if out.read_line(&mut line).unwrap() == 0 {
+                let _ = child.kill();
+                let log = std::fs::read_to_string(dir.join("serve.log")).unwrap_or_default();
+                panic!("serve did not come up:\n{log}");
+            }
+            if let Some(a) = line.trim().strip_prefix("probebridge serve: listening on ") {
+                plc_port = Some(a.rsplit(':').next().unwrap().parse().unwrap());
+            }
+            if let Some(u) = line
+                .trim()
+                .strip_prefix("probebridge serve: OPC UA face on ")
+            {
+                url = Some(u.to_string());
+            }
+        }
+        Self {
+            child,
+            plc_port: plc_port.unwrap(),
+            url: url.unwrap(),
+            dir,
+        }
+    }
+
+    fn log(&self) -> String {
+        std::fs::read_to_string(self.dir.join("serve.log")).unwrap_or_default()
+    }
+
+    fn opcua_port(&self) -> u16 {
+        self.url
+            .trim_end_matches('/')
+            .rsplit(':')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    }
+
+    /// mes.py COMMAND ARGS; its JSON (`ok`: it must succeed).
+    fn mes(&self, py: &Path, machine: &str, args: &[&str]) -> serde_json::Value {
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/gateway/mes.py");
+        let out = Command::new(py)
+            .arg(script)
+            .arg(&self.url)
+            .arg(machine)
+            .arg(&self.dir)
+            .arg(self.dir.join("pki/own/cert.der"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "MES {args:?}: {}\nserve log:\n{}",
+            String::from_utf8_lossy(&out.stderr),
+            self.log()
+        );
+        serde_json::from_slice(&out.stdout).unwrap()
+    }
+
+    fn plc(&self, py: &Path, args: &[&str]) -> serde_json::Value {
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/gateway/plc.py");
+        let out = Command::new(py)
+            .arg(script)
+            .args(["127.0.0.1", &self.plc_port.to_string()])
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "PLC {args:?}: {}\nserve log:\n{}",
+            String::from_utf8_lossy(&out.stderr),
+            self.log()
+        );
+        serde_json::from_slice(&out.stdout).unwrap()
+    }
+
+    /// asyncua's own command-line tool `tool` (in the venv's bin/) with `args`.
+    fn ua_tool(&self, py: &Path, tool: &str, args: &[&str]) -> String {
+        let out = Command::new(py.with_file_name(tool))
+            .args(["-u", &self.url])
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{tool} {args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    }
+
+    fn stop(&mut self) -> std::process::ExitStatus {
+        // SAFETY: kill(2) on our own child's pid.
+        unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
+        self.child.wait().unwrap()
+    }
+}
+
+impl Drop for Serve {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            self.stop();
+        }
+    }
+}
+
+/// The users file with the MES's user, made by `probebridge opcua-user`.
+fn write_users(dir: &Path) {
+    let mut child = bin()
+        .args(["opcua-user", "mes"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(b"measure 431!\n")
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    let line = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        line.starts_with("mes:$argon2id$") && !line.contains("measure"),
+        "{line}"
+    );
+    let f = dir.join("users");
+    std::fs::write(&f, line).unwrap();
+    std::fs::set_permissions(&f, std::fs::Permissions::from_mode(0o600)).unwrap();
+}
+
+fn history(dir: &Path) -> Vec<serde_json::Value> {
+    let out = run(bin()
+        .args([
+            "history",
+            "--db",
+            dir.join("history.sqlite").to_str().unwrap(),
+            "--json",
+        ])
+        .args(["--since", "2000-01-01"]));
+    assert!(out.status.success());
+    serde_json::from_slice::<serde_json::Value>(&out.stdout)
+        .unwrap()
+        .as_array()
+        .unwrap()
+        .clone()
+}
+
+/// Trusts the MES's certificate the way the docs say: its first secured connection is
+/// refused and leaves the certificate in pki/rejected/; moved to pki/trusted/ it is
+/// taken.
+fn trust_the_mes(serve: &Serve, py: &Path, machine: &str) {
+    let first = serve.mes(py, machine, &["connect"]);
+    assert_eq!(first["connected"], false, "{first}");
+    let rejected: Vec<PathBuf> = std::fs::read_dir(serve.dir.join("pki/rejected"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(rejected.len(), 1, "{rejected:?}");
+    let name = rejected[0].file_name().unwrap();
+    std::fs::rename(&rejected[0], serve.dir.join("pki/trusted").join(name)).unwrap();
+    let again = serve.mes(py, machine, &["connect"]);
+    assert_eq!(again["connected"], true, "{again}\n{}", serve.log());
+}
+
+#[test]
+fn the_mes_browses_subscribes_and_runs_a_431_as_the_plc_does() {
+    let Some(py) = python() else { return };
+    let machine = MACHINE;
+    let mut serve = Serve::start(
+        "mes",
+        "tilted-plane.toml",
+        &[(431, "431-plane.h")],
+        &format!(
+            "security = [\"none\", \"basic256sha256-sign-encrypt\"]\nmay_start = true\n\
+             max_queued_notifications = {MAX_QUEUED}\nmax_connections = {MAX_CONNECTIONS}\n\
+             max_sessions = {MAX_CONNECTIONS}\n"
+        ),
+        &[],
+        true,
+    );
+    // The certificate is made on first start, in the PKI folder; its key is private.
+    let key = serve.dir.join("pki/private/private.pem");
+    assert!(serve.dir.join("pki/own/cert.der").is_file());
+    assert_eq!(key.metadata().unwrap().permissions().mode() & 0o777, 0o600);
+
+    browse_and_tools(&serve, &py);
+    trust_the_mes(&serve, &py, machine);
+    let r = serve.mes(&py, machine, &["refusals", "431"]);
+    assert_eq!(r["anonymous"], "BadUserAccessDenied", "{r}");
+    assert_ne!(r["wrong_password"], "logged in", "{r}");
+    assert_eq!(r["state"], "idle", "nothing started: {r}");
+
+    the_431_as_the_plc(&serve, &py);
+    stalled_and_capped(&serve, &py);
+    let status = serve.stop();
+    assert_eq!(status.code(), Some(0), "{}", serve.log());
+}
+
+/// Browse by browse names, anonymously; asyncua's uals and uaread as the docs show them.
+fn browse_and_tools(serve: &Serve, py: &Path) {
+    let machine = MACHINE;
+    // Browse by browse names, anonymously: identification and state.
+    let b = serve.mes(py, machine, &["browse"]);
+    assert_eq!(
+        b["children"],
+        serde_json::json!([
+            "Identification",
+            "MachineryItemState",
+            "Measurements",
+            "Monitoring",
+            "Production"
+        ]),
+        "{b}"
+    );
+    assert_eq!(
+        b["methods"],
+        serde_json::json!(["Abort", "Acknowledge", "StartProgram"])
+    );
+    let v = &b["values"];
+    assert_eq!(v["Identification/Manufacturer"], "ACME Werkzeugmaschinen");
+    assert_eq!(v["Identification/SerialNumber"], "SN-0451");
+    assert!(v["Identification/SoftwareRevision"]
+        .as_str()
+        .unwrap()
+        .starts_with("probebridge "));
+    assert_eq!(v["MachineryItemState/CurrentState"], "NotExecuting");
+    assert_eq!(v["Monitoring/MachineOk"], true);
+    assert_eq!(v["Monitoring/Bus"], "simulator");
+    assert_eq!(v["Monitoring/RunState"], "idle");
+
+    // asyncua's own tools, as the docs show them.
+    let ls = serve.ua_tool(py, "uals", &["-n", "i=85", "-d", "3"]);
+    assert!(
+        ls.contains("Machines") && ls.contains(machine) && ls.contains("Monitoring"),
+        "{ls}"
+    );
+    let ns = "2";
+    let read = serve.ua_tool(
+        py,
+        "uaread",
+        &[
+            "-p",
+            &format!("0:Objects,{ns}:Machines,{ns}:{machine},{ns}:Monitoring,{ns}:RunState"),
+        ],
+    );
+    assert_eq!(read.trim(), "idle", "{read}");
+}
+
+/// The PLC's 431, then the MES's over SignAndEncrypt: the same results, the history's.
+fn the_431_as_the_plc(serve: &Serve, py: &Path) {
+    let machine = MACHINE;
+    // The PLC's 431, then the MES's: the same results, and the history's.
+    let plc = serve.plc(py, &["run", "431"]);
+    let mes = serve.mes(py, machine, &["run", "431"]);
+    println!(
+        "OPC UA change latencies (ms, client clock): {:?}",
+        mes["latencies_ms"]
+    );
+    let lat: Vec<f64> = mes["latencies_ms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert!(!lat.is_empty());
+    assert!(lat.iter().all(|&l| l < 2000.0), "a generous bound: {lat:?}");
+    let states: Vec<&str> = mes["states"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s.as_str().unwrap())
+        .collect();
+    assert!(
+        states.windows(2).all(|w| w[0] != w[1]),
+        "each change once: {states:?}"
+    );
+    assert!(
+        states.contains(&"busy") && states.last() == Some(&"done"),
+        "{states:?}"
+    );
+    assert_eq!(mes["active"]["Production/ActiveProgram/StartedBy"], "opcua");
+    assert_eq!(mes["active"]["Production/ActiveProgram/State"], "Ended");
+    let results = mes["results"].as_object().unwrap();
+    let real = plc["real"].as_object().unwrap();
+    assert_eq!(results.len(), real.len(), "{results:?} / {real:?}");
+    for (name, v) in results {
+        let (v, p) = (v.as_f64().unwrap(), real[name].as_f64().unwrap());
+        assert!(
+            (v - p).abs() <= 1e-6 * v.abs().max(1.0),
+            "{name}: OPC UA {v}, PLC {p}"
+        );
+    }
+    let h = history(&serve.dir);
+    let row = h
+        .iter()
+        .find(|r| r["source"] == "opcua")
+        .expect("the MES's run in the history");
+    assert_eq!(row["status"], "done");
+    assert_eq!(row["program_number"], 431);
+    assert_eq!(row["request_seq"], serde_json::Value::Null);
+    assert_eq!(
+        row["parameters"],
+        serde_json::json!([1.5, -2.25, 0.0, 0.0, 0.0, 0.0, 0.0, 1000.125])
+    );
+    for x in row["results"].as_array().unwrap() {
+        assert_eq!(results[x["name"].as_str().unwrap()], x["value"], "{x}");
+    }
+    let run01 = &mes["run01"];
+    assert_eq!(run01["Id"], row["id"]);
+    assert_eq!(
+        (run01["Source"].as_str(), run01["Status"].as_str()),
+        (Some("opcua"), Some("done"))
+    );
+    assert_eq!(run01["Parameters"], row["parameters"]);
+}
+
+/// A subscriber that never publishes; the connection cap.
+fn stalled_and_capped(serve: &Serve, py: &Path) {
+    let machine = MACHINE;
+    // A subscriber that never publishes: at most max_queued_notifications are kept.
+    let s = serve.mes(py, machine, &["stalled", &MAX_QUEUED.to_string()]);
+    println!("stalled subscriber: {s}");
+    assert!(
+        s["heartbeat_changes"].as_u64().unwrap() >= 4 * MAX_QUEUED as u64,
+        "{s}"
+    );
+    // Without publish requests the server keeps the item's queue (1 value here, at most
+    // 10) and at most max_queued_notifications messages, not every change.
+    let messages = s["messages"].as_u64().unwrap();
+    assert!((1..=MAX_QUEUED as u64).contains(&messages), "{s}");
+    assert!(s["values"].as_u64().unwrap() <= MAX_QUEUED as u64, "{s}");
+
+    // The connection cap: one more than max_connections is closed at once.
+    let port = serve.opcua_port();
+    let open: Vec<std::net::TcpStream> = (0..MAX_CONNECTIONS)
+        .map(|_| std::net::TcpStream::connect(("127.0.0.1", port)).unwrap())
+        .collect();
+    let mut extra = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
+    let mut buf = [0u8; 8];
+    assert_eq!(
+        extra.read(&mut buf).unwrap_or(0),
+        0,
+        "the extra one is closed"
+    );
+    for s in &open {
+        s.set_nonblocking(true).unwrap();
+        let mut b = [0u8; 1];
+        let e = (&*s).read(&mut b).unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::WouldBlock, "still open");
+    }
+    drop(open);
+    assert!(
+        serve.log().contains("opcua.max_connections"),
+        "{}",
+        serve.log()
+    );
+}
+
+#[test]
+fn a_start_while_the_plc_runs_one_is_refused_and_an_abort_ends_a_451() {
+    let Some(py) = python() else { return };
+    let machine = MACHINE;
+    let serve = Serve::start(
+        "abort",
+        "demo-sphere.toml",
+        &[(451, "451-check.h"), (431, "431-plane.h")],
+        "may_start = true\n",
+        &[],
+        true,
+    );
+    trust_the_mes(&serve, &py, machine);
+    // The PLC runs a 451: the MES's start is refused as busy, its abort ends the run.
+    serve.plc(&py, &["start_busy", "451"]);
+    let w = serve.mes(&py, machine, &["while_plc_runs", "431"]);
+    assert_eq!(w["state"], "busy");
+    assert_eq!(w["started_by"], "plc");
+    assert_eq!(
+        w["refused"],
+        serde_json::json!([1, "a measurement is running"]),
+        "{w}"
+    );
+    assert_eq!(w["abort"][0], 0, "{w}");
+    assert_eq!(w["after"]["Monitoring/RunState"], "aborted", "{w}");
+    assert_eq!(w["after"]["Monitoring/ErrorKind"], 20, "{w}");
+    assert_eq!(
+        w["after"]["Production/ActiveProgram/State"], "Aborted",
+        "{w}"
+    );
+    assert_eq!(w["abort_again"][0], 6, "not busy: {w}");
+    assert!(
+        serve.log().contains("abort requested over OPC UA"),
+        "{}",
+        serve.log()
+    );
+    let h = history(&serve.dir);
+    let r451 = h.iter().find(|r| r["program_number"] == 451).unwrap();
+    assert_eq!(
+        (r451["source"].as_str(), r451["status"].as_str()),
+        (Some("serve"), Some("aborted"))
+    );
+
+    // The MES's own 451, aborted by the MES.
+    let a = serve.mes(&py, machine, &["start_abort", "451"]);
+    assert_eq!(a["abort"][0], 0, "{a}");
+    assert_eq!(a["after"]["Monitoring/RunState"], "aborted", "{a}");
+    assert_eq!(a["after"]["Monitoring/ErrorKind"], 20, "{a}");
+    assert_eq!(
+        a["after"]["Production/ActiveProgram/StartedBy"], "opcua",
+        "{a}"
+    );
+    let h = history(&serve.dir);
+    assert!(
+        h.iter().any(|r| r["source"] == "opcua"
+            && r["status"] == "aborted"
+            && r["program_number"] == 451),
+        "{h:?}"
+    );
+}
+
+#[test]
+fn opcua_errors_say_where_and_why_before_the_machine_opens() {
+    for (extra, users_mode, want) in [
+        (
+            "listen = \"opc.tcp://gateway:4840\"\n",
+            None,
+            "opcua.listen",
+        ),
+        (
+            "listen = \"opc.tcp://127.0.0.1:0\"\nsecurity = [\"basic128rsa15\"]\n",
+            None,
+            "opcua.security",
+        ),
+        (
+            "listen = \"opc.tcp://127.0.0.1:0\"\n",
+            Some(0o644),
+            "opcua.users",
+        ),
+    ] {
+        let dir = tmpdir("opcua-bad");
+        std::fs::create_dir_all(dir.join("programs")).unwrap();
+        if let Some(mode) = users_mode {
+            write_users(&dir);
+            std::fs::set_permissions(dir.join("users"), std::fs::Permissions::from_mode(mode))
+                .unwrap();
+        }
+        let config = dir.join("gateway.toml");
+        std::fs::write(
+            &config,
+            format!(
+                "[machine]\nscenario = {:?}\n[programs]\nfolder = \"programs\"\n\
+                 [history]\nenabled = false\n[plc]\nlisten = \"127.0.0.1:0\"\n\
+                 [opcua]\npki = \"pki\"\nusers = \"users\"\n{extra}",
+                configs()
+                    .join("scenarios/demo-sphere.toml")
+                    .to_str()
+                    .unwrap(),
+            ),
+        )
+        .unwrap();
+        let out = bin()
+            .args(["serve", "--config", config.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{extra}: {err}");
+        assert!(
+            err.contains(config.to_str().unwrap()) && err.contains(want),
+            "{extra}: {err}"
+        );
+        assert!(!err.contains("machine up"), "before the machine: {err}");
+        if users_mode.is_some() {
+            assert!(err.contains("chmod 600"), "{err}");
+        }
+    }
+}
+
+#[test]
+fn the_opcua_face_s_death_ends_the_service() {
+    if python().is_none() {
+        return;
+    }
+    let mut serve = Serve::start(
+        "death",
+        "demo-sphere.toml",
+        &[],
+        "",
+        &[("PROBEBRIDGE_FAULT_OPCUA_FACE", "end")],
+        false,
+    );
+    let status = serve.child.wait().unwrap();
+    assert!(!status.success(), "{status:?}");
+    let log = serve.log();
+    assert!(log.contains("the OPC UA face is dead"), "{log}");
+}
