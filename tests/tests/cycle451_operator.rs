@@ -498,6 +498,11 @@ fn check_and_run_agree_at_the_same_move() {
             "10 CYCL DEF 247 DATUM SETTING ~\n  Q339=+1 ;DATUM NUMBER\n",
         )
     };
+    // The seed's 444 with another Q260.
+    let q260 = |v: &str, refused: bool| {
+        let text = read("444-seed.h").replace("Q260=+100", &format!("Q260={v}"));
+        ("seed-444.toml", text, None, refused)
+    };
     // (scenario, program text, preset row 1, refused?)
     let cases: Vec<(&str, String, Option<[f64; 3]>, bool)> = vec![
         ("tilted-plane.toml", read("431-plane.h"), None, false),
@@ -505,41 +510,16 @@ fn check_and_run_agree_at_the_same_move() {
         ("tilted-plane-y.toml", read("431-plane-y.h"), None, false),
         ("freeform.toml", read("444-freeform.h"), None, false),
         ("seed-444.toml", read("444-seed.h"), None, false),
-        (
-            "seed-444.toml",
-            read("444-seed.h").replace("Q260=+100", "Q260=-1"),
-            None,
-            true,
-        ),
+        q260("-1", true),
         // The seed's face is vertical at X0, the side of a dome that rises to Z80
         // within the ball radius behind it: Q260 must clear the probed point itself
         // by R + SET_UP (5 over Z0), and the probe, standing above Q260, comes down
         // over the pre-position (X5), never at X0 where it stood (which drove it into
         // the dome at Q260 = +0.2 and +33 before).
-        (
-            "seed-444.toml",
-            read("444-seed.h").replace("Q260=+100", "Q260=+0.2"),
-            None,
-            true,
-        ),
-        (
-            "seed-444.toml",
-            read("444-seed.h").replace("Q260=+100", "Q260=+4.99"),
-            None,
-            true,
-        ),
-        (
-            "seed-444.toml",
-            read("444-seed.h").replace("Q260=+100", "Q260=+5"),
-            None,
-            false,
-        ),
-        (
-            "seed-444.toml",
-            read("444-seed.h").replace("Q260=+100", "Q260=+33"),
-            None,
-            false,
-        ),
+        q260("+0.2", true),
+        q260("+4.99", true),
+        q260("+5", false),
+        q260("+33", false),
         ("demo-sphere.toml", check451.clone(), None, false),
         ("demo-sphere.toml", read("451-optimise.h"), None, false),
         (

@@ -133,14 +133,7 @@ impl MeasuringCycle for KinematicsParams {
             ));
         }
         notes.push(format!("{spheres} sphere(s) measured"));
-        for t in &result.transfers {
-            notes.push(format!(
-                "machine datum: {} = {:+.6} deg moved into {}",
-                ErrorSet::name(t.from),
-                t.value,
-                ErrorSet::name(t.to)
-            ));
-        }
+        notes.extend(result.transfers.iter().map(transfer_note));
         let ctx = m.ctx;
 
         let write_back = WriteBack::decide(
@@ -236,5 +229,15 @@ fn preset_text(p: &KinematicsParams, refused: bool, at: &nalgebra::Vector3<f64>)
     format!(
         "Q431={}: {words} X{:+.4} Y{:+.4} Z{:+.4}",
         p.preset, at.x, at.y, at.z
+    )
+}
+
+/// The note of one rotation moved into a machine datum (mode 3).
+fn transfer_note(t: &crate::kinematics::identification::DatumTransfer) -> String {
+    format!(
+        "machine datum: {} = {:+.6} deg moved into {}",
+        ErrorSet::name(t.from),
+        t.value,
+        ErrorSet::name(t.to)
     )
 }
