@@ -208,7 +208,7 @@ impl Probing3dParams {
 
     /// Every move the cycle commands, in order, with the active datum at `origin`
     /// (machine XYZ) and the axes at `here` (the safe height and the working plane in
-    /// the order [`from_above`] gives): what `check` and `run` hold against the machine before the
+    /// the order `from_above` gives): what `check` and `run` hold against the machine before the
     /// program's first move. The retraction after the contact, MB back along the
     /// normal, lies between its ends for a contact at the start and at the path's end.
     pub fn planned_moves(
