@@ -16,7 +16,7 @@ pub struct ReceiveTime {
     pub t1_ns: u64,
 }
 
-/// Reading and writing the receive-time file of [`EstimatorOptions::record_times`].
+/// Reading and writing the receive-time file of [`EstimatorOptions::record_times`](super::EstimatorOptions::record_times).
 pub struct ReceiveTimes;
 
 impl ReceiveTimes {
