@@ -143,33 +143,29 @@ impl Server {
     }
 
     /// SIGSTOP (`true`) or SIGCONT to the whole server: the postmaster and every
-    /// process it started (each backend is a process group of its own).
+    /// process it started (each backend is a process group of its own). The
+    /// postmaster is stopped first and its children are looked up only once it is
+    /// stopped: a backend forked while the list was read (a client reconnecting at
+    /// that moment) would otherwise go on answering. Continued in the reverse order.
     pub fn pause(&self, stop: bool) {
         assert!(self.running, "the server is stopped");
-        let sig = if stop { libc::SIGSTOP } else { libc::SIGCONT };
         let postmaster = self.child.id() as i32;
-        let mut pids = vec![postmaster];
-        for entry in std::fs::read_dir("/proc").unwrap().flatten() {
-            let Ok(pid) = entry.file_name().to_string_lossy().parse::<i32>() else {
-                continue;
-            };
-            let stat = std::fs::read_to_string(entry.path().join("stat")).unwrap_or_default();
-            // pid (comm) state ppid ...: the fields after the last ')'.
-            let ppid = stat
-                .rsplit_once(')')
-                .and_then(|(_, rest)| rest.split_whitespace().nth(1))
-                .and_then(|p| p.parse::<i32>().ok());
-            if ppid == Some(postmaster) {
-                pids.push(pid);
+        // SAFETY (each kill): kill(2) on our child or its children.
+        if stop {
+            unsafe { libc::kill(postmaster, libc::SIGSTOP) };
+            let deadline = Instant::now() + Duration::from_secs(10);
+            while proc_stat(postmaster).map(|(state, _)| state) != Some('T') {
+                assert!(Instant::now() < deadline, "the postmaster did not stop");
+                std::thread::yield_now();
             }
-        }
-        // Stop the postmaster first (it starts no new backend), continue it last.
-        if !stop {
-            pids.reverse();
-        }
-        for pid in pids {
-            // SAFETY: kill(2) on our child or its children.
-            unsafe { libc::kill(pid, sig) };
+            for pid in children(postmaster) {
+                unsafe { libc::kill(pid, libc::SIGSTOP) };
+            }
+        } else {
+            for pid in children(postmaster) {
+                unsafe { libc::kill(pid, libc::SIGCONT) };
+            }
+            unsafe { libc::kill(postmaster, libc::SIGCONT) };
         }
     }
 
@@ -212,4 +208,24 @@ impl Drop for Server {
         self.stop();
         let _ = std::fs::remove_dir_all(&self.dir);
     }
+}
+
+/// The state letter and the parent of a process, from /proc/<pid>/stat.
+fn proc_stat(pid: i32) -> Option<(char, i32)> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // pid (comm) state ppid ...: the fields after the last ')'.
+    let mut rest = stat.rsplit_once(')')?.1.split_whitespace();
+    let state = rest.next()?.chars().next()?;
+    let ppid = rest.next()?.parse().ok()?;
+    Some((state, ppid))
+}
+
+/// The processes whose parent is `parent`.
+fn children(parent: i32) -> Vec<i32> {
+    std::fs::read_dir("/proc")
+        .unwrap()
+        .flatten()
+        .filter_map(|e| e.file_name().to_string_lossy().parse::<i32>().ok())
+        .filter(|&pid| proc_stat(pid).is_some_and(|(_, ppid)| ppid == parent))
+        .collect()
 }
