@@ -5,7 +5,7 @@
 //! silently or counted twice), a restarted bridge (resumes from the PLC's
 //! acknowledge), another word order, and the PLC-cycle capture's bias compensation.
 
-use hal::contact_sample::{ContactSample, FLAG_HW_LATCH};
+use hal::contact_sample::{ContactSample, ProbeWindow, FLAG_HW_LATCH};
 use hal::modbus::{CaptureKind, ModbusMachine, ModbusOptions, WordOrder};
 use hal::{Axis, AxisPositions, ErrorKind, Machine, NullSink, ProbeMove, SampleSink, SinkError};
 use probebridge_tests::conformance_modbus::{open_tcp, open_tcp_with, PlcHeld};
@@ -47,6 +47,48 @@ impl SampleSink for Recorder {
         self.0.lock().unwrap().push(*sample);
         Ok(())
     }
+}
+
+/// Both kinds of call, in the order the sink saw them.
+#[derive(Clone, Default)]
+struct Journal(Arc<Mutex<Vec<Result<ContactSample, ProbeWindow>>>>);
+
+impl SampleSink for Journal {
+    fn publish(&mut self, sample: &ContactSample) -> Result<(), SinkError> {
+        self.0.lock().unwrap().push(Ok(*sample));
+        Ok(())
+    }
+
+    fn probing_move(&mut self, window: ProbeWindow) {
+        self.0.lock().unwrap().push(Err(window));
+    }
+}
+
+#[test]
+fn each_probing_move_is_announced_before_its_contact_with_its_longest_duration() {
+    let journal = Journal::default();
+    let mut m = open_tcp_with(&plane(), |b| b.plc_cycle_us = 2000, journal.clone());
+    m.machine.set_run(41);
+    assert_contact(probe_down(&mut m).unwrap());
+    m.machine.set_run(42);
+    assert_contact(probe_down(&mut m).unwrap());
+    let events = journal.0.lock().unwrap().clone();
+    assert_eq!(events.len(), 4, "{events:?}");
+    for (pair, run) in events.chunks(2).zip([41, 42]) {
+        let (Err(w), Ok(s)) = (&pair[0], &pair[1]) else {
+            panic!("want a window, then its contact: {pair:?}");
+        };
+        assert_eq!((w.run_id, s.run_id), (run, run));
+        // 10 mm at 200 mm/min: 3 s of travel, plus the PLC's cycles and polls.
+        assert!(w.duration_ns() >= 3_000_000_000, "{w:?}");
+        assert!(w.duration_ns() < 4_000_000_000, "{w:?}");
+        assert!(w.start_ns <= s.receive_ns, "{w:?} {s:?}");
+    }
+    // A positioning move announces nothing.
+    m.machine
+        .move_to(&AxisPositions::linear([0.0, 0.0, 40.0]), 5000.0)
+        .unwrap();
+    assert_eq!(journal.0.lock().unwrap().len(), 4);
 }
 
 #[test]

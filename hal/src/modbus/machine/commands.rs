@@ -98,6 +98,8 @@ impl Machine for ModbusMachine {
             ));
         }
         self.contact_along = Some(dir);
+        let window = self.probe_window(mv);
+        self.sink.probing_move(window);
         let (s, latch) = self.run(CommandCode::Probe, &end, mv.feed)?;
         match (ResultCode::from_u16(s.result), latch) {
             (Some(ResultCode::Contact), None) => {

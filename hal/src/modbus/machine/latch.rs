@@ -5,8 +5,8 @@
 
 use super::{exception_error, CaptureInfo, ModbusMachine, ATTEMPTS};
 use crate::clock::monotonic_ns;
-use crate::contact_sample::{ContactSample, FLAG_HW_LATCH};
-use crate::machine::{Contact, ErrorKind, MachineError};
+use crate::contact_sample::{ContactSample, ProbeWindow, FLAG_HW_LATCH};
+use crate::machine::{Contact, ErrorKind, MachineError, ProbeMove};
 use crate::modbus::config::CaptureKind;
 use crate::modbus::latch_ring::RingEvent;
 use crate::modbus::mailbox::LatchSlot;
@@ -102,6 +102,25 @@ impl ModbusMachine {
             self.latches.contacts += 1;
         }
         Ok(found)
+    }
+
+    /// The announcement of a probing move about to be commanded, so that the estimator
+    /// may watch for its contact instead of sleeping (the armed receive). Its longest
+    /// duration: the travel at the probing feed, then up to two PLC task cycles until
+    /// the latch is in the ring and two status polls until the bridge reads it.
+    pub(super) fn probe_window(&self, mv: &ProbeMove) -> ProbeWindow {
+        let travel_s = if mv.feed > 0.0 {
+            mv.max_distance / (mv.feed / 60.0)
+        } else {
+            0.0
+        };
+        let plc_s = 2.0 * (self.bus.plc_cycle_us as f64 * 1e-6 + self.bus.poll_ms as f64 * 1e-3);
+        let start_ns = monotonic_ns();
+        ProbeWindow {
+            run_id: self.run_id,
+            start_ns,
+            end_ns: start_ns.saturating_add(((travel_s + plc_s) * 1e9) as u64),
+        }
     }
 
     /// The contact of `slot`, on the bridge's clock, corrected for the capture kind;
