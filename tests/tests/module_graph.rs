@@ -24,16 +24,6 @@ const MAX_LINES: usize = 600;
 /// enough (or gone) fails the check, so the list only shrinks.
 const BEING_SPLIT: &[&str] = &[];
 
-/// Circles through a file being split, by crate and module prefixes: a circle whose
-/// modules all start with one of the prefixes is let through until the split unties
-/// it. An entry that lets no circle through fails the check, so the list only shrinks.
-/// - `bridge/src/commands/bench/trigger/`: `mod.rs` keeps the shared types its parts
-///   use, and calls the parts.
-///
-/// Untied by moving the shared types out of `mod.rs` into a file of their own (issue 24
-/// stays open until it is).
-const CIRCLES_BEING_SPLIT: &[(&str, &[&str])] = &[("bridge", &["crate::commands::bench::trigger"])];
-
 fn workspace_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .parent()
@@ -389,7 +379,6 @@ fn no_module_imports_another_in_a_circle() {
     let crates = members(&root);
     assert!(crates.len() >= 6, "the members were found: {crates:?}");
     let mut found = Vec::new();
-    let mut untied: BTreeSet<usize> = (0..CIRCLES_BEING_SPLIT.len()).collect();
     for member in &crates {
         let src = root.join(member).join("src");
         let main = src.join("main.rs");
@@ -407,29 +396,13 @@ fn no_module_imports_another_in_a_circle() {
         let g = graph(&src);
         assert!(g.len() > 1, "{member}: the sources were found: {g:?}");
         for c in circles(&g) {
-            let being_split = CIRCLES_BEING_SPLIT.iter().position(|(krate, prefixes)| {
-                krate == member && c.iter().all(|m| prefixes.iter().any(|p| m.starts_with(p)))
-            });
-            match being_split {
-                Some(i) => {
-                    let _ = untied.remove(&i);
-                }
-                None => found.push(format!("  {member}: {}", c.join(", "))),
-            }
+            found.push(format!("  {member}: {}", c.join(", ")));
         }
     }
     assert!(
         found.is_empty(),
         "modules that import each other in a circle:\n{}",
         found.join("\n")
-    );
-    assert!(
-        untied.is_empty(),
-        "untied already, remove from CIRCLES_BEING_SPLIT: {:?}",
-        untied
-            .iter()
-            .map(|&i| CIRCLES_BEING_SPLIT[i])
-            .collect::<Vec<_>>()
     );
 }
 
