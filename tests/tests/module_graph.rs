@@ -24,24 +24,6 @@ const MAX_LINES: usize = 600;
 /// enough (or gone) fails the check, so the list only shrinks.
 const BEING_SPLIT: &[&str] = &[];
 
-/// Circles through a file being split, by crate and module prefixes: a circle whose
-/// modules all start with one of the prefixes is let through until the split unties
-/// it. An entry that lets no circle through fails the check, so the list only shrinks.
-/// - `hal/src/master/rt_loop/`: `mod.rs` keeps the loop's state, which `latch.rs`
-///   reads, and calls `latch.rs`'s arming and collection;
-/// - `bridge/src/commands/bench/trigger/` and `bridge/src/history/trend/`: the same,
-///   between `mod.rs` (the shared types) and its parts.
-///
-/// Each is untied by moving the shared types out of `mod.rs` into a file of their own
-/// (issue 24 stays open until they are).
-const CIRCLES_BEING_SPLIT: &[(&str, &[&str])] = &[
-    ("hal", &["crate::master::rt_loop"]),
-    (
-        "bridge",
-        &["crate::commands::bench::trigger", "crate::history::trend"],
-    ),
-];
-
 fn workspace_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .parent()
@@ -237,19 +219,27 @@ fn paths(code: &str) -> Vec<String> {
         .filter(|u| !u.re_export || names_word(&own, bound_name(&u.path)))
         .map(|u| u.path.split('~').next().unwrap_or_default().to_string())
         .collect();
+    out.extend(inline_paths(&own));
+    out
+}
+
+/// The `crate::`/`super::` paths in `code`, each whole: `super::super::time::f` is
+/// one path, not also `super::time::f` (a module of the parent's that may not exist).
+fn inline_paths(code: &str) -> Vec<String> {
+    let path_char = |c: char| c.is_alphanumeric() || c == '_' || c == ':';
+    let mut out = Vec::new();
     for start in ["crate::", "super::"] {
         let mut from = 0;
-        while let Some(i) = own[from..].find(start) {
+        while let Some(i) = code[from..].find(start) {
             let at = from + i;
-            let path: String = own[at..]
-                .chars()
-                .take_while(|c| c.is_alphanumeric() || *c == '_' || *c == ':')
-                .collect();
+            let path: String = code[at..].chars().take_while(|&c| path_char(c)).collect();
+            // Inside a longer path (`a::crate::`, `super::super::`): counted with it.
+            let inside = code[..at].chars().next_back().is_some_and(path_char);
+            from = at + path.len().max(start.len());
             // `super::{a, b}` is a `use` tree, counted above.
-            if !path.ends_with("::") {
+            if !inside && !path.ends_with("::") {
                 out.push(path);
             }
-            from = at + start.len();
         }
     }
     out
@@ -389,7 +379,6 @@ fn no_module_imports_another_in_a_circle() {
     let crates = members(&root);
     assert!(crates.len() >= 6, "the members were found: {crates:?}");
     let mut found = Vec::new();
-    let mut untied: BTreeSet<usize> = (0..CIRCLES_BEING_SPLIT.len()).collect();
     for member in &crates {
         let src = root.join(member).join("src");
         let main = src.join("main.rs");
@@ -407,29 +396,13 @@ fn no_module_imports_another_in_a_circle() {
         let g = graph(&src);
         assert!(g.len() > 1, "{member}: the sources were found: {g:?}");
         for c in circles(&g) {
-            let being_split = CIRCLES_BEING_SPLIT.iter().position(|(krate, prefixes)| {
-                krate == member && c.iter().all(|m| prefixes.iter().any(|p| m.starts_with(p)))
-            });
-            match being_split {
-                Some(i) => {
-                    let _ = untied.remove(&i);
-                }
-                None => found.push(format!("  {member}: {}", c.join(", "))),
-            }
+            found.push(format!("  {member}: {}", c.join(", ")));
         }
     }
     assert!(
         found.is_empty(),
         "modules that import each other in a circle:\n{}",
         found.join("\n")
-    );
-    assert!(
-        untied.is_empty(),
-        "untied already, remove from CIRCLES_BEING_SPLIT: {:?}",
-        untied
-            .iter()
-            .map(|&i| CIRCLES_BEING_SPLIT[i])
-            .collect::<Vec<_>>()
     );
 }
 
@@ -495,6 +468,10 @@ fn the_check_sees_a_circle() {
     assert_eq!(
         resolve("crate::k", "n::{X, Y}", &known, &none).as_deref(),
         Some("crate::k::n")
+    );
+    assert_eq!(
+        inline_paths("f(super::super::time::parse(x), crate::k::m::f());"),
+        vec!["crate::k::m::f", "super::super::time::parse"]
     );
     assert_eq!(
         expand("crate::{a, b::{c, d as e}}"),

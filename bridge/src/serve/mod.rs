@@ -6,6 +6,7 @@
 
 pub mod config;
 pub mod face_log;
+pub mod face_thread;
 pub mod gateway;
 pub mod handshake;
 pub mod machine_link;
@@ -19,6 +20,7 @@ pub mod sd_notify;
 pub mod web_face;
 
 use config::GatewayConfig;
+use face_thread::FaceHealth;
 use gateway::{lock, Core, ToMachine};
 use hal::AbortFlag;
 use handshake::{AbortReason, Handshake, State};
@@ -366,11 +368,11 @@ fn supervise(
         let mut face_ok = true;
         for ((name, health), said) in healths.into_iter().zip(stall_said.iter_mut()) {
             match health {
-                None | Some(modbus_face::FaceHealth::Serving) => *said = false,
-                Some(modbus_face::FaceHealth::Stalled(d)) if d >= FACE_DEAD => {
+                None | Some(FaceHealth::Serving) => *said = false,
+                Some(FaceHealth::Stalled(d)) if d >= FACE_DEAD => {
                     return End::FaceDied(name, format!("it has not run for {} ms", d.as_millis()))
                 }
-                Some(modbus_face::FaceHealth::Stalled(d)) => {
+                Some(FaceHealth::Stalled(d)) => {
                     if !*said {
                         tracing::error!(
                             "the {name} has not run for {} ms: no longer feeding the watchdog",
@@ -381,7 +383,7 @@ fn supervise(
                     }
                     face_ok = false;
                 }
-                Some(modbus_face::FaceHealth::Ended(why)) => return End::FaceDied(name, why),
+                Some(FaceHealth::Ended(why)) => return End::FaceDied(name, why),
             }
         }
         let now = Instant::now();

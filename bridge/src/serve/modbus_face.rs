@@ -15,6 +15,7 @@
 //!   that stalls or ends stops the service, so systemd restarts it.
 
 use super::face_log::{Event, FaceLog, SUMMARY_EVERY};
+use super::face_thread::{FaceHealth, FaceThread, Heartbeat};
 use super::gateway::{lock, Shared, WriteRefusal};
 use super::peer_allow::AllowList;
 use super::register_map::MapException;
@@ -22,9 +23,7 @@ use std::collections::BTreeMap;
 use std::io;
 use std::net::{IpAddr, SocketAddr};
 use std::os::fd::AsRawFd;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
-use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
@@ -45,8 +44,6 @@ const KEEPALIVE_IDLE_S: libc::c_int = 5;
 const KEEPALIVE_INTERVAL_S: libc::c_int = 1;
 const KEEPALIVE_PROBES: libc::c_int = 5;
 const USER_TIMEOUT_MS: libc::c_uint = 10_000;
-/// How often the face ticks its heartbeat.
-const BEAT: Duration = Duration::from_millis(100);
 
 const EXC_ILLEGAL_FUNCTION: u8 = 1;
 const EXC_ILLEGAL_DATA_ADDRESS: u8 = 2;
@@ -70,23 +67,9 @@ pub fn bind(addr: SocketAddr) -> io::Result<std::net::TcpListener> {
     Ok(listener)
 }
 
-/// How the face is doing, as the service loop sees it.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub enum FaceHealth {
-    Serving,
-    /// Its heartbeat has not moved for this long.
-    Stalled(Duration),
-    /// Its thread has ended (why).
-    Ended(String),
-}
-
 pub struct PlcFace {
     pub local_addr: SocketAddr,
-    stop: Option<tokio::sync::oneshot::Sender<()>>,
-    thread: Option<JoinHandle<Result<(), String>>>,
-    epoch: Instant,
-    /// Milliseconds since `epoch` at the face's last tick.
-    beat: Arc<AtomicU64>,
+    thread: FaceThread,
 }
 
 /// Fault injection for the tests of the service's supervision (never set in
@@ -100,94 +83,48 @@ impl PlcFace {
         opts: FaceOptions,
     ) -> io::Result<Self> {
         let local_addr = listener.local_addr()?;
-        let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-        let epoch = Instant::now();
-        let beat = Arc::new(AtomicU64::new(0));
         let fault = std::env::var(FAULT_ENV).unwrap_or_default();
-        let thread = {
-            let beat = beat.clone();
-            std::thread::Builder::new()
-                .name("probebridge-plc-face".into())
-                .spawn(move || -> Result<(), String> {
-                    let rt = tokio::runtime::Builder::new_current_thread()
-                        .enable_all()
-                        .build()
-                        .map_err(|e| format!("cannot start its runtime: {e}"))?;
-                    rt.block_on(async move {
-                        let listener = tokio::net::TcpListener::from_std(listener)
-                            .map_err(|e| format!("cannot listen: {e}"))?;
-                        tokio::spawn(tick(beat, epoch));
-                        if !fault.is_empty() {
-                            tokio::time::sleep(Duration::from_secs(1)).await;
-                            tracing::warn!("{FAULT_ENV}={fault}: injecting the fault");
-                            match fault.as_str() {
-                                // Blocks the runtime: no accept, no answer, no tick.
-                                "stall" => loop {
-                                    std::thread::park();
-                                },
-                                _ => return Err(format!("ended by {FAULT_ENV}={fault}")),
-                            }
-                        }
-                        accept_loop(listener, shared, opts, rx).await;
-                        Ok(())
-                    })
-                })?
-        };
-        Ok(Self {
-            local_addr,
-            stop: Some(tx),
-            thread: Some(thread),
-            epoch,
-            beat,
-        })
+        let thread = FaceThread::spawn("probebridge-plc-face", move |heartbeat, stop| {
+            serve(listener, shared, opts, (heartbeat, stop), fault)
+        })?;
+        Ok(Self { local_addr, thread })
     }
 
     pub fn health(&mut self) -> FaceHealth {
-        if self.thread.as_ref().is_some_and(|t| t.is_finished()) {
-            let why = match self.thread.take().map(JoinHandle::join) {
-                Some(Ok(Err(e))) => e,
-                Some(Ok(Ok(()))) => "its loop returned".into(),
-                Some(Err(_)) => "its thread panicked".into(),
-                None => "gone".into(),
-            };
-            return FaceHealth::Ended(why);
-        }
-        if self.thread.is_none() {
-            return FaceHealth::Ended("gone".into());
-        }
-        let last = Duration::from_millis(self.beat.load(Ordering::Acquire));
-        let silent = self.epoch.elapsed().saturating_sub(last);
-        if silent > BEAT * 10 {
-            FaceHealth::Stalled(silent)
-        } else {
-            FaceHealth::Serving
-        }
+        self.thread.health()
     }
 
     /// Leaves a stalled face's thread behind instead of waiting for it on drop.
-    pub fn abandon(mut self) {
-        self.stop.take();
-        self.thread.take();
+    pub fn abandon(self) {
+        self.thread.abandon();
     }
 }
 
-impl Drop for PlcFace {
-    fn drop(&mut self) {
-        if let Some(tx) = self.stop.take() {
-            let _ = tx.send(());
-        }
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
+/// The face's runtime: its heartbeat, the fault injected if asked, then the accept
+/// loop until `stop`.
+async fn serve(
+    listener: std::net::TcpListener,
+    shared: Shared,
+    opts: FaceOptions,
+    (heartbeat, stop): (Heartbeat, tokio::sync::oneshot::Receiver<()>),
+    fault: String,
+) -> Result<(), String> {
+    let listener =
+        tokio::net::TcpListener::from_std(listener).map_err(|e| format!("cannot listen: {e}"))?;
+    tokio::spawn(heartbeat.run());
+    if !fault.is_empty() {
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        tracing::warn!("{FAULT_ENV}={fault}: injecting the fault");
+        match fault.as_str() {
+            // Blocks the runtime: no accept, no answer, no tick.
+            "stall" => loop {
+                std::thread::park();
+            },
+            _ => return Err(format!("ended by {FAULT_ENV}={fault}")),
         }
     }
-}
-
-async fn tick(beat: Arc<AtomicU64>, epoch: Instant) {
-    let mut every = tokio::time::interval(BEAT);
-    loop {
-        every.tick().await;
-        beat.store(epoch.elapsed().as_millis() as u64, Ordering::Release);
-    }
+    accept_loop(listener, shared, opts, stop).await;
+    Ok(())
 }
 
 /// The open connections, shared by the accept loop and the connection tasks.

@@ -22,8 +22,8 @@ pub mod methods;
 pub mod users;
 pub mod values;
 
+use super::face_thread::{FaceHealth, FaceThread, Heartbeat};
 use super::gateway::Shared;
-use super::modbus_face::FaceHealth;
 use opcua::crypto::SecurityPolicy;
 use opcua::server::diagnostics::NamespaceMetadata;
 use opcua::server::node_manager::memory::{simple_node_manager, SimpleNodeManager};
@@ -32,13 +32,10 @@ use opcua::types::{BuildInfo, DateTime, MessageSecurityMode};
 use std::net::SocketAddr;
 use std::os::unix::fs::{DirBuilderExt, PermissionsExt};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
-use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-/// How often the face ticks its heartbeat.
-const BEAT: Duration = Duration::from_millis(100);
 /// How often the server looks at its subscriptions: a change reaches a subscriber
 /// within about this plus the client's publishing interval.
 const SUBSCRIPTION_TICK_MS: u64 = 10;
@@ -54,10 +51,7 @@ pub struct OpcuaFace {
     pub local_addr: SocketAddr,
     pub endpoint_url: String,
     pub certificate: PathBuf,
-    stop: Option<tokio::sync::oneshot::Sender<()>>,
-    thread: Option<JoinHandle<Result<(), String>>>,
-    epoch: Instant,
-    beat: Arc<AtomicU64>,
+    thread: FaceThread,
 }
 
 /// What the face needs from the rest of the service once the machine is up.
@@ -292,33 +286,18 @@ impl OpcuaFace {
         local_addr: SocketAddr,
         endpoint_url: String,
     ) -> Result<Self, String> {
-        let (tx, rx) = tokio::sync::oneshot::channel::<()>();
         let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
-        let epoch = Instant::now();
-        let beat = Arc::new(AtomicU64::new(0));
         let fault = std::env::var(FAULT_ENV).unwrap_or_default();
-        let thread = {
-            let beat = beat.clone();
-            std::thread::Builder::new()
-                .name("probebridge-opcua-face".into())
-                .spawn(move || -> Result<(), String> {
-                    let rt = tokio::runtime::Builder::new_current_thread()
-                        .enable_all()
-                        .build()
-                        .map_err(|e| format!("cannot start its runtime: {e}"))?;
-                    rt.block_on(serve(setup, ready_tx, rx, (beat, epoch), fault))
-                })
-                .map_err(|e| e.to_string())?
-        };
+        let thread = FaceThread::spawn("probebridge-opcua-face", move |heartbeat, stop| {
+            serve(setup, ready_tx, stop, heartbeat, fault)
+        })
+        .map_err(|e| e.to_string())?;
         let certificate = pki.join(OWN_CERT);
         let mut face = Self {
             local_addr,
             endpoint_url,
             certificate: certificate.clone(),
-            stop: Some(tx),
-            thread: Some(thread),
-            epoch,
-            beat,
+            thread,
         };
         match ready_rx.recv() {
             Ok(Ok(())) => {}
@@ -347,42 +326,12 @@ impl OpcuaFace {
     }
 
     pub fn health(&mut self) -> FaceHealth {
-        if self.thread.as_ref().is_some_and(|t| t.is_finished()) {
-            let why = match self.thread.take().map(JoinHandle::join) {
-                Some(Ok(Err(e))) => e,
-                Some(Ok(Ok(()))) => "its loop returned".into(),
-                Some(Err(_)) => "its thread panicked".into(),
-                None => "gone".into(),
-            };
-            return FaceHealth::Ended(why);
-        }
-        if self.thread.is_none() {
-            return FaceHealth::Ended("gone".into());
-        }
-        let last = Duration::from_millis(self.beat.load(Ordering::Acquire));
-        let silent = self.epoch.elapsed().saturating_sub(last);
-        if silent > BEAT * 10 {
-            FaceHealth::Stalled(silent)
-        } else {
-            FaceHealth::Serving
-        }
+        self.thread.health()
     }
 
     /// Leaves a stalled face's thread behind instead of waiting for it on drop.
-    pub fn abandon(mut self) {
-        self.stop.take();
-        self.thread.take();
-    }
-}
-
-impl Drop for OpcuaFace {
-    fn drop(&mut self) {
-        if let Some(tx) = self.stop.take() {
-            let _ = tx.send(());
-        }
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
+    pub fn abandon(self) {
+        self.thread.abandon();
     }
 }
 
@@ -392,7 +341,7 @@ async fn serve(
     setup: Setup,
     ready: std::sync::mpsc::Sender<Result<(), String>>,
     stop: tokio::sync::oneshot::Receiver<()>,
-    (beat, epoch): (Arc<AtomicU64>, Instant),
+    heartbeat: Heartbeat,
     fault: String,
 ) -> Result<(), String> {
     let up = bring_up(setup).await;
@@ -404,13 +353,7 @@ async fn serve(
         }
     };
     let _ = ready.send(Ok(()));
-    let ticker = tokio::spawn(async move {
-        let mut every = tokio::time::interval(BEAT);
-        loop {
-            every.tick().await;
-            beat.store(epoch.elapsed().as_millis() as u64, Ordering::Release);
-        }
-    });
+    let ticker = tokio::spawn(heartbeat.run());
     let faulty = async {
         if fault.is_empty() {
             std::future::pending::<()>().await;

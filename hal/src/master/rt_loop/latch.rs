@@ -2,8 +2,9 @@
 //! collection: the first latch frame starts the stop of every axis, the contact is
 //! published once every moving axis's latch is in.
 
+use super::probing::{ArmStage, PendingContact, ProbeRequest};
 use super::{Activity, DriveLink, RtLoop};
-use crate::axis::{Axis, MAX_AXES};
+use crate::axis::MAX_AXES;
 use crate::cia402::touch_probe::{Probe, TouchProbeFunction, TouchProbeStatus};
 use crate::contact_sample::{ContactSample, ProbeWindow, SampleSink, FLAG_HW_LATCH};
 use crate::machine::ErrorKind;
@@ -17,40 +18,6 @@ use crate::motion_guard::ProbeInput;
 pub(super) fn is_armed(d: &DriveLink) -> bool {
     let s = TouchProbeStatus::from_bits(d.tp_status);
     d.tp_status_fresh && s.enabled(Probe::One) && !s.positive_edge_stored(Probe::One)
-}
-
-#[derive(Clone, Copy, Debug)]
-pub(super) enum ArmStage {
-    Disarm,
-    Enable,
-    WaitArmed,
-}
-
-/// A probing move as commanded.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct ProbeRequest {
-    pub(super) direction: [f64; 3],
-    pub(super) feed: f64,
-    pub(super) max_distance: f64,
-    pub(super) run_id: u64,
-}
-
-impl ProbeRequest {
-    /// Does the probing move move `axis`? (Only linear axes probe.)
-    pub(super) fn moves(&self, axis: Axis) -> bool {
-        self.direction.get(axis.index()).is_some_and(|&d| d != 0.0)
-    }
-}
-
-/// A contact whose stop is under way while latches of moving axes are still to come.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct PendingContact {
-    pub(super) request: ProbeRequest,
-    /// The SYNC of the cycle in which the first latch frame arrived.
-    pub(super) sync_ns: u64,
-    /// Each drive's (actual, setpoint) increments when it arrived: the step of the
-    /// period in which the drives latched (the stop changes both afterwards).
-    pub(super) step_inc: [(i32, i32); MAX_AXES],
 }
 
 impl<S: SampleSink> RtLoop<S> {

@@ -14,7 +14,8 @@
 //! after a shutdown (NMT reset communication, which also ends the drives' watch on the
 //! master's heartbeat).
 //!
-//! The files: this one (the loop's state and the commands), `latch` (probe arming and
+//! The files: this one (the loop's state and the commands), `probing` (a probing
+//! move's request, arming stage and pending contact), `latch` (probe arming and
 //! latch collection), `motion` (interpolation, stop and settling), `enable` (the CiA 402
 //! enable sequence), `supervision` (heartbeat, EMCY, faults) and `frames` (frames in,
 //! and the frames of each tick).
@@ -23,6 +24,7 @@ mod enable;
 mod frames;
 mod latch;
 mod motion;
+mod probing;
 mod supervision;
 
 use super::command::{Command, Detail, Reply, RtError};
@@ -35,7 +37,7 @@ use crate::contact_sample::{ProbeWindow, SampleSink};
 use crate::machine::ErrorKind;
 use crate::motion::{AxisLimits, Profile};
 use crate::motion_guard::{may_start_deflected, ProbeInput};
-use latch::{ArmStage, PendingContact, ProbeRequest};
+use probing::{ArmStage, PendingContact, ProbeRequest};
 
 /// How the loop is paced: on CLOCK_MONOTONIC at the SYNC period, or in lockstep with a
 /// simulator on a virtual clock (driven by `master::pacing`).

@@ -1,7 +1,7 @@
 //! Interpolation: the setpoint of each SYNC for moves and probing moves, the stop
 //! (braking along the path) and settling in position.
 
-use super::latch::ProbeRequest;
+use super::probing::ProbeRequest;
 use super::{Activity, RtLoop};
 use crate::cia402::statusword::Statusword;
 use crate::contact_sample::SampleSink;

@@ -1,8 +1,9 @@
 //! The triggers with the floors between them, the hot floors after, and their
 //! latencies matched with the estimators' receive times.
 
+use super::options::BenchArgs;
 use super::rig::Rig;
-use super::{BenchArgs, FLOOR_RUN, HOT_RUN, TRIGGER_RUN};
+use super::run_id::{FLOOR_RUN, HOT_RUN, TRIGGER_RUN};
 use crate::bench::{self};
 use crate::estimator::ReceiveTime;
 use crate::ipc::ContactPublisher;

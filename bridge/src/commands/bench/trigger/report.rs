@@ -1,8 +1,8 @@
 //! The report: settings, figures and losses printed, and all of it as JSON.
 
 use super::measure::{Latencies, Measured};
+use super::options::BenchArgs;
 use super::stats::Figures;
-use super::BenchArgs;
 use crate::bench::Summary;
 use crate::estimator::ArmedReceive;
 use hal::master::StartupReport;

@@ -2,7 +2,8 @@
 //! estimator, the simulated drives, the bridge's `CanMachine` with its sink, the
 //! floors' publisher and eventfd partner.
 
-use super::{BenchArgs, TRIGGER_RUN};
+use super::options::BenchArgs;
+use super::run_id::TRIGGER_RUN;
 use crate::bench::{self};
 use crate::commands::bench::Workspace;
 use crate::commands::estimator::DEFAULT_RECORD_CAPACITY;

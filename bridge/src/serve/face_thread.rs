@@ -1,0 +1,129 @@
+//! The thread a face serves on (the PLC face, the OPC UA face), as the service loop
+//! supervises it: a tokio runtime of its own, a heartbeat the face ticks, a stop the
+//! service sends. A face that stalls (its heartbeat stands still) or ends is seen by
+//! [`FaceThread::health`], and the service ends: the face's death is the service's
+//! death, and systemd restarts it.
+
+use std::future::Future;
+use std::io;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+use tokio::sync::oneshot;
+
+/// How often a face ticks its heartbeat; ten missed ticks and it is stalled.
+const BEAT: Duration = Duration::from_millis(100);
+
+/// How the face is doing, as the service loop sees it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum FaceHealth {
+    Serving,
+    /// Its heartbeat has not moved for this long.
+    Stalled(Duration),
+    /// Its thread has ended (why).
+    Ended(String),
+}
+
+/// The face's side of the heartbeat: [`Heartbeat::run`] on the face's runtime ticks it
+/// for as long as the runtime runs its tasks.
+pub struct Heartbeat {
+    epoch: Instant,
+    /// Milliseconds since `epoch` at the face's last tick.
+    beat: Arc<AtomicU64>,
+}
+
+impl Heartbeat {
+    /// Ticks every `BEAT`, forever: spawn it on the face's runtime.
+    pub async fn run(self) {
+        let mut every = tokio::time::interval(BEAT);
+        loop {
+            every.tick().await;
+            self.beat
+                .store(self.epoch.elapsed().as_millis() as u64, Ordering::Release);
+        }
+    }
+}
+
+/// A face's thread: its handle, its heartbeat and its stop. Dropping it stops the face
+/// and waits for its thread; [`FaceThread::abandon`] leaves a stalled one behind.
+pub struct FaceThread {
+    stop: Option<oneshot::Sender<()>>,
+    thread: Option<JoinHandle<Result<(), String>>>,
+    epoch: Instant,
+    beat: Arc<AtomicU64>,
+}
+
+impl FaceThread {
+    /// Starts thread `name` with a current-thread tokio runtime that runs the future
+    /// `serve` makes of the face's heartbeat and its stop. The future is made on the
+    /// thread, so it need not be `Send`. `Err` from it is why the face ended.
+    pub fn spawn<F, Fut>(name: &str, serve: F) -> io::Result<Self>
+    where
+        F: FnOnce(Heartbeat, oneshot::Receiver<()>) -> Fut + Send + 'static,
+        Fut: Future<Output = Result<(), String>>,
+    {
+        let (tx, rx) = oneshot::channel::<()>();
+        let epoch = Instant::now();
+        let beat = Arc::new(AtomicU64::new(0));
+        let heartbeat = Heartbeat {
+            epoch,
+            beat: beat.clone(),
+        };
+        let thread = std::thread::Builder::new().name(name.into()).spawn(
+            move || -> Result<(), String> {
+                let rt = tokio::runtime::Builder::new_current_thread()
+                    .enable_all()
+                    .build()
+                    .map_err(|e| format!("cannot start its runtime: {e}"))?;
+                rt.block_on(serve(heartbeat, rx))
+            },
+        )?;
+        Ok(Self {
+            stop: Some(tx),
+            thread: Some(thread),
+            epoch,
+            beat,
+        })
+    }
+
+    /// Ended (and why), stalled (its heartbeat has not moved for ten beats) or serving.
+    pub fn health(&mut self) -> FaceHealth {
+        if self.thread.as_ref().is_some_and(|t| t.is_finished()) {
+            let why = match self.thread.take().map(JoinHandle::join) {
+                Some(Ok(Err(e))) => e,
+                Some(Ok(Ok(()))) => "its loop returned".into(),
+                Some(Err(_)) => "its thread panicked".into(),
+                None => "gone".into(),
+            };
+            return FaceHealth::Ended(why);
+        }
+        if self.thread.is_none() {
+            return FaceHealth::Ended("gone".into());
+        }
+        let last = Duration::from_millis(self.beat.load(Ordering::Acquire));
+        let silent = self.epoch.elapsed().saturating_sub(last);
+        if silent > BEAT * 10 {
+            FaceHealth::Stalled(silent)
+        } else {
+            FaceHealth::Serving
+        }
+    }
+
+    /// Leaves a stalled face's thread behind instead of waiting for it on drop.
+    pub fn abandon(mut self) {
+        self.stop.take();
+        self.thread.take();
+    }
+}
+
+impl Drop for FaceThread {
+    fn drop(&mut self) {
+        if let Some(tx) = self.stop.take() {
+            let _ = tx.send(());
+        }
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
