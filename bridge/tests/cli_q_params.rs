@@ -208,3 +208,104 @@ fn check_evaluates_parameters_before_anything_moves() {
         .args(["--presets", dir.join("p.toml").to_str().unwrap()]));
     assert!(out.status.success());
 }
+
+/// table-ac with `[cycles] mStrobeRotAxPos = 203` (the PLC positions A and C), in `dir`.
+fn m_function_machine(dir: &Path) -> PathBuf {
+    let shipped = std::fs::read_to_string(configs().join("machines/table-ac.toml")).unwrap();
+    assert!(
+        shipped.contains("\n[cycles]\n"),
+        "table-ac has a [cycles] table"
+    );
+    let machine = dir.join("table-ac-m203.toml");
+    std::fs::write(
+        &machine,
+        shipped.replace("\n[cycles]\n", "\n[cycles]\nmStrobeRotAxPos = 203\n"),
+    )
+    .unwrap();
+    machine
+}
+
+/// The strobes of M203 the run printed, in order: (Q120, Q122) of each.
+fn strobes(said: &str) -> Vec<(f64, f64)> {
+    said.lines()
+        .filter_map(|l| l.trim().strip_prefix("M203 (mStrobeRotAxPos): "))
+        .map(|rest| {
+            let words: Vec<&str> = rest.split(':').next().unwrap().split(' ').collect();
+            let value = |q: &str| {
+                words
+                    .iter()
+                    .find_map(|w| w.strip_prefix(&format!("{q}=")))
+                    .unwrap_or_else(|| panic!("{q} in {rest}"))
+                    .parse::<f64>()
+                    .unwrap()
+            };
+            assert!(!rest.contains("Q121"), "table-ac has no B axis: {rest}");
+            (value("Q120"), value("Q122"))
+        })
+        .collect()
+}
+
+/// Must show: with `mStrobeRotAxPos` the rotary turns of 451 are strobes of the M
+/// function with the target angles in Q120 (A) and Q122 (C), in the order the cycle
+/// measures (A+90, then C's reference and its three positions, back to the start); the
+/// simulator carries out each positioning (the spheres are where they should be: the
+/// same results as without the key); the program reads Q120/Q122 after the cycle, and
+/// `--json` lists them.
+#[test]
+fn rotary_axes_positioned_by_an_m_function_write_q120_to_q122() {
+    let retracted = program("+1").replace("Q408=+0 ;", "Q408=+100 ;");
+    let (dir, scenario, plain) = table_ac_case("q-m203-plain", SCENARIO, &retracted);
+    let plain = run_case(&dir, &scenario, &plain).1;
+    // Without the key Q120 is nobody's: `check` refuses a program that reads it.
+    assert!(plain["parameters"].get("Q120").is_none(), "{plain}");
+    let body = retracted.replace("19 Q10 = Q141 * 1000", "19 Q10 = Q120 + Q122 + 7");
+    let (dir, scenario, program) = table_ac_case("q-m203", SCENARIO, &body);
+    let machine = m_function_machine(&dir);
+    let text = std::fs::read_to_string(&scenario).unwrap();
+    let first = text.lines().next().unwrap();
+    std::fs::write(
+        &scenario,
+        text.replacen(first, &format!("machine = \"{}\"", machine.display()), 1),
+    )
+    .unwrap();
+    let (out, v) = run_program(
+        &program,
+        &scenario,
+        &dir,
+        &[
+            "--kinematics",
+            dir.join("k.toml").to_str().unwrap(),
+            "--yes",
+        ],
+    );
+    let v = v.expect("run wrote its JSON");
+    assert!(out.status.success(), "{v}");
+    // The progress lines go to stderr.
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        strobes(&said),
+        [
+            (90.0, 0.0),
+            (0.0, 0.0),
+            (0.0, 90.0),
+            (0.0, 180.0),
+            (0.0, 270.0),
+            (0.0, 0.0)
+        ],
+        "{said}"
+    );
+    // The PLC's positionings put the spheres where the NC's do: the same results.
+    let p = &v["parameters"];
+    assert_eq!(p["Q120"].as_f64(), Some(0.0), "{v}");
+    assert_eq!(p["Q122"].as_f64(), Some(0.0), "{v}");
+    assert!(p.get("Q121").is_none(), "{v}");
+    assert_eq!(v["cycles"][0]["q"]["Q120"].as_f64(), Some(0.0), "{v}");
+    assert_eq!(p["Q10"].as_f64(), Some(7.0), "{v}");
+    for q in ["Q141", "Q143"] {
+        let (a, b) = (
+            p[q].as_f64().unwrap(),
+            plain["parameters"][q].as_f64().unwrap(),
+        );
+        assert!((a - b).abs() < 1e-6, "{q}: {a} with M203, {b} without");
+    }
+}

@@ -368,9 +368,15 @@ pub fn start_params(remanent: &BTreeMap<QName, f64>) -> QParams {
     p
 }
 
-/// Parameters that a measuring cycle writes, as `check` sees them after the cycle.
-pub fn mark_cycle_results(params: &mut QParams, cycle: u16) {
-    for n in crate::q_params::results_of(cycle) {
+/// Parameters that a measuring cycle writes, as `check` sees them after the cycle;
+/// `rotary_targets`: what 451 also writes on this machine (Q120..Q122 with
+/// `mStrobeRotAxPos`).
+pub fn mark_cycle_results(params: &mut QParams, cycle: u16, rotary_targets: &[QName]) {
+    let also = if cycle == 451 { rotary_targets } else { &[] };
+    for n in crate::q_params::results_of(cycle)
+        .into_iter()
+        .chain(also.iter().copied())
+    {
         params.mark_measured(n);
     }
 }
@@ -411,6 +417,8 @@ pub struct CheckWalk<'p> {
     pending: Vec<CheckPath>,
     seen: std::collections::HashSet<u64>,
     paths: usize,
+    /// Q120..Q122 that cycle 451 writes on this machine (`mStrobeRotAxPos`).
+    rotary_targets: Vec<QName>,
 }
 
 /// A block `check` refuses while walking: its line, kind and why.
@@ -428,6 +436,7 @@ impl<'p> CheckWalk<'p> {
         datum: Datum,
         here: hal::AxisPositions,
         max_jumps: u64,
+        rotary_targets: Vec<QName>,
     ) -> Self {
         Self {
             program,
@@ -440,6 +449,7 @@ impl<'p> CheckWalk<'p> {
             pending: Vec::new(),
             seen: std::collections::HashSet::new(),
             paths: 0,
+            rotary_targets,
         }
     }
 
@@ -473,8 +483,12 @@ impl<'p> CheckWalk<'p> {
                 Ok(Step::Act(i)) => {
                     let b = &program.blocks[i];
                     match &b.statement {
-                        Statement::Cycle(c) => mark_cycle_results(&mut cur.params, c.head.cycle),
-                        Statement::Deferred(d) => mark_cycle_results(&mut cur.params, d.cycle),
+                        Statement::Cycle(c) => {
+                            mark_cycle_results(&mut cur.params, c.head.cycle, &self.rotary_targets)
+                        }
+                        Statement::Deferred(d) => {
+                            mark_cycle_results(&mut cur.params, d.cycle, &self.rotary_targets)
+                        }
                         _ => {}
                     }
                     return Ok(Some(b));

@@ -1,6 +1,7 @@
 //! Cycle 451's plan refuses, before anything moves, what the machine cannot do; the
 //! error's kind says which check failed.
 
+use probebridge_cycles::cycle451::rotary_m_function::written_params;
 use probebridge_cycles::cycle451::{plan, plan_on, KinematicsParams, PlanErrorKind};
 use probebridge_cycles::kinematics::Mode;
 use probebridge_cycles::program::CycleKind;
@@ -72,8 +73,12 @@ fn rotary_axes_positioned_by_an_m_function() {
     let retracted = params(&cfg, "Q408=+0", "Q408=+30");
     // Not set (-1): as before.
     assert_eq!(plan_on(&retracted, &probe, &cfg).unwrap().rotary_m, None);
+    assert!(written_params(&cfg).is_empty());
     cfg.parameters.strobe_rot_ax_pos = 203;
     assert_eq!(cfg.parameters.invalid_field(), None);
+    // check knows that 451 then writes Q120 (A) and Q122 (C): table-ac has no B.
+    let names: Vec<String> = written_params(&cfg).iter().map(|n| n.to_string()).collect();
+    assert_eq!(names, ["Q120", "Q122"]);
     assert_eq!(
         plan_on(&retracted, &probe, &cfg).unwrap().rotary_m,
         Some(203)

@@ -97,6 +97,7 @@ impl MeasuringCycle for KinematicsParams {
         let preset_measuring = m.preset;
         let measured = m.measure_axes()?;
         let spheres = m.spheres;
+        let rotary_targets = std::mem::take(&mut m.rotary_targets);
 
         let input = identify::input(&plan, active_set, &measured);
         let result = identify::identify(m.ctx.estimator, &input)?;
@@ -118,7 +119,9 @@ impl MeasuringCycle for KinematicsParams {
             .collect::<Result<Vec<_>, _>>()?;
         let axes = with_uncertainties(axes, &errors_u);
         let offset = ev.reference_ball() - preset_measuring;
-        let (q, qs) = ev.results(&axes, &offset);
+        let (mut q, qs) = ev.results(&axes, &offset);
+        // mStrobeRotAxPos: Q120..Q122 as the last strobe left them, the program's to read.
+        q.extend(rotary_targets);
         // Q431 = 2/3: the preset goes to the sphere centre measured at the reference.
         let mut preset_after = m.preset;
         if p.preset == 2 || p.preset == 3 {

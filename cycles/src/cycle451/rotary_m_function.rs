@@ -6,7 +6,9 @@
 
 use super::plan::KinematicsPlan;
 use crate::cycle::CycleContext;
+use crate::cycles_config::CyclesConfig;
 use crate::error::CycleError;
+use crate::q_params::QName;
 use hal::{Axis, AxisPositions, Machine};
 
 /// The start of the confirmation asked before a 451 on such a machine. The gateway
@@ -67,6 +69,20 @@ pub(super) fn check_start<M: Machine>(
     Ok(())
 }
 
+/// What 451 writes besides its results on `cfg`'s machine: with `mStrobeRotAxPos`,
+/// Q120..Q122 of its rotary axes (every measurement turns them); none otherwise.
+pub fn written_params(cfg: &CyclesConfig) -> Vec<QName> {
+    if cfg.parameters.rotary_m_function().is_none() {
+        return Vec::new();
+    }
+    Axis::ROTARY
+        .into_iter()
+        .filter(|a| cfg.machine.axis(*a).is_some())
+        .filter_map(target_param)
+        .filter_map(QName::parse)
+        .collect()
+}
+
 /// The Q120..Q122 values of a rotary positioning to `target`: the angles of the rotary
 /// axes it names.
 pub fn target_values(target: &AxisPositions) -> Vec<(&'static str, f64)> {
@@ -74,4 +90,14 @@ pub fn target_values(target: &AxisPositions) -> Vec<(&'static str, f64)> {
         .iter()
         .filter_map(|(a, v)| target_param(a).map(|q| (q, v)))
         .collect()
+}
+
+/// The line of one strobe of M`m`: the target angles as the TNC writes them, then the
+/// M function (`M203: Q120=+45.0000 Q122=+0.0000: the PLC positions the rotary axes`).
+pub fn strobe_note(m: u32, values: &[(&str, f64)]) -> String {
+    let qs: Vec<String> = values.iter().map(|(q, v)| format!("{q}={v:+.4}")).collect();
+    format!(
+        "M{m} (mStrobeRotAxPos): {}: the PLC positions the rotary axes",
+        qs.join(" ")
+    )
 }

@@ -183,6 +183,7 @@ pub fn preflight_program_from(
         Datum::new(cfg.presets.clone()),
         assumed_start(&cfg.machine).merged(start),
         cfg.parameters.max_jumps,
+        crate::cycle451::rotary_m_function::written_params(cfg),
     );
     while let Some(block) = walk.next_block().map_err(|f| Preflight::Program {
         line: f.line,

@@ -20,7 +20,12 @@ pub fn targets() -> Vec<Target> {
             prepare: || {
                 machines();
             },
-            seeds: || corpus::with(corpus::files(&corpus::configs("programs"), ".h"), &[STRINGS]),
+            seeds: || {
+                corpus::with(
+                    corpus::files(&corpus::configs("programs"), ".h"),
+                    &[STRINGS, FLOW],
+                )
+            },
             dictionary: &[
                 "TCH PROBE", "CYCL DEF", "BEGIN PGM", "END PGM", "TOOL CALL", "FMAX", "FAUTO",
                 "MM", "INCH", "L ", "~\n", ";", " ~", "QS400=", "Q", "R0", "M99", "IX", "IY",
@@ -39,6 +44,15 @@ pub fn targets() -> Vec<Target> {
                 // String comparison and string cycle values.
                 "STRCOMP ( SRC_QS1 SEA_QS2 )", "INSTR ( SRC_QS1 SEA_QS2 BEG0 )", "SEA_QS",
                 "SRC_QS", " BEG", "QS400=QS1", "FN 9: IF QS1 EQU QS2 GOTO LBL 1",
+                // Every FN of 0..16 (6..8, 13, 15 and 16 are refused at their line), the
+                // bare words the mutator can recombine, the program's mode and M91/M92.
+                "FN 1: Q1 = +Q2 + +3", "FN 2: Q1 = +Q2 - +3", "FN 3: Q1 = +Q2 * +3",
+                "FN 6: Q1 = SIN +30", "FN 7: Q1 = COS +30", "FN 8: Q1 = +3 LEN +4",
+                "FN 13: Q1 = +3 ANG +4", "FN 15: PRINT Q1", "FN 16: F-PRINT TNC:\\M.A / TNC:\\O.TXT",
+                "FN ", "FN 99: ", "QS", "QL", "QR", "QR0 = QR0 + 1", "SUBSTR", "TONUMB", "TOCHAR",
+                "STRLEN", "STRCOMP", "INSTR", "DAT+", "DECIMALS", "LEN", "BEG", "EQU", "NE", "GT",
+                "LT", "GOTO", "LBL", "CALL LBL", " REP ", "CALL LBL \"SUB\" REP 2", "LBL \"SUB\"",
+                "FUNCTION MODE MILL", "FUNCTION MODE TURN", "FUNCTION ", "M91", "M92", "L Z+Q20 R0 FMAX M91",
             ],
             run: run_check,
         },
@@ -85,6 +99,43 @@ const STRINGS: &str = "0 BEGIN PGM STRINGS MM
   Q309=+0
 9 LBL 9
 10 END PGM STRINGS MM
+";
+
+/// A seed with every kind of Q-parameter block: QL/QR/QS, FN 0..5 and the formulas,
+/// each jump, a subprogram with REP, TOCHAR/SUBSTR/TONUMB, M91 and FUNCTION MODE, FN 14.
+const FLOW: &str = "0 BEGIN PGM FLOW MM
+1 FUNCTION MODE MILL
+2 TOOL CALL \"TOUCH_PROBE\" Z
+3 FN 0: Q1 = +5
+4 FN 1: Q2 = +Q1 + +2.5
+5 FN 2: Q3 = +Q2 - +1
+6 FN 3: Q4 = +Q3 * -2
+7 FN 4: Q5 = +Q4 / +4
+8 FN 5: Q6 = SQRT +16
+9 QL1 = ( Q1 + Q2 ) / 2 + SQ 3 - ABS -1 + INT 2.7 + FRAC 1.25 + SGN -4 + PI
+10 QR1 = 2
+11 QR1 = QR1 + 1
+12 QS1 = TOCHAR ( DAT+QL1 DECIMALS3 ) || \";\"
+13 QS2 = SUBSTR ( SRC_QS1 BEG0 LEN2 )
+14 Q7 = TONUMB ( SRC_QS2 ) + STRLEN ( SRC_QS1 )
+15 Q8 = 0
+16 CALL LBL \"SUB\" REP 2
+17 FN 9: IF +Q1 EQU +5 GOTO LBL 2
+18 FN 14: ERROR = 1000
+19 LBL 2
+20 FN 10: IF +Q1 NE +5 GOTO LBL 2
+21 FN 12: IF +Q2 LT +0 GOTO LBL 2
+22 FN 11: IF +Q7 GT +1000 GOTO LBL 99
+23 Q9 = Q6 * 250
+24 L Z+150 R0 FMAX M91
+25 L X+Q1 Y-Q2 R0 FQ9
+26 M30
+27 LBL \"SUB\"
+28 Q8 = Q8 + SIN 30 + COS 60 + TAN 45 + ASIN 0.5 + ACOS 0.5 + ATAN 1
+29 LBL 0
+30 LBL 99
+31 FN 14: ERROR = 1001
+32 END PGM FLOW MM
 ";
 
 struct Machine {

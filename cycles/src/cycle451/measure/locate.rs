@@ -177,10 +177,9 @@ impl<M: Machine> Measure<'_, '_, M> {
                 self.rotary(&start),
                 self.rotary(&first)
             ));
-            self.mv(
+            self.turn_rotary(
                 "turning the rotary axes to the first measurement at the safe height",
-                self.rotary(&first),
-                self.plan.rotary_feed,
+                &first,
             )?;
             self.now = first;
         }

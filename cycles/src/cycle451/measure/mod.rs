@@ -8,6 +8,7 @@
 
 use super::plan::KinematicsPlan;
 use super::report::SphereRecord;
+use super::rotary_m_function;
 use crate::cycle::CycleContext;
 use crate::cycle_block::CycleBlock;
 use crate::error::CycleError;
@@ -86,6 +87,9 @@ pub(super) struct Measure<'a, 'c, M: Machine> {
     located: Option<Sphere>,
     /// Spheres measured so far (a sphere probed twice counts once).
     pub spheres: usize,
+    /// With `mStrobeRotAxPos`: Q120..Q122 as the last strobe of the M function left
+    /// them (the program reads them after the cycle).
+    pub rotary_targets: BTreeMap<String, f64>,
 }
 
 impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
@@ -119,6 +123,7 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
             notes: Vec::new(),
             located: None,
             spheres: 0,
+            rotary_targets: BTreeMap::new(),
         })
     }
 
@@ -198,6 +203,24 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
 
     fn predicted_pole(&self, a: &Angles) -> Vector3<f64> {
         self.pole(a, &self.model.predict(a, &self.table_point))
+    }
+
+    /// Turns the rotary axes to `a` (`step` names the move in an error). With
+    /// `mStrobeRotAxPos` the TNC writes the target angles into Q120 (A), Q121 (B),
+    /// Q122 (C) and strobes the M function; the PLC positions the axes, which the
+    /// machine's positioning carries out like any other move.
+    fn turn_rotary(&mut self, step: &str, a: &Angles) -> Result<(), CycleError> {
+        let target = self.rotary(a);
+        let Some(m) = self.plan.rotary_m else {
+            return self.mv(step, target, self.plan.rotary_feed);
+        };
+        let values = rotary_m_function::target_values(&target);
+        self.note(rotary_m_function::strobe_note(m, &values));
+        for (q, v) in values {
+            self.rotary_targets.insert(q.to_string(), v);
+        }
+        let step = format!("{step}: M{m} (mStrobeRotAxPos)");
+        self.mv(&step, target, self.plan.rotary_feed)
     }
 
     fn rotary(&self, a: &Angles) -> AxisPositions {

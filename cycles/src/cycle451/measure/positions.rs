@@ -182,7 +182,7 @@ impl<M: Machine> Measure<'_, '_, M> {
             } else {
                 "turning the rotary axes at a height that clears the sphere (Q253)"
             };
-            self.mv(step, self.rotary(a), self.plan.rotary_feed)?;
+            self.turn_rotary(step, a)?;
             self.now = *a;
         }
         let pole = self.predicted_pole(&to);
