@@ -53,7 +53,11 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
         )
     };
     let read_only = files(false)?;
-    let cfg = cycles_config_with_presets(&machine_cfg, scenario.as_ref(), Some(&read_only.presets))
+    let mut cfg =
+        cycles_config_with_presets(&machine_cfg, scenario.as_ref(), Some(&read_only.presets))
+            .map_err(|e| e.to_string())?;
+    // The probes' calibration rows of the machine's state (cycle 460 writes there).
+    cfg.use_calibrations(&read_only.probes)
         .map_err(|e| e.to_string())?;
     let Some(program) = validated(args, &cfg, &read_only.kinematics)? else {
         return Ok(2);
@@ -63,8 +67,9 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     for n in &files.notes {
         tell!("state: {n}");
     }
-    let mut cfg = cfg;
     cfg.presets = cycles::preset_table::PresetTable::load(&files.presets, &cfg.machine)
+        .map_err(|e| e.to_string())?;
+    cfg.use_calibrations(&files.probes)
         .map_err(|e| e.to_string())?;
     if let Some(n) = scenario.as_ref().and_then(|sc| sc.preset) {
         cfg.start_with_preset(n)?;
@@ -73,6 +78,12 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     std::fs::create_dir_all(&out_dir)
         .map_err(|e| format!("cannot create {}: {e}", out_dir.display()))?;
     crate::output::check_output(args.json.as_deref())?;
+    if program.cycles().any(|c| c.head.cycle == 460) {
+        // Cycle 460 writes the probe table row at its end: a folder it cannot write
+        // is refused before anything moves.
+        crate::output::check_output(Some(&files.probes))
+            .map_err(|e| format!("probe table (cycle 460): {e}"))?;
+    }
 
     // The session first: it claims the `--service` prefix, so a second run on the
     // same prefix is refused before it looks for an estimator.

@@ -171,22 +171,8 @@ pub fn run_program<M: Machine>(
         let recalibrated = with_row(call, &calibrations);
         let call = recalibrated.as_ref().unwrap_or(call);
         let result = run_cycle(call, machine, &mut ctx, &mut report);
-        if let (CycleKind::CalibrateProbe(_), Status::Ok) = (&call.kind, result.status) {
-            // The row just written is the probe's from the next cycle on.
-            match ProbeCalibrations::load(&cfg.calibrations.path, &cfg.probes) {
-                Ok(rows) => calibrations = Some(rows),
-                Err(e) => {
-                    report.stopped = Some(format!(
-                        "block {}: the probe table row written by cycle 460 cannot be read back: {e}",
-                        call.head.block
-                    ));
-                }
-            }
-        }
-        if let (CycleKind::SaveKinematics(p), Status::Ok) = (&call.kind, result.status) {
-            if p.mode == crate::cycle450::SaveMode::Restore {
-                note_restore(&mut report, &ctx.kinematics, &cfg.machine, call.head.block);
-            }
+        if result.status == Status::Ok {
+            after_cycle(call, cfg, &ctx.kinematics, &mut calibrations, &mut report);
         }
         if result.status == Status::Ok {
             // What the cycle measured is the program's to read (Q141.., QS146, ...).
@@ -200,6 +186,35 @@ pub fn run_program<M: Machine>(
     report.parameters = params.written();
     keep_remanent(&params, &qr_path, &mut report);
     report
+}
+
+/// What a cycle that succeeded leaves for the rest of the run: after 460 its probe
+/// table row is the probe's from the next cycle on (read back from the file); after
+/// 450's restore, the earlier 451 results say what the kinematics file is now.
+fn after_cycle(
+    call: &CycleCall,
+    cfg: &CyclesConfig,
+    kinematics: &std::path::Path,
+    calibrations: &mut Option<ProbeCalibrations>,
+    report: &mut ProgramReport,
+) {
+    match &call.kind {
+        CycleKind::CalibrateProbe(_) => {
+            match ProbeCalibrations::load(&cfg.calibrations.path, &cfg.probes) {
+                Ok(rows) => *calibrations = Some(rows),
+                Err(e) => {
+                    report.stopped = Some(format!(
+                        "block {}: the probe table row written by cycle 460 cannot be read back: {e}",
+                        call.head.block
+                    ));
+                }
+            }
+        }
+        CycleKind::SaveKinematics(p) if p.mode == crate::cycle450::SaveMode::Restore => {
+            note_restore(report, kinematics, &cfg.machine, call.head.block);
+        }
+        _ => {}
+    }
 }
 
 /// `call` with its probe's calibration from `rows` (the probe table after a cycle 460
