@@ -53,12 +53,7 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
         )
     };
     let read_only = files(false)?;
-    let mut cfg =
-        cycles_config_with_presets(&machine_cfg, scenario.as_ref(), Some(&read_only.presets))
-            .map_err(|e| e.to_string())?;
-    // The probes' calibration rows of the machine's state (cycle 460 writes there).
-    cfg.use_calibrations(&read_only.probes)
-        .map_err(|e| e.to_string())?;
+    let mut cfg = state_cycles_config(&machine_cfg, scenario.as_ref(), &read_only)?;
     let Some(program) = validated(args, &cfg, &read_only.kinematics)? else {
         return Ok(2);
     };
@@ -69,8 +64,7 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     }
     cfg.presets = cycles::preset_table::PresetTable::load(&files.presets, &cfg.machine)
         .map_err(|e| e.to_string())?;
-    cfg.use_calibrations(&files.probes)
-        .map_err(|e| e.to_string())?;
+    use_state_probes(&mut cfg, &files.probes, &program)?;
     if let Some(n) = scenario.as_ref().and_then(|sc| sc.preset) {
         cfg.start_with_preset(n)?;
     }
@@ -78,12 +72,6 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     std::fs::create_dir_all(&out_dir)
         .map_err(|e| format!("cannot create {}: {e}", out_dir.display()))?;
     crate::output::check_output(args.json.as_deref())?;
-    if program.cycles().any(|c| c.head.cycle == 460) {
-        // Cycle 460 writes the probe table row at its end: a folder it cannot write
-        // is refused before anything moves.
-        crate::output::check_output(Some(&files.probes))
-            .map_err(|e| format!("probe table (cycle 460): {e}"))?;
-    }
 
     // The session first: it claims the `--service` prefix, so a second run on the
     // same prefix is refused before it looks for an estimator.
@@ -181,6 +169,36 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     }
     closed?;
     Ok(if report.completed() { 0 } else { 1 })
+}
+
+/// The machine as the cycles see it with the preset table and the probes' calibration
+/// rows of the machine's state `files` (cycle 460 writes there).
+fn state_cycles_config(
+    machine_cfg: &hal::config::MachineConfig,
+    scenario: Option<&sim::Scenario>,
+    files: &crate::machine_state::MachineFiles,
+) -> Result<cycles::CyclesConfig, String> {
+    let mut cfg = cycles_config_with_presets(machine_cfg, scenario, Some(&files.presets))
+        .map_err(|e| e.to_string())?;
+    cfg.use_calibrations(&files.probes)
+        .map_err(|e| e.to_string())?;
+    Ok(cfg)
+}
+
+/// The probes' calibration rows of the machine's state at `probes` for `cfg` (cycle
+/// 460 writes its row there, at its end: with a 460 in `program` a file that could not
+/// be written is refused now, before anything moves).
+fn use_state_probes(
+    cfg: &mut cycles::CyclesConfig,
+    probes: &std::path::Path,
+    program: &Program,
+) -> Result<(), String> {
+    cfg.use_calibrations(probes).map_err(|e| e.to_string())?;
+    if program.cycles().any(|c| c.head.cycle == 460) {
+        crate::output::check_output(Some(probes))
+            .map_err(|e| format!("probe table (cycle 460): {e}"))?;
+    }
+    Ok(())
 }
 
 /// The program, loaded and refused (`None`, said on stderr) as `check` refuses it:
