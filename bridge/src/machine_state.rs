@@ -1,7 +1,8 @@
 //! The files a machine remembers between runs, in its folder of the state directory
 //! ([`crate::state_dir`]): `<state>/<machine>/<machine>.presets.toml`,
 //! `<machine>.kinematics.toml` (its `.prev`), `<machine>.kinematics.saved/` (cycle
-//! 450), and the protocols (`protocols/`). The same layout for the CLI and `serve`.
+//! 450), `<machine>.probes.toml` (the probes' calibration rows, cycle 460), and the
+//! protocols (`protocols/`). The same layout for the CLI and `serve`.
 //! A file missing there is seeded from the shipped one beside the machine
 //! configuration (copied as it is, comments and all) the first time a command that may
 //! write it runs; `check` only reads (the state's file, else the shipped one).
@@ -9,6 +10,7 @@
 
 use cycles::kinematics_file::ActiveKinematics;
 use cycles::preset_table::PresetTable;
+use cycles::probe_table::probes_file::ProbeCalibrations;
 use hal::config::MachineConfig;
 use std::path::{Path, PathBuf};
 
@@ -17,6 +19,8 @@ use std::path::{Path, PathBuf};
 pub struct MachineFiles {
     pub presets: PathBuf,
     pub kinematics: PathBuf,
+    /// The probes' calibration rows (cycle 460 writes them; 431, 444, 451 read them).
+    pub probes: PathBuf,
     /// The machine's state folder (protocols go to `protocols/` below it by default).
     pub dir: PathBuf,
     /// What to tell the user: each file read, and where it was seeded from.
@@ -62,10 +66,10 @@ pub fn machine_files(
                 notes.push(format!(
                     "{what}: {} (none yet: {})",
                     state.display(),
-                    if what == "presets" {
-                        "row 0 at the machine origin"
-                    } else {
-                        "the nominal kinematics"
+                    match what {
+                        "presets" => "row 0 at the machine origin",
+                        "probes" => "no calibration rows: every probe as [[probe]] gives it",
+                        _ => "the nominal kinematics",
                     }
                 ));
                 return Ok(state);
@@ -98,9 +102,11 @@ pub fn machine_files(
         ActiveKinematics::default_path(cfg),
         "kinematics",
     )?;
+    let probes = pick(None, ProbeCalibrations::default_path(cfg), "probes")?;
     Ok(MachineFiles {
         presets,
         kinematics,
+        probes,
         dir,
         notes,
     })
@@ -121,7 +127,11 @@ impl MachineFiles {
     }
 
     fn watched(&self) -> Vec<PathBuf> {
-        let mut v = vec![self.presets.clone(), self.kinematics.clone()];
+        let mut v = vec![
+            self.presets.clone(),
+            self.kinematics.clone(),
+            self.probes.clone(),
+        ];
         if let Ok(rd) = std::fs::read_dir(self.saved_dir()) {
             v.extend(rd.flatten().map(|e| e.path()));
         }

@@ -124,8 +124,8 @@ enum Cmd {
         /// <machine>.kinematics.toml in the machine's state folder.
         #[arg(long)]
         kinematics: Option<PathBuf>,
-        /// The state directory (preset table, kinematics, protocols, one folder per
-        /// machine); default: $XDG_STATE_HOME/probebridge, else
+        /// The state directory (preset table, kinematics, probe table, protocols, one
+        /// folder per machine); default: $XDG_STATE_HOME/probebridge, else
         /// ~/.local/state/probebridge.
         #[arg(long, value_name = "DIR")]
         state_dir: Option<PathBuf>,

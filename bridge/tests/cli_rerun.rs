@@ -56,7 +56,7 @@ fn q_values(v: &serde_json::Value) -> Vec<BTreeMap<String, f64>> {
 }
 
 /// (program, scenario) as the table of examples in docs/cycles.md lists them.
-const EXAMPLES: [(&str, &str); 9] = [
+const EXAMPLES: [(&str, &str); 10] = [
     ("431-plane.h", "tilted-plane.toml"),
     ("431-plane-y.h", "tilted-plane-y.toml"),
     ("444-freeform.h", "freeform.toml"),
@@ -66,6 +66,7 @@ const EXAMPLES: [(&str, &str); 9] = [
     ("451-preset-set.h", "demo-sphere.toml"),
     ("451-preset-247.h", "demo-sphere.toml"),
     ("450-save-restore.h", "demo-sphere.toml"),
+    ("460-calibrate.h", "demo-sphere.toml"),
 ];
 
 #[test]

@@ -362,8 +362,61 @@ pub static CYCLE_450: CycleTable = CycleTable {
     ],
 };
 
+/// Most directions per ring of cycle 460's 3D calibration.
+pub const MAX_POINTS_3D: f64 = 30.0;
+
+pub static CYCLE_460: CycleTable = CycleTable {
+    number: 460,
+    name: "CALIBRATION OF TS ON A SPHERE",
+    params: &[
+        num(
+            "Q407",
+            "RADIUS OF CALIB. SPHERE",
+            (0.0001, 99.9999),
+            Unit::Length,
+            NONE,
+            Default::Required,
+        ),
+        SETUP_CLEARANCE,
+        ParamSpec {
+            name: "Q301",
+            title: "MOVE TO CLEARANCE",
+            kind: Kind::Number {
+                min: 0.0,
+                max: 1.0,
+                integer: true,
+                unit: Unit::None,
+            },
+            keywords: PREDEF,
+            default: Default::Number(1.0),
+        },
+        int(
+            "Q423",
+            "NO. OF PROBE POINTS",
+            (3.0, 8.0),
+            Default::Number(8.0),
+        ),
+        angle("Q380", "REFERENCE ANGLE", (0.0, 360.0)),
+        int("Q433", "CALIBRATE LENGTH", (0.0, 1.0), Default::Number(0.0)),
+        num(
+            "Q434",
+            "DATUM FOR LENGTH",
+            (-COORD, COORD),
+            Unit::Length,
+            NONE,
+            Default::Number(0.0),
+        ),
+        int(
+            "Q455",
+            "NO. OF POINTS IN 3D CAL.",
+            (0.0, MAX_POINTS_3D),
+            Default::Number(0.0),
+        ),
+    ],
+};
+
 /// Cycles this crate knows, by number.
-pub static TABLES: [&CycleTable; 4] = [&CYCLE_431, &CYCLE_444, &CYCLE_450, &CYCLE_451];
+pub static TABLES: [&CycleTable; 5] = [&CYCLE_431, &CYCLE_444, &CYCLE_450, &CYCLE_451, &CYCLE_460];
 
 pub fn table(cycle: u16) -> Option<&'static CycleTable> {
     TABLES.iter().copied().find(|t| t.number == cycle)
@@ -390,7 +443,7 @@ pub fn predef_names() -> Vec<&'static str> {
     names
 }
 
-/// "431, 444, 450, 451" for messages.
+/// "431, 444, 450, 451, 460" for messages.
 pub fn known_cycles() -> String {
     TABLES
         .iter()

@@ -7,6 +7,7 @@ use crate::cycle431::PlaneParams;
 use crate::cycle444::Probing3dParams;
 use crate::cycle450::SaveParams;
 use crate::cycle451::KinematicsParams;
+use crate::cycle460::CalibrationParams;
 pub use crate::cycle_block::{CycleBlock, Origin, Param, ToolCall, Value};
 use crate::datum::DatumBlock;
 pub use crate::diagnostic::{Diagnostic, ProgramErrors};
@@ -22,6 +23,8 @@ pub enum CycleKind {
     Probing3d(Probing3dParams),
     MeasureKinematics(KinematicsParams),
     SaveKinematics(SaveParams),
+    /// Cycle 460: calibrates the probe on a sphere, writes its probe table row.
+    CalibrateProbe(CalibrationParams),
 }
 
 /// One measuring cycle block: where it stands and its typed parameters.

@@ -24,7 +24,8 @@ pub struct CycleResult {
     /// NC block number (the line when the block has none).
     pub block: u32,
     pub cycle: u16,
-    /// Result Q parameters, mm and degrees.
+    /// Result Q parameters, mm and degrees; cycle 460: the probe table row's columns
+    /// R, CAL_OF1, CAL_OF2 and L after it (mm).
     pub q: BTreeMap<String, f64>,
     pub qs: BTreeMap<String, String>,
     pub status: Status,
@@ -37,6 +38,9 @@ pub struct CycleResult {
     /// Cycle 451: every measuring position, its sphere, the errors before and after.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kinematics: Option<Box<KinematicsReport>>,
+    /// Cycle 460: the probe table row before and after, what was kept and why.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<Box<CalibrationReport>>,
 }
 
 impl CycleResult {
@@ -58,6 +62,7 @@ impl CycleResult {
             message: Some(message.into()),
             u: BTreeMap::new(),
             kinematics: None,
+            calibration: None,
         }
     }
 }
@@ -157,6 +162,9 @@ impl ProgramReport {
                 out.push_str(&format!("  {k} = \"{v}\"\n"));
             }
             if let Some(k) = &c.kinematics {
+                out.push_str(&k.summary());
+            }
+            if let Some(k) = &c.calibration {
                 out.push_str(&k.summary());
             }
         }

@@ -194,6 +194,7 @@ fn report_json_has_the_agreed_shape() {
         message: None,
         u: Default::default(),
         kinematics: None,
+        calibration: None,
     });
     assert_eq!(
         serde_json::to_string(&one).unwrap(),

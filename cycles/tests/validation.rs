@@ -15,6 +15,8 @@ fn valid_value(cycle: u16, name: &str) -> String {
         (444, "Q583") => "+1".into(),
         (451, "Q407") => "+12.5".into(),
         (451, "Q423") => "+4".into(),
+        (460, "Q407") => "+12.5".into(),
+        (460, "Q423") => "+8".into(),
         _ => "+0".into(),
     }
 }
@@ -247,7 +249,7 @@ fn unknown_cycle_number() {
     );
     assert_eq!(d.len(), 2, "{d:?}");
     assert!(d[0].starts_with(
-        "line 2: TCH PROBE 400: unknown cycle number 400 (supported: 431, 444, 450, 451)"
+        "line 2: TCH PROBE 400: unknown cycle number 400 (supported: 431, 444, 450, 451, 460)"
     ));
     assert!(d[1].starts_with("line 4: G425: unknown cycle number 425"));
 }
@@ -556,4 +558,51 @@ fn tool_axis_the_machine_has_no_spindle_for_is_refused() {
     );
     // Z, written or not, is the spindle's.
     assert!(check_program("1 TOOL CALL \"TOUCH_PROBE\" Z\n2 TOOL CALL 2", &cfg).is_empty());
+}
+
+/// Cycle 460 as the TNC writes it parses into its typed parameters; a value the table
+/// allows but the cycle cannot use (Q455 = 1 or 2: a 3D table needs 3 directions a
+/// ring) is refused at its line with the parameter's name; `CYCL DEF 460` says how the
+/// TNC writes a touch-probe cycle.
+#[test]
+fn cycle_460_parses_and_its_own_checks_name_the_line() {
+    let block = |q455: &str| {
+        format!(
+            "1 TOOL CALL \"TOUCH_PROBE\" Z\n2 TCH PROBE 460 CALIBRATION OF TS ON A SPHERE ~\n\
+  Q407=+12.5 ;RADIUS OF CALIB. SPHERE ~\n  Q320=+0 ;SET-UP CLEARANCE ~\n  Q301=+1 ;MOVE TO CLEARANCE ~\n\
+  Q423=+8 ;NO. OF PROBE POINTS ~\n  Q380=+0 ;REFERENCE ANGLE ~\n  Q433=+1 ;CALIBRATE LENGTH ~\n\
+  Q434=+80 ;DATUM FOR LENGTH ~\n  Q455={q455} ;NO. OF POINTS IN 3D CAL.\n"
+        )
+    };
+    let p = Program::parse(&block("+8"), &common::config()).unwrap();
+    let c = p.cycles().next().unwrap();
+    let CycleKind::CalibrateProbe(k) = &c.kind else {
+        panic!("{:?}", c.kind)
+    };
+    assert_eq!(
+        (
+            k.sphere_radius,
+            k.points,
+            k.calibrate_length,
+            k.length_datum,
+            k.points_3d
+        ),
+        (12.5, 8, true, 80.0, 8)
+    );
+    let d = diags_of(&block("+2"));
+    assert_eq!(d.len(), 1, "{d:?}");
+    assert!(
+        d[0].starts_with("line 10: Q455=2: a 3D calibration needs at least 3 directions"),
+        "{d:?}"
+    );
+    let d = diags_of(&block("+8").replace("Q407=+12.5", "Q407=+0"));
+    assert!(
+        d[0].starts_with("line 3: Q407=+0: RADIUS OF CALIB. SPHERE out of range"),
+        "{d:?}"
+    );
+    let d = diags_of("1 TOOL CALL \"TOUCH_PROBE\" Z\n2 CYCL DEF 460 Q407=+12.5");
+    assert!(
+        d[0].contains("a touch-probe cycle is written TCH PROBE 460 CALIBRATION OF TS ON A SPHERE"),
+        "{d:?}"
+    );
 }

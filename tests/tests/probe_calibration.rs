@@ -4,11 +4,13 @@
 //! 444 are off by what the physics says (computed here from the scenario's definition
 //! of the stylus, independently of the simulator's code).
 
+use cycles::probe_table::probes_file::ProbeCalibrations;
 use cycles::program::Program;
 use cycles::results::{ProgramReport, Status};
 use cycles::runner::{run_program, RunOptions};
 use hal::Machine;
 use probebridge_tests::conformance::{Backend, CanInproc};
+use probebridge_tests::world_machine::WorldMachine;
 use probebridge_tests::{cycles_config, scenario};
 
 type V = [f64; 3];
@@ -211,4 +213,246 @@ fn uncalibrated_431_heights_are_off_by_the_physics_of_the_stylus() {
         "off by {} mm only",
         want - 10.0
     );
+}
+
+// ---------------------------------------------------------------------------------
+// Cycle 460 calibrates the probe; 431, 444 and 451 then use its probe table row.
+
+/// Cycle 460 on the sphere of radius `radius` whose centre is at tool-axis coordinate
+/// `centre_z` (Q434, row 0 of the preset table at the machine origin), from the probe
+/// put SET_UP above its pole in machine coordinates.
+fn block_460(centre: V, radius: f64, q455: u32) -> String {
+    format!(
+        "L Z+200 R0 FMAX M91\nL X{:+} Y{:+} R0 FMAX M91\nL Z{:+} R0 FMAX M91\n\
+TCH PROBE 460 CALIBRATION OF TS ON A SPHERE ~\n  Q407={radius:+} ;RADIUS OF CALIB. SPHERE ~\n\
+  Q320=+0 ;SET-UP CLEARANCE ~\n  Q301=+1 ;MOVE TO CLEARANCE ~\n  Q423=+8 ;NO. OF PROBE POINTS ~\n\
+  Q380=+0 ;REFERENCE ANGLE ~\n  Q433=+1 ;CALIBRATE LENGTH ~\n  Q434={:+} ;DATUM FOR LENGTH ~\n\
+  Q455={q455:+} ;NO. OF POINTS IN 3D CAL.\nL Z+200 R0 FMAX M91\n",
+        centre[0],
+        centre[1],
+        centre[2] + radius + REAL.ball + 2.0 + 1.0,
+        centre[2]
+    )
+}
+
+/// What 460 must find for the stylus: R the mean lateral effective radius, the offset,
+/// and L the effective length (the length error less the axial pre-travel's excess over
+/// the lateral one, which L absorbs so that the pole reads R: see the probe table's doc).
+fn truth_460(s: &Stylus) -> [(&'static str, f64); 4] {
+    [
+        ("R", s.ball - s.pretravel),
+        ("CAL_OF1", s.offset[0]),
+        ("CAL_OF2", s.offset[1]),
+        ("L", s.length - (s.axial - s.pretravel)),
+    ]
+}
+
+fn world_run(
+    program: &str,
+    cfg: &cycles::CyclesConfig,
+    sc: &sim::Scenario,
+    tag: &str,
+) -> ProgramReport {
+    let mut m = WorldMachine::new(sc);
+    run_on(program, cfg, &mut m, tag)
+}
+
+/// With lobing of 4 µm, a 0.003 mm offset and a length error, and no noise, cycle 460
+/// recovers R, CAL_OF1/2 and L to 0.2 µm, reports each with its uncertainty and writes
+/// them to the probe table row.
+#[test]
+fn cycle_460_recovers_radius_offset_and_length() {
+    let sc = sphere_scenario(&REAL, REAL.ball);
+    let cfg = cycles_config(&sc);
+    let report = world_run(
+        &program(&[block_460(SPHERE_CENTRE, SPHERE_RADIUS, 0)]),
+        &cfg,
+        &sc,
+        "460",
+    );
+    assert!(report.completed(), "{}", report.to_json());
+    let c = &report.cycles[0];
+    assert_eq!(c.cycle, 460);
+    for (name, want) in truth_460(&REAL) {
+        let got = c.q[name];
+        println!(
+            "460 {name} {got:+.7} mm, the stylus {want:+.7} mm, u {:?}",
+            c.u.get(name)
+        );
+        assert!(
+            (got - want).abs() <= 2e-4,
+            "{name} = {got}, the stylus has {want}"
+        );
+        assert!(
+            c.u.get(name).is_some_and(|u| u.is_finite()),
+            "{name}: {:?}",
+            c.u
+        );
+    }
+    let cal = c.calibration.as_ref().expect("460's report");
+    assert!(cal.offset_measured && cal.length_measured, "{cal:?}");
+    assert_eq!(cal.before.r, REAL.ball);
+    let rows = ProbeCalibrations::load(&cfg.calibrations.path, &cfg.probes).unwrap();
+    let row = rows.row("TOUCH_PROBE").expect("the row written");
+    assert_eq!(
+        (row.r, row.cal_of1, row.cal_of2, row.l),
+        (c.q["R"], c.q["CAL_OF1"], c.q["CAL_OF2"], c.q["L"])
+    );
+    let json = report.to_json();
+    assert!(
+        json.contains("\"calibration\"") && json.contains("\"CAL_OF1\""),
+        "{json}"
+    );
+}
+
+/// The world's machine without an orientable spindle (`Machine::orient_spindle`'s
+/// default).
+struct FixedSpindle(WorldMachine);
+
+impl Machine for FixedSpindle {
+    type Error = hal::MachineError;
+
+    fn axes(&self) -> u8 {
+        self.0.axes()
+    }
+
+    fn positions(&mut self) -> Result<hal::AxisPositions, hal::MachineError> {
+        self.0.positions()
+    }
+
+    fn move_to(&mut self, target: &hal::AxisPositions, feed: f64) -> Result<(), hal::MachineError> {
+        self.0.move_to(target, feed)
+    }
+
+    fn probe(&mut self, mv: &hal::ProbeMove) -> Result<hal::Contact, hal::MachineError> {
+        self.0.probe(mv)
+    }
+
+    fn set_run(&mut self, run_id: u64) {
+        self.0.set_run(run_id);
+    }
+}
+
+/// A machine whose spindle cannot be oriented: the offset cannot be separated from
+/// the sphere's position; R and L are still calibrated, the offset is kept, and the
+/// report says why.
+#[test]
+fn without_an_orientable_spindle_the_offset_is_kept_and_said() {
+    let sc = sphere_scenario(&REAL, REAL.ball);
+    let cfg = cycles_config(&sc);
+    let mut m = FixedSpindle(WorldMachine::new(&sc));
+    let report = run_on(
+        &program(&[block_460(SPHERE_CENTRE, SPHERE_RADIUS, 0)]),
+        &cfg,
+        &mut m,
+        "460-fixed",
+    );
+    assert!(report.completed(), "{}", report.to_json());
+    let c = &report.cycles[0];
+    assert_eq!((c.q["CAL_OF1"], c.q["CAL_OF2"]), (0.0, 0.0));
+    assert!(!c.u.contains_key("CAL_OF1"), "{:?}", c.u);
+    let cal = c.calibration.as_ref().unwrap();
+    assert!(!cal.offset_measured);
+    assert!(
+        cal.notes.iter().any(|n| n.contains("cannot be separated")),
+        "{:?}",
+        cal.notes
+    );
+    assert!(
+        report.to_text().contains("cannot be separated"),
+        "{}",
+        report.to_text()
+    );
+    for (name, want) in [truth_460(&REAL)[0], truth_460(&REAL)[3]] {
+        assert!(
+            (c.q[name] - want).abs() <= 2e-4,
+            "{name} = {}, the stylus has {want}",
+            c.q[name]
+        );
+    }
+}
+
+/// After 460 with a 3D calibration (8 directions per ring: the three lobes resolved),
+/// 444 lands within 0.3 µm of the sphere in the same program (the row is the probe's
+/// from the next cycle on), and 431 on a face with the written row, where uncalibrated
+/// they are off by micrometres (the tests above).
+#[test]
+fn after_460_431_and_444_land_on_the_truth() {
+    let sc = sphere_scenario(&REAL, REAL.ball);
+    let cfg = cycles_config(&sc);
+    let points = sphere_points();
+    let mut blocks = vec![block_460(SPHERE_CENTRE, SPHERE_RADIUS, 8)];
+    blocks.extend(points.iter().map(|(p, n)| block_444(*p, *n)));
+    let report = world_run(&program(&blocks), &cfg, &sc, "460-444");
+    assert!(report.completed(), "{}", report.to_json());
+    for (c, (_, n)) in report.cycles[1..].iter().zip(&points) {
+        let got = c.q["Q164"];
+        println!("444 after 460, normal {n:?}: Q164 {got:+.7} mm");
+        assert!(got.abs() <= 3e-4, "normal {n:?}: Q164 = {got}");
+    }
+
+    let plane = scenario(&format!(
+        "machine = \"table-ac\"\n{}[[plane]]\npoint = [0.0, 0.0, 10.0]\nnormal = [0.0, 0.0, 1.0]\n",
+        REAL.probe_section(REAL.ball)
+    ));
+    let mut cfg431 = cycles_config(&plane);
+    cfg431.use_calibrations(&cfg.calibrations.path).unwrap();
+    let pts = [[0.0, 0.0, 10.0], [40.0, 5.0, 10.0], [5.0, 35.0, 10.0]];
+    let report = world_run(&program(&[block_431(pts)]), &cfg431, &plane, "460-431");
+    assert!(report.completed(), "{}", report.to_json());
+    let c = &report.cycles[0];
+    for k in ["Q173", "Q174", "Q175"] {
+        println!("431 after 460: {k} {:+.7} mm", c.q[k]);
+        assert!((c.q[k] - 10.0).abs() <= 3e-4, "{k} = {}", c.q[k]);
+    }
+}
+
+/// 451 on the A/C table with the real stylus, calibrated by 460 first in the same
+/// program: the injected location errors are recovered to 1e-4.
+#[test]
+fn cycle_451_with_the_calibrated_probe_recovers_the_errors() {
+    let centre = [50.0, -30.0, 80.0];
+    let sc = scenario(&format!(
+        "machine = \"table-ac\"\nseed = 1\n{}[truth]\nEX0C = 0.012\nEY0C = -0.008\nEA0C = 0.004\nEB0A = 0.005\n\
+[[sphere]]\ncenter = [{}, {}, {}]\nradius = 12.5\n",
+        REAL.probe_section(REAL.ball),
+        centre[0],
+        centre[1],
+        centre[2]
+    ));
+    let cfg = cycles_config(&sc);
+    let z = centre[2] + 12.5 + REAL.ball + 2.0 + 5.0;
+    let b451 = format!(
+        "L X{:+} Y{:+} Z{z:+} R0 FMAX\nTCH PROBE 451 MEASURE KINEMATICS ~\n  Q406=+2 ~\n  Q407=+12.5 ~\n  Q320=+0 ~\n  Q408=+0 ~\n  Q253=+750 ~\n  Q380=+0 ~\n\
+  Q411=-90 ~\n  Q412=+90 ~\n  Q413=+0 ~\n  Q414=+4 ~\n  Q415=+0 ~\n  Q416=+0 ~\n  Q417=+0 ~\n  Q418=+0 ~\n\
+  Q419=+90 ~\n  Q420=+270 ~\n  Q421=+0 ~\n  Q422=+3 ~\n  Q423=+4 ~\n  Q431=+1 ~\n  Q432=+0\n",
+        centre[0], centre[1]
+    );
+    let program = program(&[block_460(centre, 12.5, 8), b451]);
+    let parsed = Program::parse(&program, &cfg).unwrap_or_else(|e| panic!("{e}"));
+    let dir = std::env::temp_dir().join(format!("pb-calib-451-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut confirm = |_: &str| true;
+    let mut progress = |_| {};
+    let mut opts = RunOptions {
+        out_dir: dir.clone(),
+        confirm: &mut confirm,
+        progress: &mut progress,
+        kinematics: Some(dir.join("kinematics.toml")),
+        estimator: None,
+    };
+    let mut m = WorldMachine::new(&sc);
+    let report = run_program(&parsed, &mut m, &cfg, &mut opts);
+    assert!(report.completed(), "{}", report.to_json());
+    let k = report.cycles[1].kinematics.as_ref().expect("451's report");
+    for name in ["EX0C", "EY0C", "EA0C", "EB0A"] {
+        let truth = sc.truth.get(name).unwrap();
+        let got = k.errors_after[name];
+        println!("451 after 460: {name} {got:+.7}, injected {truth:+.7}");
+        assert!(
+            (got - truth).abs() <= 1e-4,
+            "{name}: identified {got} vs injected {truth}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }

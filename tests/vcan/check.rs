@@ -197,11 +197,14 @@ fn parse_cases(configs: &Path, text: &str) -> Result<Vec<Case>, String> {
                 }
                 ("truth", "probe") => expect.truth_probe = true,
                 ("truth", "431") => expect.truth_431 = true,
-                (q, v) if q.starts_with('Q') => expect.q.push((
-                    q.to_string(),
-                    v.parse()
-                        .map_err(|_| format!("line {}: {q}={v:?} is not a number", i + 1))?,
-                )),
+                // Q results, and cycle 460's probe table columns.
+                (q, v) if q.starts_with('Q') || ["R", "CAL_OF1", "CAL_OF2", "L"].contains(&q) => {
+                    expect.q.push((
+                        q.to_string(),
+                        v.parse()
+                            .map_err(|_| format!("line {}: {q}={v:?} is not a number", i + 1))?,
+                    ))
+                }
                 _ => {
                     return Err(format!(
                         "tests/vcan/cases line {}: unknown expectation {word:?}",

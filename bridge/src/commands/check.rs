@@ -27,7 +27,10 @@ pub fn run(
     for n in &files.notes {
         tell!("state: {n}");
     }
-    let cycles_cfg = cycles_config_with_presets(&cfg, scenario.as_ref(), Some(&files.presets))
+    let mut cycles_cfg = cycles_config_with_presets(&cfg, scenario.as_ref(), Some(&files.presets))
+        .map_err(|e| e.to_string())?;
+    cycles_cfg
+        .use_calibrations(&files.probes)
         .map_err(|e| e.to_string())?;
     let text = cycles::parser::read_program_text(program)
         .map_err(|e| format!("cannot read {}: {e}", program.display()))?;

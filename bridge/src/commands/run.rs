@@ -53,8 +53,7 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
         )
     };
     let read_only = files(false)?;
-    let cfg = cycles_config_with_presets(&machine_cfg, scenario.as_ref(), Some(&read_only.presets))
-        .map_err(|e| e.to_string())?;
+    let mut cfg = state_cycles_config(&machine_cfg, scenario.as_ref(), &read_only)?;
     let Some(program) = validated(args, &cfg, &read_only.kinematics)? else {
         return Ok(2);
     };
@@ -63,9 +62,9 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     for n in &files.notes {
         tell!("state: {n}");
     }
-    let mut cfg = cfg;
     cfg.presets = cycles::preset_table::PresetTable::load(&files.presets, &cfg.machine)
         .map_err(|e| e.to_string())?;
+    use_state_probes(&mut cfg, &files.probes, &program)?;
     if let Some(n) = scenario.as_ref().and_then(|sc| sc.preset) {
         cfg.start_with_preset(n)?;
     }
@@ -170,6 +169,36 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     }
     closed?;
     Ok(if report.completed() { 0 } else { 1 })
+}
+
+/// The machine as the cycles see it with the preset table and the probes' calibration
+/// rows of the machine's state `files` (cycle 460 writes there).
+fn state_cycles_config(
+    machine_cfg: &hal::config::MachineConfig,
+    scenario: Option<&sim::Scenario>,
+    files: &crate::machine_state::MachineFiles,
+) -> Result<cycles::CyclesConfig, String> {
+    let mut cfg = cycles_config_with_presets(machine_cfg, scenario, Some(&files.presets))
+        .map_err(|e| e.to_string())?;
+    cfg.use_calibrations(&files.probes)
+        .map_err(|e| e.to_string())?;
+    Ok(cfg)
+}
+
+/// The probes' calibration rows of the machine's state at `probes` for `cfg` (cycle
+/// 460 writes its row there, at its end: with a 460 in `program` a file that could not
+/// be written is refused now, before anything moves).
+fn use_state_probes(
+    cfg: &mut cycles::CyclesConfig,
+    probes: &std::path::Path,
+    program: &Program,
+) -> Result<(), String> {
+    cfg.use_calibrations(probes).map_err(|e| e.to_string())?;
+    if program.cycles().any(|c| c.head.cycle == 460) {
+        crate::output::check_output(Some(probes))
+            .map_err(|e| format!("probe table (cycle 460): {e}"))?;
+    }
+    Ok(())
 }
 
 /// The program, loaded and refused (`None`, said on stderr) as `check` refuses it:

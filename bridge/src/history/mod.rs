@@ -469,6 +469,7 @@ mod tests {
                 message: None,
                 u: [("Q158".to_string(), 0.0002)].into_iter().collect(),
                 kinematics: None,
+                calibration: None,
             }],
             stopped: None,
             aborted: false,

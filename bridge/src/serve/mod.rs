@@ -288,8 +288,14 @@ fn machine_state(
     if cfg.programs.out.is_none() {
         cfg.programs.out = Some(files.protocols_dir());
     }
-    crate::session::cycles_config_with_presets(machine_cfg, scenario, Some(&files.presets))
-        .map_err(|e| e.to_string())
+    let mut cycles_cfg =
+        crate::session::cycles_config_with_presets(machine_cfg, scenario, Some(&files.presets))
+            .map_err(|e| e.to_string())?;
+    // The probes' calibration rows of the state, never the shipped folder's.
+    cycles_cfg
+        .use_calibrations(&files.probes)
+        .map_err(|e| e.to_string())?;
+    Ok(cycles_cfg)
 }
 
 /// The history of the gateway, opened before the machine (a history that is down is

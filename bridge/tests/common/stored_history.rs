@@ -57,6 +57,7 @@ fn report(run: &StoredRun) -> ProgramReport {
             message: None,
             u: Default::default(),
             kinematics: Some(Box::new(serde_json::from_value(kinematics).unwrap())),
+            calibration: None,
         }],
         ..ProgramReport::default()
     }

@@ -39,7 +39,10 @@ pub fn calibration_log_text(
         ("CAL_ANG", b.cal_ang, a.cal_ang),
         ("L", b.l, a.l),
     ] {
-        let _ = writeln!(s, "{name:<8} {x:>+14.6} {y:>+14.6}");
+        let u =
+            r.u.get(name)
+                .map_or_else(String::new, |u| format!(" ± {u:.6}"));
+        let _ = writeln!(s, "{name:<8} {x:>+14.6} {y:>+14.6}{u}");
     }
     if let Some(m) = r.max_deviation_3d {
         let _ = writeln!(

@@ -13,7 +13,9 @@ pub mod evaluate;
 pub mod measure;
 pub mod measuring_log;
 pub mod parameters;
+pub mod plan;
 pub mod report;
+pub mod uncertainty;
 
 pub use parameters::{CalibrationParams, CYCLE_460};
 pub use report::{CalibrationReport, RowValues};
@@ -102,6 +104,21 @@ pub fn evaluate(
     (cal, true_centre, notes)
 }
 
+/// R, CAL_OF1/2 and L as the cycle's results, by the row's column names (the TNC's 460
+/// has no result Q parameters).
+fn row_results(cal: &Calibration) -> BTreeMap<String, f64> {
+    let row = RowValues::of(cal);
+    [
+        ("R", row.r),
+        ("CAL_OF1", row.cal_of1),
+        ("CAL_OF2", row.cal_of2),
+        ("L", row.l),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect()
+}
+
 impl MeasuringCycle for CalibrationParams {
     fn run<M: Machine>(
         &self,
@@ -166,6 +183,17 @@ impl MeasuringCycle for CalibrationParams {
                 .flatten()
                 .fold(t.pole.abs(), |m, v| m.max(v.abs()))
         });
+        let mut notes = notes;
+        let u = uncertainty::row_uncertainty(
+            &probed,
+            &frame,
+            probe.repeatability(),
+            self.calibrate_length,
+        )
+        .unwrap_or_else(|e| {
+            notes.push(format!("no uncertainty: {e}"));
+            BTreeMap::new()
+        });
         let report = CalibrationReport {
             probe: probe.name.clone(),
             sphere_radius: self.sphere_radius,
@@ -178,6 +206,7 @@ impl MeasuringCycle for CalibrationParams {
             max_deviation_3d: max_dev,
             notes,
             file: file.display().to_string(),
+            u: u.clone(),
         };
         let log =
             write_calibration_log(ctx.out_dir, &report, &probed, ctx.program).map_err(|e| {
@@ -186,7 +215,8 @@ impl MeasuringCycle for CalibrationParams {
                     message: e.source.to_string(),
                 }
             })?;
-        let mut out = CycleOutput::new(BTreeMap::new(), None);
+        let mut out = CycleOutput::new(row_results(&cal), None);
+        out.u = u;
         out.logs.push(log);
         out.calibration = Some(Box::new(report));
         Ok(out)

@@ -1,122 +1,14 @@
 //! Cycle 460's parameters, as HEIDENHAIN documents them for CALIBRATION OF TS ON A
-//! SPHERE, with their input ranges.
+//! SPHERE: their table (input ranges, defaults) is [`crate::params::CYCLE_460`]; here
+//! the typed parameters and the checks the table cannot make.
 
 use crate::cycle_block::{Param, ParamReader};
 use crate::diagnostic::Diagnostic;
 use crate::length_unit::LengthUnit;
-use crate::params::{CycleTable, Default, Keywords, Kind, ParamSpec, Unit};
 use std::collections::BTreeMap;
 
-const COORD: f64 = 99999.9999;
-
-const fn number(
-    name: &'static str,
-    title: &'static str,
-    (min, max): (f64, f64),
-    integer: bool,
-    unit: Unit,
-    predef: bool,
-    default: Default,
-) -> ParamSpec {
-    ParamSpec {
-        name,
-        title,
-        kind: Kind::Number {
-            min,
-            max,
-            integer,
-            unit,
-        },
-        keywords: Keywords {
-            predef,
-            fmax: false,
-            fauto: false,
-        },
-        default,
-    }
-}
-
-/// Most directions per ring of the 3D calibration.
-pub const MAX_POINTS_3D: f64 = 30.0;
-
-pub static CYCLE_460: CycleTable = CycleTable {
-    number: 460,
-    name: "CALIBRATION OF TS ON A SPHERE",
-    params: &[
-        number(
-            "Q407",
-            "RADIUS OF CALIB. SPHERE",
-            (0.0001, 99.9999),
-            false,
-            Unit::Length,
-            false,
-            Default::Required,
-        ),
-        number(
-            "Q320",
-            "SET-UP CLEARANCE",
-            (0.0, COORD),
-            false,
-            Unit::Length,
-            true,
-            Default::Number(0.0),
-        ),
-        number(
-            "Q301",
-            "MOVE TO CLEARANCE",
-            (0.0, 1.0),
-            true,
-            Unit::None,
-            true,
-            Default::Number(1.0),
-        ),
-        number(
-            "Q423",
-            "NO. OF PROBE POINTS",
-            (3.0, 8.0),
-            true,
-            Unit::None,
-            false,
-            Default::Number(8.0),
-        ),
-        number(
-            "Q380",
-            "REFERENCE ANGLE",
-            (0.0, 360.0),
-            false,
-            Unit::Angle,
-            false,
-            Default::Number(0.0),
-        ),
-        number(
-            "Q433",
-            "CALIBRATE LENGTH",
-            (0.0, 1.0),
-            true,
-            Unit::None,
-            false,
-            Default::Number(0.0),
-        ),
-        number(
-            "Q434",
-            "DATUM FOR LENGTH",
-            (-COORD, COORD),
-            false,
-            Unit::Length,
-            false,
-            Default::Number(0.0),
-        ),
-        number(
-            "Q455",
-            "NO. OF POINTS IN 3D CAL.",
-            (0.0, MAX_POINTS_3D),
-            true,
-            Unit::None,
-            false,
-            Default::Number(0.0),
-        ),
-    ],
-};
+// The table sits with the other cycles' in [`crate::params`] (its `TABLES`).
+pub use crate::params::{CYCLE_460, MAX_POINTS_3D};
 
 /// Validated parameters of cycle 460.
 #[derive(Clone, Debug, PartialEq)]

@@ -27,6 +27,47 @@ pub struct CalibrationReport {
     pub notes: Vec<String>,
     /// Where the row was written.
     pub file: String,
+    /// The standard uncertainty (k = 1) of the columns measured (R; CAL_OF1/2 with an
+    /// oriented spindle; L with Q433 = 1), mm ([`super::uncertainty`]).
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub u: std::collections::BTreeMap<String, f64>,
+}
+
+impl CalibrationReport {
+    /// The row before and after, the uncertainties, and what was kept and why, for the
+    /// text report.
+    pub fn summary(&self) -> String {
+        let mut s = format!("  probe table row \"{}\" ({}):\n", self.probe, self.file);
+        let (b, a) = (&self.before, &self.after);
+        for (name, x, y) in [
+            ("R", b.r, a.r),
+            ("CAL_OF1", b.cal_of1, a.cal_of1),
+            ("CAL_OF2", b.cal_of2, a.cal_of2),
+            ("L", b.l, a.l),
+        ] {
+            let kept = match name {
+                "CAL_OF1" | "CAL_OF2" => !self.offset_measured,
+                "L" => !self.length_measured,
+                _ => false,
+            };
+            let u = match self.u.get(name) {
+                _ if kept => " (kept)".to_string(),
+                Some(u) => format!(" ± {u:.6}"),
+                None => String::new(),
+            };
+            s.push_str(&format!("    {name:<8} {x:+.6} -> {y:+.6}{u}\n"));
+        }
+        if let Some(m) = self.max_deviation_3d {
+            s.push_str(&format!(
+                "    3D table: {} directions per ring, largest |effective radius - R| {m:.6}\n",
+                self.points_3d
+            ));
+        }
+        for n in &self.notes {
+            s.push_str(&format!("    note: {n}\n"));
+        }
+        s
+    }
 }
 
 /// The columns of a row, as reported.

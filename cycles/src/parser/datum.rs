@@ -60,10 +60,18 @@ pub(super) fn cycl_def(
             }
         }
         _ => {
+            // A touch-probe cycle under CYCL DEF: the TNC writes those TCH PROBE.
+            let hint = match number.parse::<u16>().ok().and_then(crate::params::table) {
+                Some(t) => format!(
+                    "; a touch-probe cycle is written TCH PROBE {} {}",
+                    t.number, t.name
+                ),
+                None => String::new(),
+            };
             err(
                 diags,
                 line,
-                format!("CYCL DEF {number}: not a cycle probebridge can run (it runs CYCL DEF 7 DATUM SHIFT and CYCL DEF 247 DATUM SETTING)"),
+                format!("CYCL DEF {number}: not a cycle probebridge can run (it runs CYCL DEF 7 DATUM SHIFT and CYCL DEF 247 DATUM SETTING){hint}"),
             );
             Statement::Other(code.to_string())
         }

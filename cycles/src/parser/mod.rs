@@ -116,7 +116,7 @@ fn analyse(text: &str, cfg: &CyclesConfig) -> (Program, Vec<Diagnostic>) {
             _ => None,
         };
         if let (Some(cycle), Some(turn)) = (cycle, st.turn_mode) {
-            if matches!(cycle, 431 | 444 | 451) {
+            if matches!(cycle, 431 | 444 | 451 | 460) {
                 err(
                     &mut diags,
                     line,

@@ -7,6 +7,7 @@ use crate::cycle431::PlaneParams;
 use crate::cycle444::Probing3dParams;
 use crate::cycle450::SaveParams;
 use crate::cycle451::KinematicsParams;
+use crate::cycle460::CalibrationParams;
 use crate::cycle_block::{CycleBlock, Origin, Param, Value};
 use crate::cycles_config::CyclesConfig;
 use crate::diagnostic::Diagnostic;
@@ -191,6 +192,7 @@ pub(super) fn cycle(
         431 => PlaneParams::from_params(&params, st.unit).map(CycleKind::MeasurePlane),
         444 => Probing3dParams::from_params(&params, st.unit).map(CycleKind::Probing3d),
         451 => KinematicsParams::from_params(&params, st.unit).map(CycleKind::MeasureKinematics),
+        460 => CalibrationParams::from_params(&params, st.unit).map(CycleKind::CalibrateProbe),
         _ => SaveParams::from_params(&params, st.unit).map(CycleKind::SaveKinematics),
     };
     match kind {

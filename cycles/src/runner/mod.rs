@@ -10,6 +10,7 @@ use crate::kinematics::{Estimator, LocalEstimator};
 use crate::kinematics_file::ActiveKinematics;
 use crate::linear::{parse_linear, LinearMove, MoveFeed};
 use crate::parser::resolve_deferred;
+use crate::probe_table::probes_file::ProbeCalibrations;
 use crate::program::{CycleCall, CycleKind, Program, Statement};
 use crate::program_flow::{start_params, substitute_params, Flow, FlowStop, Step};
 use crate::progress::{ProgressEvent, ProgressSink};
@@ -96,6 +97,8 @@ pub fn run_program<M: Machine>(
     };
     let guard = MotionGuard::new(&cfg.machine);
     let mut flow = Flow::new(cfg.parameters.max_jumps);
+    // The probe table rows as cycle 460 last wrote them in this run.
+    let mut calibrations: Option<ProbeCalibrations> = None;
     loop {
         let index = match flow.advance(program, &mut params) {
             Ok(Step::Act(i)) => i,
@@ -165,11 +168,11 @@ pub fn run_program<M: Machine>(
             }
             _ => continue,
         };
+        let recalibrated = with_row(call, &calibrations);
+        let call = recalibrated.as_ref().unwrap_or(call);
         let result = run_cycle(call, machine, &mut ctx, &mut report);
-        if let (CycleKind::SaveKinematics(p), Status::Ok) = (&call.kind, result.status) {
-            if p.mode == crate::cycle450::SaveMode::Restore {
-                note_restore(&mut report, &ctx.kinematics, &cfg.machine, call.head.block);
-            }
+        if result.status == Status::Ok {
+            after_cycle(call, cfg, &ctx.kinematics, &mut calibrations, &mut report);
         }
         if result.status == Status::Ok {
             // What the cycle measured is the program's to read (Q141.., QS146, ...).
@@ -183,6 +186,44 @@ pub fn run_program<M: Machine>(
     report.parameters = params.written();
     keep_remanent(&params, &qr_path, &mut report);
     report
+}
+
+/// What a cycle that succeeded leaves for the rest of the run: after 460 its probe
+/// table row is the probe's from the next cycle on (read back from the file); after
+/// 450's restore, the earlier 451 results say what the kinematics file is now.
+fn after_cycle(
+    call: &CycleCall,
+    cfg: &CyclesConfig,
+    kinematics: &std::path::Path,
+    calibrations: &mut Option<ProbeCalibrations>,
+    report: &mut ProgramReport,
+) {
+    match &call.kind {
+        CycleKind::CalibrateProbe(_) => {
+            match ProbeCalibrations::load(&cfg.calibrations.path, &cfg.probes) {
+                Ok(rows) => *calibrations = Some(rows),
+                Err(e) => {
+                    report.stopped = Some(format!(
+                        "block {}: the probe table row written by cycle 460 cannot be read back: {e}",
+                        call.head.block
+                    ));
+                }
+            }
+        }
+        CycleKind::SaveKinematics(p) if p.mode == crate::cycle450::SaveMode::Restore => {
+            note_restore(report, kinematics, &cfg.machine, call.head.block);
+        }
+        _ => {}
+    }
+}
+
+/// `call` with its probe's calibration from `rows` (the probe table after a cycle 460
+/// of this run), `None` when there are none for its probe.
+fn with_row(call: &CycleCall, rows: &Option<ProbeCalibrations>) -> Option<CycleCall> {
+    let row = rows.as_ref()?.row(&call.head.tool.probe.name)?;
+    let mut call = call.clone();
+    call.head.tool.probe.calibration = Some(row.calibration());
+    Some(call)
 }
 
 /// After cycle 450 restored `path`: each earlier 451 result that wrote it says what the
@@ -356,6 +397,7 @@ fn run_cycle<M: Machine>(
         CycleKind::Probing3d(p) => p.run(head, machine, ctx),
         CycleKind::SaveKinematics(p) => p.run(head, machine, ctx),
         CycleKind::MeasureKinematics(p) => p.run(head, machine, ctx),
+        CycleKind::CalibrateProbe(p) => p.run(head, machine, ctx),
     };
     let result = match outcome {
         Ok(out) => {
@@ -380,6 +422,7 @@ fn run_cycle<M: Machine>(
                 message: out.stop,
                 u: out.u,
                 kinematics: out.kinematics,
+                calibration: out.calibration,
             }
         }
         Err(e) if e.kind() == CycleErrorKind::Machine(hal::ErrorKind::Aborted) => {

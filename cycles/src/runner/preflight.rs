@@ -33,7 +33,7 @@ pub enum PreflightKind {
     MissingAxis,
     /// A positioning block (L) cannot run.
     Positioning(LinearBlockErrorKind),
-    /// A move of a probing cycle (431, 444) the machine would refuse: a point outside
+    /// A move of a probing cycle (431, 444, 460) the machine would refuse: a point outside
     /// the software limits, a feed the axes cannot run, a safe height below a start.
     Moves,
     /// A Q-parameter block that cannot be carried out (an undefined parameter, a
@@ -54,7 +54,7 @@ fn preflight(
 ) -> Result<(), (PreflightKind, String)> {
     let tool = &call.head.tool;
     match &call.kind {
-        CycleKind::MeasurePlane(_) | CycleKind::Probing3d(_) => {}
+        CycleKind::MeasurePlane(_) | CycleKind::Probing3d(_) | CycleKind::CalibrateProbe(_) => {}
         // Works on files only: no probe, no motion.
         CycleKind::SaveKinematics(_) => return Ok(()),
         CycleKind::MeasureKinematics(p) => {
@@ -319,6 +319,11 @@ pub(super) fn check_cycle_moves(
             Ok(Vec::new())
         }
         CycleKind::SaveKinematics(_) => Ok(Vec::new()),
+        // Planned from where the axes stand: the probe over the sphere, as the
+        // operator puts it before the block.
+        CycleKind::CalibrateProbe(p) => {
+            crate::cycle460::plan::planned_moves(p, &call.head, cfg, datum, here)
+        }
     };
     let moves = moves
         .and_then(|m| check_planned(&m, guard).map(|()| m))

@@ -45,13 +45,15 @@ impl<M: Machine> Measure<'_, '_, M> {
             let fit = self.ctx.estimator.fit_sphere(run, &contacts).map_err(|e| {
                 CycleError::Geometry(format!("{what}: sphere fit (run {run}): {e}"))
             })?;
-            let radius = fit.radius - self.probe.radius;
-            let shift = (fit.centre - c).norm();
+            // The probe's calibration (probe table row): the true ball-centre sphere.
+            let (centre, ball_sphere) = self.calibrated(a, &contacts, fit.centre, fit.radius);
+            let radius = ball_sphere - self.probe.calibration().r;
+            let shift = (centre - c).norm();
             if round == 0 && shift > RE_PROBE_TOLERANCE {
                 self.note(format!(
                     "{what}: the sphere is {shift:.4} mm from where it was expected; probing it again around the fitted centre"
                 ));
-                c = fit.centre;
+                c = centre;
                 continue;
             }
             let dev = radius - p.sphere_radius;
@@ -77,11 +79,11 @@ impl<M: Machine> Measure<'_, '_, M> {
             self.spheres += 1;
             return Ok(Sphere {
                 angles,
-                centre: fit.centre,
+                centre,
                 radius,
                 record: SphereRecord {
                     angles: axis_map(&self.plan.present, &angles),
-                    centre: arr(&fit.centre),
+                    centre: arr(&centre),
                     radius,
                     rms: fit.rms,
                     run_ids,
@@ -90,6 +92,31 @@ impl<M: Machine> Measure<'_, '_, M> {
             });
         }
         unreachable!("the second round returns")
+    }
+
+    /// A sphere fitted through latched ball centres (`centre`, `radius`), corrected by
+    /// the probe's calibration ([`crate::probe_table::calibration::Calibration::correct_sphere`]):
+    /// the stylus offset and length, and the 3D table's effect on the fit. The stylus
+    /// turns with a swivel head, so the correction is made in the head's frame at `a`.
+    /// Returns the true ball-centre sphere (centre in machine X/Y/Z, radius).
+    pub(super) fn calibrated(
+        &self,
+        a: &Angles,
+        contacts: &[hal::Contact],
+        centre: Vector3<f64>,
+        radius: f64,
+    ) -> (Vector3<f64>, f64) {
+        let cal = self.probe.calibration();
+        let rot = nalgebra::Matrix3::from_columns(
+            &[Vector3::x(), Vector3::y(), Vector3::z()].map(|e| self.model.tool_vector(a, e)),
+        );
+        let back = rot.transpose();
+        let directions: Vec<[f64; 3]> = contacts
+            .iter()
+            .map(|k| (back * Vector3::from(k.direction)).into())
+            .collect();
+        let (c, r) = cal.correct_sphere(self.tool, (back * centre).into(), radius, &directions);
+        (rot * Vector3::from(c), r)
     }
 
     /// Where the Q423 points around the sphere at `c` (axes at `a`) start: Q380, or,
