@@ -202,8 +202,15 @@ impl PlaneParams {
             .points
             .map(|pt| Vector3::from(axis.to_machine(pt)) + origin + up * distance - shift);
         if let Some((i, s)) = starts.iter().enumerate().find(|(_, s)| s[t] > safe_height) {
+            // The value that clears all three starts, not just this one: raised to this
+            // point's start, Q260 could still be below another's.
+            let highest = starts
+                .iter()
+                .map(|s| s[t])
+                .fold(f64::NEG_INFINITY, f64::max);
+            let lowest = crate::cycle451::plan::round_up(highest - origin[t]);
             return Err(CycleError::Plan(format!(
-                "Q260={} is below the start of point {} ({:.4} = nominal + R + SET_UP + Q320); nothing moved",
+                "Q260={} is below the start of point {} ({:.4} = nominal + R + SET_UP + Q320); the lowest Q260 that clears is {lowest:.4}; nothing moved",
                 self.safe_height,
                 i + 1,
                 s[t] - origin[t]

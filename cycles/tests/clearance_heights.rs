@@ -62,8 +62,9 @@ fn block444(nominal: [f64; 3], normal: [f64; 3], q320: f64, q260: f64) -> String
     )
 }
 
-/// A program with a datum shift of `shift` (program coordinates relative to it).
-fn program444(shift: [f64; 3], block: &str) -> Program {
+/// A program with a datum shift of `shift` (program coordinates relative to it) and
+/// `block` (a 444 or a 431).
+fn shifted_program(shift: [f64; 3], block: &str) -> Program {
     let text = format!(
         "0 BEGIN PGM P MM\n1 TOOL CALL \"TOUCH_PROBE\" Z\n2 TRANS DATUM AXIS X{:+} Y{:+} Z{:+}\n{block}99 END PGM P MM\n",
         shift[0], shift[1], shift[2]
@@ -90,7 +91,7 @@ fn q260_below_the_start_of_the_444_point_is_refused_before_anything_moves() {
         let start = Vector3::from(nominal) + n * (3.0 + 2.0 + q320);
         let lowest = f64::max(start.z, nominal[2] + 3.0 + 2.0);
         for q260 in [lowest - 0.01, lowest - 15.0, -50.0] {
-            let prog = program444(shift, &block444(nominal, normal, q320, q260));
+            let prog = shifted_program(shift, &block444(nominal, normal, q320, q260));
             let e = preflight_program(&prog, 0b111, &cfg, std::path::Path::new("k.toml"))
                 .unwrap_err()
                 .to_string();
@@ -123,7 +124,7 @@ fn q260_below_the_start_of_the_444_point_is_refused_before_anything_moves() {
             );
         }
         for q260 in [lowest, lowest + 0.01, lowest + 100.0] {
-            let prog = program444(shift, &block444(nominal, normal, q320, q260));
+            let prog = shifted_program(shift, &block444(nominal, normal, q320, q260));
             preflight_program(&prog, 0b111, &cfg, std::path::Path::new("k.toml"))
                 .unwrap_or_else(|e| panic!("Q260={q260}: {e}"));
             let mut m = MockMachine::new(vec![Surface::Plane {
@@ -131,6 +132,80 @@ fn q260_below_the_start_of_the_444_point_is_refused_before_anything_moves() {
                 normal: n,
             }]);
             let (report, _) = common::run(&prog, &mut m, &common::temp_dir("q260-ok"), true);
+            assert_eq!(
+                report.cycles[0].status,
+                Status::Ok,
+                "Q260={q260}: {:?}",
+                report.stopped
+            );
+        }
+    }
+}
+
+/// Cycle 431's Q260 must lie above the start of every one of its three points; a
+/// lower one is refused at the block by `check` and `run` alike, before anything
+/// moves, with the lowest Q260 that clears all three. That is the highest start, not
+/// the start of the first point found below Q260: a Q260 raised only to that one
+/// would be refused again at a higher point. Points at different heights, with a
+/// Q320 and a datum shift.
+#[test]
+fn q260_of_431_below_a_start_is_refused_naming_the_lowest_that_clears_all_three() {
+    let cfg = common::config();
+    // TOUCH_PROBE: R 3, SET_UP 2. (heights of points 1..3, Q320, shift).
+    for (z, q320, shift) in [
+        ([2.0, 9.5, 4.25], 0.0, [0.0; 3]),
+        ([-6.0, -11.0, -3.5], 1.5, [4.0, -3.0, 30.0]),
+        ([7.75, 1.0, 0.5], 0.25, [-8.0, 6.0, -12.0]),
+    ] {
+        let xy = [[0.0, 0.0], [40.0, 0.0], [0.0, 40.0]];
+        let p = |i: usize| Vector3::new(xy[i][0], xy[i][1], z[i]);
+        let lowest = z.iter().copied().fold(f64::NEG_INFINITY, f64::max) + 3.0 + 2.0 + q320;
+        let normal = (p(1) - p(0)).cross(&(p(2) - p(0))).normalize();
+        let block = |q260: f64| {
+            let q: Vec<String> = (0..3)
+                .map(|i| format!("{:+}", xy[i][0]))
+                .chain((0..3).map(|i| format!("{:+}", xy[i][1])))
+                .chain(z.iter().map(|v| format!("{v:+}")))
+                .collect();
+            format!(
+                "5 TCH PROBE 431 MEASURE PLANE ~\n  Q263={} ~\n  Q264={} ~\n  Q294={} ~\n  Q265={} ~\n  Q266={} ~\n  Q295={} ~\n  Q296={} ~\n  Q297={} ~\n  Q298={} ~\n  Q320={q320:+} ~\n  Q260={q260:+} ~\n  Q281=+0\n",
+                q[0], q[3], q[6], q[1], q[4], q[7], q[2], q[5], q[8]
+            )
+        };
+        let machine = || {
+            MockMachine::new(vec![Surface::Plane {
+                point: p(0) + Vector3::from(shift),
+                normal,
+            }])
+        };
+        // Just below the highest start (above the lower ones), and far below.
+        for q260 in [lowest - 0.01, lowest - 23.0] {
+            let prog = shifted_program(shift, &block(q260));
+            let e = preflight_program(&prog, 0b111, &cfg, std::path::Path::new("k.toml"))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(&format!("Q260={q260} is below the start of point"))
+                    && e.contains(&format!("the lowest Q260 that clears is {lowest:.4}"))
+                    && e.contains("block 5"),
+                "{e}"
+            );
+            let mut m = machine();
+            let (report, _) = common::run(&prog, &mut m, &common::temp_dir("q260-431"), true);
+            assert_eq!(m.motion_count(), 0, "Q260={q260}: something moved");
+            let stopped = report.stopped.unwrap();
+            assert!(
+                stopped.contains(&e[e.find("Q260=").unwrap()..]),
+                "{stopped} / {e}"
+            );
+        }
+        // The value the message names runs, and so does a little more.
+        for q260 in [lowest, lowest + 0.01] {
+            let prog = shifted_program(shift, &block(q260));
+            preflight_program(&prog, 0b111, &cfg, std::path::Path::new("k.toml"))
+                .unwrap_or_else(|e| panic!("Q260={q260}: {e}"));
+            let mut m = machine();
+            let (report, _) = common::run(&prog, &mut m, &common::temp_dir("q260-431-ok"), true);
             assert_eq!(
                 report.cycles[0].status,
                 Status::Ok,
