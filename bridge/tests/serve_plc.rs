@@ -257,6 +257,55 @@ fn programs_started_by_number_give_the_results_of_run() {
     }
 }
 
+/// The machine's state is read again at each start, as a new `probebridge run` reads
+/// it: a preset row rewritten since the service started (by a 451 with Q431, or by the
+/// operator) is the one the next program runs with, and a table that cannot be read
+/// refuses the start ("the machine is not up", the file named in the log) before
+/// anything moves or is recorded.
+#[test]
+fn each_start_runs_with_the_machine_state_its_files_hold_then() {
+    let Some(py) = python() else { return };
+    let dir = tmpdir("serve-state-reread");
+    let state = dir.join("state");
+    let serve = Serve::start_in(
+        dir.clone(),
+        "state-reread",
+        "plane-z10.toml",
+        &[(431, "431-plane.h")],
+        "",
+        &[("STATE_DIRECTORY", state.as_os_str())],
+    );
+    let q175 = |out: &serde_json::Value| out["real"]["Q175"].as_f64().unwrap();
+    let first = serve.plc(&py, &["run", "431"]);
+    // The plane z = 10 under preset row 0 at the origin.
+    assert!((q175(&first) - 10.0).abs() < 1e-3, "{first}");
+    let presets = state.join("table-ac").join("table-ac.presets.toml");
+    assert!(
+        presets.is_file(),
+        "the state was seeded: {}",
+        presets.display()
+    );
+    // Row 0 moved down by 1.5 mm while the service runs.
+    std::fs::write(
+        &presets,
+        "machine = \"table-ac\"\nactive = 0\n\n[[preset]]\nnumber = 0\nX = 0.0\nY = 0.0\nZ = -1.5\n",
+    )
+    .unwrap();
+    let second = serve.plc(&py, &["run", "431"]);
+    assert!((q175(&second) - 11.5).abs() < 1e-3, "{second}");
+    // A table whose active row does not exist: refused, nothing recorded.
+    std::fs::write(&presets, "machine = \"table-ac\"\nactive = 7\n").unwrap();
+    let st = serve.plc_script(&py, "history_plc.py", &["start", "431"]);
+    assert_eq!(st["ack_code"], 1 | 0x8000, "{st}");
+    assert_eq!(st["reason"], 8, "the machine is not up: {st}");
+    assert_eq!(serve.history().len(), 2);
+    let log = serve.log();
+    assert!(
+        log.contains("the machine's state cannot be read") && log.contains("table-ac.presets.toml"),
+        "{log}"
+    );
+}
+
 #[test]
 fn start_while_busy_is_refused_and_abort_stops_mid_cycle() {
     let Some(py) = python() else { return };

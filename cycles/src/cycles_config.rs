@@ -134,6 +134,22 @@ impl CyclesConfig {
         Ok(())
     }
 
+    /// The same configuration with the machine's state read again from its files: the
+    /// preset table's rows and the probes' calibration rows, as a run (451, 460) may
+    /// have rewritten them since. A long-running service starts each program with this,
+    /// as a new `probebridge run` would. The active preset row stays the one of this
+    /// configuration while the table still has it (a scenario's start row).
+    pub fn reread_state(&self) -> Result<Self, ConfigError> {
+        let mut cfg = self.clone();
+        cfg.presets = PresetTable::load(&self.presets.path, &self.machine)?;
+        if cfg.presets.row(self.presets.active).is_some() {
+            cfg.presets.active = self.presets.active;
+        }
+        cfg.calibrations = ProbeCalibrations::load(&self.calibrations.path, &self.probes)?;
+        cfg.apply_calibrations();
+        Ok(cfg)
+    }
+
     /// Makes row `number` the active preset the program starts with (a scenario's
     /// `preset`); `Err` names the rows there are.
     pub fn start_with_preset(&mut self, number: u32) -> Result<(), String> {

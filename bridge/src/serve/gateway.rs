@@ -27,6 +27,9 @@ pub struct Job {
     pub params: [f32; super::register_map::REQ_PARAM_COUNT],
     /// The run's row in the history (written before the start was taken).
     pub record: Option<i64>,
+    /// The cycles' configuration with the machine's state as its files held it when
+    /// the start was taken (the last run's preset or calibration included).
+    pub cycles: CyclesConfig,
 }
 
 /// A command of the OPC UA face (it has no request block): start, abort or acknowledge.
@@ -220,12 +223,13 @@ impl Core {
         let req = self.map.request();
         let (folder, cfg, history) = (&self.programs, &self.cycles, &self.history);
         let action = self.hs.on_request(&req, now, |n| {
-            let program = resolve_program(folder, cfg, n)?;
+            let cfg = state_now(cfg)?;
+            let program = resolve_program(folder, &cfg, n)?;
             // The run is in the history as `running` before the start is taken.
             let record = match history {
                 Some(h) => Some(begin_run(
                     h,
-                    cfg,
+                    &cfg,
                     RunOrigin::Plc { seq: req.seq },
                     n,
                     &req.params,
@@ -233,7 +237,7 @@ impl Core {
                 )?),
                 None => None,
             };
-            Ok((program, record))
+            Ok((program, record, cfg))
         });
         if self.hs.view().reason != 0 && self.hs.view().ack_seq == req.seq && action.is_none() {
             tracing::info!(
@@ -246,7 +250,7 @@ impl Core {
         match action {
             Some(Action::Start {
                 seq,
-                program: (program, record),
+                program: (program, record, cycles),
                 confirm,
             }) => {
                 tracing::info!(
@@ -262,6 +266,7 @@ impl Core {
                     confirm,
                     params: req.params,
                     record,
+                    cycles,
                 };
                 self.start(job, Face::Plc);
             }
@@ -312,11 +317,12 @@ impl Core {
         let answer = self
             .hs
             .command(cmd.code, cmd.program, cmd.params, cmd.confirm, now, |n| {
-                let program = resolve_program(folder, cfg, n)?;
+                let cfg = state_now(cfg)?;
+                let program = resolve_program(folder, &cfg, n)?;
                 let record = match history {
                     Some(h) => Some(begin_run(
                         h,
-                        cfg,
+                        &cfg,
                         RunOrigin::OpcUa,
                         n,
                         &cmd.params,
@@ -324,7 +330,7 @@ impl Core {
                     )?),
                     None => None,
                 };
-                Ok((program, record))
+                Ok((program, record, cfg))
             });
         match &answer {
             Ok(Some(Action::Start { .. })) => {}
@@ -346,7 +352,7 @@ impl Core {
         match answer {
             Ok(Some(Action::Start {
                 seq,
-                program: (program, record),
+                program: (program, record, cycles),
                 confirm,
             })) => {
                 tracing::info!(
@@ -362,6 +368,7 @@ impl Core {
                     confirm,
                     params: cmd.params,
                     record,
+                    cycles,
                 };
                 self.start(job, Face::OpcUa);
             }
@@ -505,6 +512,16 @@ fn begin_run(
             tracing::error!(?origin, "start refused: {e}");
             Refusal::HistoryUnavailable
         })
+}
+
+/// The cycles' configuration with the machine's state read again from its files; a
+/// state that cannot be read refuses the start (the machine cannot run with it;
+/// nothing moved), and the log says which file and why.
+fn state_now(cfg: &CyclesConfig) -> Result<CyclesConfig, Refusal> {
+    cfg.reread_state().map_err(|e| {
+        tracing::error!("start refused: the machine's state cannot be read: {e}");
+        Refusal::MachineNotReady
+    })
 }
 
 /// Program number NNN is `NNN.h` in the program folder (at least three digits).

@@ -15,7 +15,6 @@ use crate::session::Session;
 use cycles::progress::ProgressEvent;
 use cycles::results::{CycleResult, ProgramReport, Status};
 use cycles::runner::{run_program, RunOptions};
-use cycles::CyclesConfig;
 use hal::{AxisPositions, Contact, Machine, MachineError, ProbeMove};
 use std::collections::BTreeMap;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
@@ -30,7 +29,6 @@ const HEALTH_PERIOD: Duration = Duration::from_millis(500);
 /// recorded when the PLC's start was taken).
 pub fn run(
     cfg: &GatewayConfig,
-    cycles: &CyclesConfig,
     shared: &Shared,
     jobs: &Receiver<ToMachine>,
     ready: &Sender<Result<Vec<String>, String>>,
@@ -57,7 +55,6 @@ pub fn run(
                     Some(session) => {
                         let ctx = Measure {
                             cfg,
-                            cycles,
                             shared,
                             history,
                         };
@@ -96,7 +93,6 @@ pub fn run(
 
 struct Measure<'a> {
     cfg: &'a GatewayConfig,
-    cycles: &'a CyclesConfig,
     shared: &'a Shared,
     history: Option<&'a Recorder>,
 }
@@ -143,7 +139,6 @@ fn supervise(
 fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChild>, job: &Job) {
     let Measure {
         cfg,
-        cycles,
         shared,
         history,
     } = ctx;
@@ -193,7 +188,7 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
         inner: &mut *session.machine,
         last_error: None,
     };
-    let report = run_program(&job.program, &mut machine, cycles, &mut opts);
+    let report = run_program(&job.program, &mut machine, &job.cycles, &mut opts);
     let reason = lock(shared).abort_reason();
     let mut outcome = match reason {
         Some(r) => Outcome::Aborted(r),

@@ -172,19 +172,12 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     let shared = Arc::new(Mutex::new(core));
     let (ready_tx, ready_rx) = std::sync::mpsc::channel();
     let machine = {
-        let (cfg, cycles, shared) = (cfg.clone(), cycles.clone(), shared.clone());
+        let (cfg, shared) = (cfg.clone(), shared.clone());
         let history = history.clone();
         std::thread::Builder::new()
             .name("probebridge-machine".into())
             .spawn(move || {
-                machine_thread::run(
-                    &cfg,
-                    &cycles,
-                    &shared,
-                    &jobs_rx,
-                    &ready_tx,
-                    history.as_ref(),
-                );
+                machine_thread::run(&cfg, &shared, &jobs_rx, &ready_tx, history.as_ref());
             })
             .map_err(|e| e.to_string())?
     };
