@@ -76,3 +76,40 @@ fn cycle_451_check() {
 fn cycle_451_optimise() {
     same_results("451-optimise.h", "demo-sphere.toml");
 }
+
+/// Cycle 460 writes no Q results: its probe-table row is compared instead (R and L
+/// measured; the offset kept, the same on both, since neither simulated machine
+/// can orient its spindle).
+#[test]
+fn cycle_460_calibrate() {
+    let sc = sim::Scenario::load(
+        &configs_dir().join("scenarios").join("demo-sphere.toml"),
+        Some(&configs_dir().join("machines")),
+    )
+    .unwrap();
+    let program = "460-calibrate.h";
+    let can = run_shipped_program(&mut CanInproc::open(&sc), program, &sc, "can");
+    let modbus = run_shipped_program(&mut ModbusTcp::open(&sc), program, &sc, "modbus");
+    let row = |r: &cycles::results::ProgramReport, bus: &str| {
+        assert!(r.completed(), "{program} on {bus}: {}", r.to_json());
+        let c = r
+            .cycles
+            .iter()
+            .find_map(|c| c.calibration.as_ref())
+            .unwrap_or_else(|| panic!("{program} on {bus}: no calibration: {}", r.to_json()));
+        assert!(c.length_measured && !c.offset_measured, "{bus}: {c:?}");
+        let a = &c.after;
+        [a.r, a.cal_of1, a.cal_of2, a.cal_ang, a.l]
+    };
+    let (c, m) = (row(&can, "CANopen"), row(&modbus, "Modbus"));
+    for (name, (v, w)) in ["R", "CAL_OF1", "CAL_OF2", "CAL_ANG", "L"]
+        .iter()
+        .zip(c.iter().zip(&m))
+    {
+        assert!(
+            (v - w).abs() <= 1e-6,
+            "{program} {name}: CANopen {v:.9}, Modbus {w:.9}"
+        );
+    }
+    println!("{program}: R, CAL_OF1, CAL_OF2, CAL_ANG, L: CANopen {c:?}, Modbus {m:?}");
+}
