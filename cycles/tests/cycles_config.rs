@@ -98,7 +98,7 @@ fn implausible_values_duplicate_probes_and_unknown_predef_are_refused() {
         (
             common::CONFIG.replace("Q260 = 150.0", "Q260 = 150.0\nQ999 = 1.0"),
             "cycles.predef.Q999",
-            "Q999 is not a parameter any cycle takes as PREDEF (known: Q253, Q260, Q320)",
+            "Q999 is not a parameter any cycle takes as PREDEF (known: Q253, Q260, Q301, Q320)",
         ),
         (
             common::CONFIG.replace("Q320 = 0.5", "Q320 = -4.0"),
