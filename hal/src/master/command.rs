@@ -80,6 +80,7 @@ pub enum Detail {
     },
     NotEnabled {
         state: u16,
+        waited_ms: f64,
     },
     ArmTimeout,
     Transport,
@@ -129,9 +130,11 @@ impl From<RtError> for MachineError {
                 "axis {} did not reach its position (error {error:.4}); axes stopped",
                 crate::Axis::from_index(axis as usize).map_or("?", |a| a.name())
             ),
-            Detail::NotEnabled { state } => {
-                format!("drive did not reach Operation enabled (statusword 0x{state:04X})")
-            }
+            Detail::NotEnabled { state, waited_ms } => format!(
+                "drive did not reach Operation enabled in {waited_ms:.0} ms (statusword 0x{state:04X}: {})",
+                crate::cia402::state::State::from_statusword(state)
+                    .map_or_else(|| "no valid state".to_string(), |s| format!("{s:?}"))
+            ),
             Detail::ArmTimeout => "touch probe did not report armed in time; nothing moved".into(),
             Detail::Transport => "CAN transport failed; all axes stopped".into(),
             Detail::Busy => "a command is already running".into(),

@@ -58,7 +58,14 @@ impl<S: SampleSink> RtLoop<S> {
             } else {
                 ErrorKind::DriveFault
             };
-            let err = RtError::new(kind, Detail::NotEnabled { state: sw }).node(node);
+            let err = RtError::new(
+                kind,
+                Detail::NotEnabled {
+                    state: sw,
+                    waited_ms: (now - since_ns) as f64 / 1e6,
+                },
+            )
+            .node(node);
             self.fault = Some(err);
             self.reply = Some(Reply::Error(err));
             self.activity = Activity::Idle;

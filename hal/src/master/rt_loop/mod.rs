@@ -89,7 +89,10 @@ impl LoopConfig {
             pacing,
             in_position_window: 0.001,
             settle_timeout_ns: 2_000_000_000,
-            enable_timeout_ns: 2_000_000_000,
+            // Enabling is three state transitions, each a round trip per drive
+            // (RPDO1 out, TPDO1 back): a bus whose drives may be silent for up to
+            // the heartbeat timeout (a slow or emulated host) gets that long for each.
+            enable_timeout_ns: (3 * bus.heartbeat_timeout_ms as u64 * 1_000_000).max(2_000_000_000),
             // Arming is a round trip per drive (RPDO2 out, TPDO2 back): a bus whose
             // drives may be silent for longer (a slow or emulated host) gets as long.
             arm_timeout_ns: (bus.heartbeat_timeout_ms as u64 * 1_000_000).max(200_000_000),
@@ -573,6 +576,8 @@ mod tests {
         tp_status: u16,
         latched: i32,
         last_tpdo2: Option<Tpdo2>,
+        /// A drive that ignores Switch on (stays in Ready to switch on).
+        refuses_switch_on: bool,
     }
 
     impl FakeDrive {
@@ -587,6 +592,7 @@ mod tests {
                 tp_status: 0,
                 latched: 0,
                 last_tpdo2: None,
+                refuses_switch_on: false,
             }
         }
 
@@ -594,9 +600,12 @@ mod tests {
             match cob_id::classify(f.cob_id()) {
                 CobKind::Rpdo { num: 1, node } if node == self.node => {
                     let r = Rpdo1::decode(f).unwrap();
-                    self.state = self
+                    let next = self
                         .state
                         .on_controlword(r.controlword, self.prev_cw, false);
+                    if !(self.refuses_switch_on && next == State::SwitchedOn) {
+                        self.state = next;
+                    }
                     self.prev_cw = r.controlword;
                     self.target = r.target_position;
                 }
@@ -820,6 +829,54 @@ mod tests {
         assert!(matches!(reply, Reply::Ready { .. }), "{reply:?}");
         assert_eq!(controlwords, [0x0006, 0x0007, 0x000F]);
         assert!(b.drives.iter().all(|d| d.state == State::OperationEnabled));
+    }
+
+    /// A drive that stays in Ready to switch on: enabling fails after the configured
+    /// time and not before, naming the node, the time waited and the state.
+    #[test]
+    fn a_drive_that_does_not_switch_on_fails_enabling_after_the_timeout() {
+        let mut b = Bench::new();
+        let timeout = b.rt.config().enable_timeout_ns;
+        b.drives[1].refuses_switch_on = true;
+        let reply = loop {
+            b.tick();
+            if let Some(r) = b.rt.take_reply() {
+                break r;
+            }
+        };
+        assert!(b.now > timeout, "failed after {} of {timeout} ns", b.now);
+        assert!(b.now <= timeout + 2 * PERIOD, "failed late: {} ns", b.now);
+        let Reply::Error(e) = reply else {
+            panic!("expected the enable to fail, got {reply:?}");
+        };
+        assert_eq!((e.kind, e.node), (ErrorKind::DriveFault, Some(2)));
+        let m = crate::machine::MachineError::from(e).message;
+        assert!(
+            m.contains("did not reach Operation enabled in 200")
+                && m.contains(": ReadyToSwitchOn)"),
+            "{m}"
+        );
+    }
+
+    /// A bus whose drives may be silent for seconds (a slow or emulated host) gives
+    /// each of the three enable transitions that long.
+    #[test]
+    fn the_enable_timeout_follows_the_heartbeat_timeout() {
+        let mut m = machine();
+        let pacing = Pacing::Lockstep {
+            answer_timeout: core::time::Duration::ZERO,
+        };
+        assert_eq!(
+            LoopConfig::from_machine(&m, pacing).enable_timeout_ns,
+            2_000_000_000
+        );
+        let mut bus = CanOpenBusConfig::DEFAULT;
+        bus.heartbeat_timeout_ms = 2000;
+        m.bus = crate::config::BusConfig::CanOpen(bus);
+        assert_eq!(
+            LoopConfig::from_machine(&m, pacing).enable_timeout_ns,
+            6_000_000_000
+        );
     }
 
     #[test]
