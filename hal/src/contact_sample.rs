@@ -52,7 +52,7 @@ impl ProbeWindow {
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
-#[type_name("probebridge::ContactSample/1")]
+#[type_name("probebridge::ContactSample/2")]
 #[repr(C)]
 pub struct ContactSample {
     /// Increments by one per sample published by one bridge.
@@ -63,6 +63,10 @@ pub struct ContactSample {
     pub trigger_ns: u64,
     /// When the bridge's real-time loop received the latch, ns, same clock.
     pub receive_ns: u64,
+    /// When the publisher handed the sample to iceoryx2, ns, the host's monotonic
+    /// clock (0: not published over IPC). With `receive_ns` and the estimator's receive
+    /// time it splits the software path into the loop's part and the hop's.
+    pub publish_ns: u64,
     /// Latched positions: X, Y, Z in mm (stylus ball centre), A, B, C in deg.
     pub positions: [f64; MAX_AXES],
     /// Probing direction, unit vector in machine X/Y/Z.
@@ -81,6 +85,7 @@ impl ContactSample {
             run_id: 0,
             trigger_ns: 0,
             receive_ns: 0,
+            publish_ns: 0,
             positions: [0.0; MAX_AXES],
             direction: [0.0; 3],
             feed: 0.0,
@@ -149,9 +154,9 @@ mod tests {
 
     #[test]
     fn layout_is_fixed() {
-        // 4 u64 + 6 f64 + 3 f64 + 1 f64 + 2 u32, no padding: the size is part of the
-        // IPC contract between bridge and estimator.
-        assert_eq!(core::mem::size_of::<ContactSample>(), 4 * 8 + 10 * 8 + 8);
+        // 5 u64 + 6 f64 + 3 f64 + 1 f64 + 2 u32, no padding: the size is part of the
+        // IPC contract between bridge and estimator (its type name carries a version).
+        assert_eq!(core::mem::size_of::<ContactSample>(), 5 * 8 + 10 * 8 + 8);
         assert_eq!(core::mem::align_of::<ContactSample>(), 8);
     }
 }

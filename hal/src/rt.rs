@@ -16,6 +16,49 @@ pub fn set_fifo_priority(priority: i32) -> bool {
     unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) == 0 }
 }
 
+/// The CPUs the calling thread may run on (its affinity mask), lowest first; empty
+/// when not reported.
+pub fn allowed_cpus() -> Vec<usize> {
+    // SAFETY: a zeroed cpu_set_t is valid; sched_getaffinity fills it for this thread.
+    unsafe {
+        let mut set: libc::cpu_set_t = core::mem::zeroed();
+        if libc::sched_getaffinity(0, core::mem::size_of::<libc::cpu_set_t>(), &mut set) != 0 {
+            return Vec::new();
+        }
+        (0..libc::CPU_SETSIZE as usize)
+            .filter(|&c| libc::CPU_ISSET(c, &set))
+            .collect()
+    }
+}
+
+/// The CPU the real-time loop takes: the last of `allowed` when there are two or more
+/// (the others are left to the estimator's armed receive and everything else, so a
+/// spinning estimator and the loop never share a CPU); `None` on one CPU.
+pub fn realtime_cpu_of(allowed: &[usize]) -> Option<usize> {
+    (allowed.len() >= 2).then(|| allowed[allowed.len() - 1])
+}
+
+/// [`realtime_cpu_of`] the calling thread's [`allowed_cpus`].
+pub fn realtime_cpu() -> Option<usize> {
+    realtime_cpu_of(&allowed_cpus())
+}
+
+/// Restricts the calling thread to `cpus`; `false` when refused (or `cpus` is empty).
+pub fn pin_thread(cpus: &[usize]) -> bool {
+    if cpus.is_empty() {
+        return false;
+    }
+    // SAFETY: a zeroed cpu_set_t is valid; CPU_SET for CPUs below CPU_SETSIZE, then
+    // sched_setaffinity on the calling thread (pid 0).
+    unsafe {
+        let mut set: libc::cpu_set_t = core::mem::zeroed();
+        for &c in cpus.iter().filter(|&&c| c < libc::CPU_SETSIZE as usize) {
+            libc::CPU_SET(c, &mut set);
+        }
+        libc::sched_setaffinity(0, core::mem::size_of::<libc::cpu_set_t>(), &set) == 0
+    }
+}
+
 /// Locks the process's memory, current and future (no page faults in a real-time
 /// loop). `false` when not permitted (no CAP_IPC_LOCK / RLIMIT_MEMLOCK too low).
 pub fn lock_memory() -> bool {
@@ -58,6 +101,29 @@ pub fn cpuidle_driver() -> Option<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_real_time_loop_takes_the_last_cpu_of_two_or_more_and_none_of_one() {
+        assert_eq!(realtime_cpu_of(&[0, 1]), Some(1));
+        assert_eq!(realtime_cpu_of(&[2, 5, 7]), Some(7));
+        assert_eq!(realtime_cpu_of(&[3]), None);
+        assert_eq!(realtime_cpu_of(&[]), None);
+    }
+
+    #[test]
+    fn a_thread_pinned_to_one_allowed_cpu_is_allowed_that_one_only() {
+        let allowed = allowed_cpus();
+        assert!(!allowed.is_empty(), "the affinity mask is readable");
+        let last = *allowed.last().unwrap();
+        std::thread::spawn(move || {
+            assert!(pin_thread(&[last]));
+            assert_eq!(allowed_cpus(), [last]);
+            assert!(!pin_thread(&[]), "an empty set is refused");
+            assert_eq!(allowed_cpus(), [last], "and changes nothing");
+        })
+        .join()
+        .unwrap();
+    }
 
     #[test]
     fn the_cpu_latency_request_is_held_while_it_lives() {

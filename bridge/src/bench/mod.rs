@@ -1,5 +1,6 @@
 //! Helpers of `probebridge bench`: latency statistics and the benchmark's machine.
 
+pub mod timer_wakeup;
 pub mod wakeup;
 
 use serde_json::{json, Value};

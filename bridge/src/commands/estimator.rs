@@ -16,7 +16,7 @@ pub struct EstimatorArgs {
     #[arg(long)]
     pub verbose: bool,
     /// Record when each contact arrived (CLOCK_MONOTONIC) and write the records to
-    /// FILE at exit: `run_id sequence trigger_ns receive_ns t1_ns` per line.
+    /// FILE at exit: `run_id sequence trigger_ns receive_ns publish_ns t1_ns` per line.
     #[arg(long, value_name = "FILE")]
     pub record_times: Option<PathBuf>,
     /// Records kept without reallocating.

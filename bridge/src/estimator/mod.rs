@@ -142,9 +142,12 @@ pub fn run_estimator_with(
         log,
         "estimator: armed receive {}",
         match (armed, options.armed_receive) {
-            (true, _) => "on (polls the contacts during probing moves)",
-            (false, ArmedReceive::Off) => "off (armed_receive = \"off\")",
-            (false, ArmedReceive::Auto) => "off (auto: no CPU to spare for it)",
+            (true, _) => format!(
+                "on (polls the contacts during probing moves; {})",
+                armed::leave_the_realtime_cpu()
+            ),
+            (false, ArmedReceive::Off) => "off (armed_receive = \"off\")".into(),
+            (false, ArmedReceive::Auto) => "off (auto: no CPU to spare for it)".into(),
         }
     );
     let mut intake = Intake {
@@ -226,6 +229,7 @@ impl Intake {
                 sequence: sample.sequence,
                 trigger_ns: sample.trigger_ns,
                 receive_ns: sample.receive_ns,
+                publish_ns: sample.publish_ns,
                 t1_ns: hal::clock::monotonic_ns(),
             });
         }

@@ -4,14 +4,15 @@ use std::io::Write;
 
 /// Receive times recorded by the estimator: per sample, taken on CLOCK_MONOTONIC right
 /// after the sample was taken from the subscriber (after the wake-up). The file has
-/// one line per sample: `run_id sequence trigger_ns receive_ns t1_ns`.
+/// one line per sample: `run_id sequence trigger_ns receive_ns publish_ns t1_ns`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ReceiveTime {
     pub run_id: u64,
     pub sequence: u64,
-    /// The sample's `trigger_ns` and `receive_ns` as published.
+    /// The sample's `trigger_ns`, `receive_ns` and `publish_ns` as published.
     pub trigger_ns: u64,
     pub receive_ns: u64,
+    pub publish_ns: u64,
     /// When the estimator had it.
     pub t1_ns: u64,
 }
@@ -26,8 +27,8 @@ impl ReceiveTimes {
         for t in times {
             writeln!(
                 out,
-                "{} {} {} {} {}",
-                t.run_id, t.sequence, t.trigger_ns, t.receive_ns, t.t1_ns
+                "{} {} {} {} {} {}",
+                t.run_id, t.sequence, t.trigger_ns, t.receive_ns, t.publish_ns, t.t1_ns
             )?;
         }
         hal::atomic_write::write_atomic(path, &out).map_err(|e| e.to_io())
@@ -45,15 +46,18 @@ impl ReceiveTimes {
                     .collect::<Result<_, _>>()
                     .map_err(|e| format!("{} line {}: {e}", path.display(), i + 1))?;
                 match v[..] {
-                    [run_id, sequence, trigger_ns, receive_ns, t1_ns] => Ok(ReceiveTime {
-                        run_id,
-                        sequence,
-                        trigger_ns,
-                        receive_ns,
-                        t1_ns,
-                    }),
+                    [run_id, sequence, trigger_ns, receive_ns, publish_ns, t1_ns] => {
+                        Ok(ReceiveTime {
+                            run_id,
+                            sequence,
+                            trigger_ns,
+                            receive_ns,
+                            publish_ns,
+                            t1_ns,
+                        })
+                    }
                     _ => Err(format!(
-                        "{} line {}: expected 5 numbers",
+                        "{} line {}: expected 6 numbers",
                         path.display(),
                         i + 1
                     )),

@@ -116,7 +116,11 @@ impl ContactPublisher {
             None => self.publisher.loan_uninit(),
         };
         let sent = match slot {
-            Ok(slot) => slot.write_payload(*sample).send().map_err(|_| SinkError),
+            Ok(slot) => {
+                let mut sample = *sample;
+                sample.publish_ns = hal::clock::monotonic_ns();
+                slot.write_payload(sample).send().map_err(|_| SinkError)
+            }
             Err(_) => Err(SinkError),
         };
         let Ok(receivers) = sent else {

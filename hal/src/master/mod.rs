@@ -37,6 +37,9 @@ pub struct StartupReport {
     /// CPU wake-up latency is held at 0 µs while the loop runs (see
     /// [`crate::rt::hold_cpu_latency_zero`]).
     pub cpu_latency_held: bool,
+    /// The CPU the loop thread is pinned to ([`crate::rt::realtime_cpu`]; `None`: not
+    /// pinned, one CPU or not in real time).
+    pub rt_cpu: Option<usize>,
     /// Each drive: axis, node and the device name it reports.
     pub drives: Vec<String>,
     pub notes: Vec<String>,
@@ -87,9 +90,11 @@ pub struct CanMachine {
 
 /// SCHED_FIFO at `priority` for the calling thread (0: do not ask) and locked memory;
 /// what was granted.
-fn apply_rt_settings(priority: i32) -> (bool, bool) {
+fn apply_rt_settings(priority: i32) -> (bool, bool, Option<usize>) {
     let fifo = priority > 0 && crate::rt::set_fifo_priority(priority);
-    (fifo, crate::rt::lock_memory())
+    // Its own CPU, the last: the estimator's armed receive spins on the others.
+    let cpu = crate::rt::realtime_cpu().filter(|&c| crate::rt::pin_thread(&[c]));
+    (fifo, crate::rt::lock_memory(), cpu)
 }
 
 impl CanMachine {
@@ -129,7 +134,8 @@ impl CanMachine {
         let (reply_tx, reply_rx) = sync_channel::<Reply>(1);
         let running = Arc::new(AtomicBool::new(true));
         let stats = Arc::new(Mutex::new(LoopStats::default()));
-        let (rt_tx, rt_rx) = sync_channel::<(bool, bool, bool, Option<String>)>(1);
+        type RtSettings = (bool, bool, Option<usize>, bool, Option<String>);
+        let (rt_tx, rt_rx) = sync_channel::<RtSettings>(1);
         let machine_cfg = cfg.clone();
         let thread = {
             let running = running.clone();
@@ -142,7 +148,7 @@ impl CanMachine {
                     let got = if realtime {
                         apply_rt_settings(priority)
                     } else {
-                        (false, false)
+                        (false, false, None)
                     };
                     // Held for as long as the loop runs.
                     let latency = if realtime {
@@ -155,7 +161,7 @@ impl CanMachine {
                         _ => None,
                     };
                     let held = matches!(latency, Some(Ok(_)));
-                    let _ = rt_tx.send((got.0, got.1, held, latency_note));
+                    let _ = rt_tx.send((got.0, got.1, got.2, held, latency_note));
                     let mut rt = PacedLoop::new(&machine_cfg, loop_cfg, transport, sink);
                     run_thread(&mut rt, &cmd_rx, &reply_tx, &running, &stats);
                 })
@@ -166,8 +172,8 @@ impl CanMachine {
                     )
                 })?
         };
-        let (realtime_priority, memory_locked, cpu_latency_held, latency_note) =
-            rt_rx.recv().unwrap_or((false, false, false, None));
+        let (realtime_priority, memory_locked, rt_cpu, cpu_latency_held, latency_note) =
+            rt_rx.recv().unwrap_or((false, false, None, false, None));
         let mut notes = Vec::new();
         if matches!(options.pacing, Pacing::RealTime) {
             if let Some(why) = latency_note {
@@ -215,6 +221,7 @@ impl CanMachine {
                 realtime_priority,
                 memory_locked,
                 cpu_latency_held,
+                rt_cpu,
                 drives,
                 notes,
             },

@@ -143,6 +143,7 @@ impl<S: SampleSink> RtLoop<S> {
             run_id: request.run_id,
             trigger_ns: sync_ns + (fraction * self.cfg.period_ns as f64) as u64,
             receive_ns,
+            publish_ns: 0,
             positions,
             direction: [d[0], d[1], d[2]],
             feed: request.feed,

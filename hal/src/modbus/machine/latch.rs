@@ -163,6 +163,7 @@ impl ModbusMachine {
             run_id: self.run_id,
             trigger_ns,
             receive_ns: monotonic_ns(),
+            publish_ns: 0,
             positions,
             direction: dir,
             feed,

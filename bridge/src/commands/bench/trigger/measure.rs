@@ -14,6 +14,9 @@ use std::time::{Duration, Instant};
 
 /// Spacing of the hot iceoryx2 hops: the floors' estimator is still awake.
 const HOT_SPACING: Duration = Duration::from_micros(50);
+/// The timer floor's sleep: about one frame's wire time at 1 Mbit/s, as long as the
+/// real-time thread waits between two frames of a cycle on the in-process bus.
+const TIMER_SLEEP: Duration = Duration::from_micros(125);
 
 /// What the trigger loop recorded.
 pub(super) struct Measured {
@@ -27,6 +30,9 @@ pub(super) struct Measured {
     pub(super) cold_wakeup_ns: Vec<u64>,
     /// Why the cold eventfd floor is missing, if it is.
     pub(super) cold_wakeup_error: Option<String>,
+    /// The timer floor, one per measured trigger: how late a timed wait ran, ns.
+    pub(super) cold_timer_ns: Vec<u64>,
+    pub(super) cold_timer_error: Option<String>,
     pub(super) stop_ns: Vec<u64>,
     pub(super) stop_cycles: Vec<u64>,
     pub(super) missing_t0: u64,
@@ -41,6 +47,9 @@ pub(super) struct Latencies {
     pub(super) trigger: Vec<u64>,
     pub(super) to_rt: Vec<u64>,
     pub(super) rt_to_estimator: Vec<u64>,
+    /// The software path's two stages: to the publisher's send, and from it on.
+    pub(super) rt_to_published: Vec<u64>,
+    pub(super) published_to_estimator: Vec<u64>,
     pub(super) floor: Vec<u64>,
     pub(super) floor_hot: Vec<u64>,
     pub(super) lost_triggers: u64,
@@ -54,6 +63,8 @@ struct Records {
     floor_seqs: Vec<u64>,
     cold_wakeup_ns: Vec<u64>,
     cold_wakeup_error: Option<String>,
+    cold_timer_ns: Vec<u64>,
+    cold_timer_error: Option<String>,
     stop_ns: Vec<u64>,
     stop_cycles: Vec<u64>,
     missing_t0: u64,
@@ -117,6 +128,8 @@ pub(super) fn measure(
             hot_seqs,
             cold_wakeup_ns: rec.cold_wakeup_ns,
             cold_wakeup_error: rec.cold_wakeup_error,
+            cold_timer_ns: rec.cold_timer_ns,
+            cold_timer_error: rec.cold_timer_error,
             stop_ns: rec.stop_ns,
             stop_cycles: rec.stop_cycles,
             missing_t0: rec.missing_t0,
@@ -155,15 +168,23 @@ fn trigger(rig: &mut Rig, measured: bool, rec: &mut Records) -> Result<u64, Stri
     Ok(contact.sequence)
 }
 
-/// The floors in the trigger's regime: one eventfd ping to the partner, one bare
-/// iceoryx2 hop to the floors' estimator. Both slept since the previous trigger, as
-/// the estimator did.
+/// The floors in the trigger's regime: one timed wait at the real-time loop's
+/// priority, one eventfd ping to the partner, one bare iceoryx2 hop to the floors'
+/// estimator. The last two slept since the previous trigger, as the estimator did.
 fn cold_floors(
     rig: &mut Rig,
     sequence: u64,
     measured: bool,
     rec: &mut Records,
 ) -> Result<(), String> {
+    match &mut rig.timer {
+        Ok(t) => match t.sample(TIMER_SLEEP) {
+            Some(ns) if measured => rec.cold_timer_ns.push(ns),
+            Some(_) => {}
+            None => rec.cold_timer_error = Some("the timer thread stopped answering".into()),
+        },
+        Err(e) => rec.cold_timer_error = Some(e.clone()),
+    }
     match &mut rig.pinger {
         Ok(p) => match p.ping() {
             Some(ns) if measured => rec.cold_wakeup_ns.push(ns),
@@ -225,6 +246,8 @@ pub(super) fn match_records(
     let mut trigger = Vec::with_capacity(t0_of.len());
     let mut to_rt = Vec::with_capacity(t0_of.len());
     let mut rt_to_estimator = Vec::with_capacity(t0_of.len());
+    let mut rt_to_published = Vec::with_capacity(t0_of.len());
+    let mut published_to_estimator = Vec::with_capacity(t0_of.len());
     let mut lost_triggers = 0u64;
     let mut seqs: Vec<&u64> = t0_of.keys().collect();
     seqs.sort_unstable();
@@ -235,6 +258,8 @@ pub(super) fn match_records(
                 trigger.push(r.t1_ns.saturating_sub(t0));
                 to_rt.push(r.receive_ns.saturating_sub(t0));
                 rt_to_estimator.push(r.t1_ns.saturating_sub(r.receive_ns));
+                rt_to_published.push(r.publish_ns.saturating_sub(r.receive_ns));
+                published_to_estimator.push(r.t1_ns.saturating_sub(r.publish_ns));
             }
             None => lost_triggers += 1,
         }
@@ -260,6 +285,8 @@ pub(super) fn match_records(
         trigger,
         to_rt,
         rt_to_estimator,
+        rt_to_published,
+        published_to_estimator,
         floor,
         floor_hot,
         lost_triggers,

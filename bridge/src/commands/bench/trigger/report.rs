@@ -49,7 +49,10 @@ impl Report {
             fl_hot: Summary::of(&l.floor_hot),
             bus_hop: Summary::of(&l.to_rt),
             ipc_hop: Summary::of(&l.rt_to_estimator),
+            loop_stage: Summary::of(&l.rt_to_published),
+            hop_stage: Summary::of(&l.published_to_estimator),
             wake: Summary::of(&m.cold_wakeup_ns),
+            timer: Summary::of(&m.cold_timer_ns),
             wake_hot: m
                 .wakeup
                 .as_ref()
@@ -111,6 +114,9 @@ impl Report {
             std::thread::available_parallelism().map_or(0, |n| n.get()),
             load_average()
         );
+        if let Some(e) = &self.measured.cold_timer_error {
+            say!("timer floor: {e}");
+        }
         if let Some(e) = &self.measured.cold_wakeup_error {
             say!("cold eventfd floor: {e}");
         }

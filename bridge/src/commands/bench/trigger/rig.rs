@@ -50,6 +50,8 @@ pub(super) struct Rig {
     pub(super) floor: ContactPublisher,
     /// The cold eventfd floor's partner process, asleep between triggers.
     pub(super) pinger: Result<bench::wakeup::Pinger, String>,
+    /// The timer wake-up floor, at the real-time loop's priority.
+    pub(super) timer: Result<bench::timer_wakeup::TimerFloor, String>,
     /// This thread (the floor's sender) under SCHED_FIFO.
     pub(super) main_fifo: bool,
     pub(super) latches: Arc<LatchLog>,
@@ -199,6 +201,11 @@ pub(super) fn start_rig(
     let drive_priority = args.drives_priority.unwrap_or(args.rt_priority - 1);
     let (sim_fifo_tx, sim_fifo_rx) = std::sync::mpsc::sync_channel(1);
     let sim = SimRunner::spawn_with_init(sim_machine, sim_transport, move || {
+        // On the real-time loop's CPU: hardware takes no host CPU, and here the drives
+        // never take the one the estimator's armed receive spins on.
+        if let Some(cpu) = hal::rt::realtime_cpu() {
+            hal::rt::pin_thread(&[cpu]);
+        }
         let _ = sim_fifo_tx.send(drive_priority > 0 && hal::rt::set_fifo_priority(drive_priority));
     });
     let sim_fifo = sim_fifo_rx.recv().unwrap_or(false);
@@ -223,6 +230,7 @@ pub(super) fn start_rig(
     let floor = ContactPublisher::new(&floor_ws.prefix).map_err(|e| e.to_string())?;
     floor.update_connections().map_err(|e| e.to_string())?;
     let pinger = bench::wakeup::Pinger::start(args.estimator_priority.max(0), false);
+    let timer = bench::timer_wakeup::TimerFloor::start(args.rt_priority.max(0), startup.rt_cpu);
     // This thread sends the floors: below the drives, above the estimators.
     let sender_priority = args.rt_priority - 2;
     let main_fifo = sender_priority > 0 && hal::rt::set_fifo_priority(sender_priority);
@@ -239,6 +247,7 @@ pub(super) fn start_rig(
         startup,
         floor,
         pinger,
+        timer,
         main_fifo,
         latches,
     })

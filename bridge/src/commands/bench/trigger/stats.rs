@@ -26,8 +26,17 @@ pub(super) struct Figures {
     pub(super) bus_hop: Option<Summary>,
     /// The software path: that last bit to the estimator.
     pub(super) ipc_hop: Option<Summary>,
+    /// Its first stage: the last bit to the publisher's send (the real-time thread's
+    /// wake-up, the loop's work on the frame, the write into the preloaned sample).
+    pub(super) loop_stage: Option<Summary>,
+    /// Its second stage: the send to the estimator having the sample (iceoryx2's send
+    /// and notify, the estimator's wake-up or poll, its read).
+    pub(super) hop_stage: Option<Summary>,
     /// The host's wake-up (eventfd between two processes), interleaved (cold).
     pub(super) wake: Option<Summary>,
+    /// How late a timed wait at the loop's priority runs, interleaved: the floor of
+    /// `loop_stage` (the real-time thread waits for each frame's last bit so).
+    pub(super) timer: Option<Summary>,
     /// The same back to back (hot).
     pub(super) wake_hot: Option<Summary>,
     pub(super) stop: Option<Summary>,
@@ -194,6 +203,15 @@ impl Figures {
         if let Some(s) = &self.ipc_hop {
             out.push(row("  software path: frame in -> estimator", s));
         }
+        if let Some(s) = &self.loop_stage {
+            out.push(row(
+                "    of which: frame in -> published (real-time loop)",
+                s,
+            ));
+        }
+        if let Some(s) = &self.hop_stage {
+            out.push(row("    of which: published -> estimator (iceoryx2)", s));
+        }
         out.push(row(
             "floor: iceoryx2 hop, cold (between triggers)",
             &self.fl,
@@ -201,6 +219,9 @@ impl Figures {
         match &self.wake {
             Some(w) => out.push(row("floor: eventfd wake-up, cold (between triggers)", w)),
             None => out.push("floor: eventfd wake-up, cold: not measured".into()),
+        }
+        if let Some(t) = &self.timer {
+            out.push(row("floor: timer wake-up, late by (loop's priority)", t));
         }
         if let Some(s) = &self.fl_hot {
             out.push(row("hot: iceoryx2 hop, back to back (50 us apart)", s));
@@ -221,6 +242,12 @@ impl Figures {
             out.push(format!(
                 "software path vs the cold eventfd wake-up: {}",
                 Against::of(sw, w).text()
+            ));
+        }
+        if let (Some(l), Some(t)) = (&self.loop_stage, &self.timer) {
+            out.push(format!(
+                "real-time loop stage vs the timer wake-up: {}",
+                Against::of(l, t).text()
             ));
         }
         out.push(format!(
@@ -256,8 +283,14 @@ impl Figures {
             "latch_to_rt_us": self.bus_hop.map(Summary::to_json),
             "wire_time_modelled": self.wire_modelled,
             "software_path_us": self.ipc_hop.map(Summary::to_json),
+            "software_path_stages_us": {
+                "frame_in_to_published": self.loop_stage.map(Summary::to_json),
+                "published_to_estimator": self.hop_stage.map(Summary::to_json),
+                "loop_stage_vs_timer": self.loop_stage.zip(self.timer).map(|(l, t)| Against::of(&l, &t).to_json()),
+            },
             "floor_us": self.fl.to_json(),
             "host_wakeup_us": self.wake.map(Summary::to_json),
+            "host_timer_late_us": self.timer.map(Summary::to_json),
             "floor_hot_us": self.fl_hot.map(Summary::to_json),
             "host_wakeup_hot_us": self.wake_hot.map(Summary::to_json),
             "regimes": "floor_us and host_wakeup_us: cold, one per trigger between the triggers (same idle gap); *_hot_us: back to back",
@@ -302,8 +335,11 @@ mod tests {
             fl_hot: Summary::of(&[us(30); 100]),
             bus_hop: Summary::of(&wire),
             ipc_hop: Summary::of(&sw),
+            loop_stage: Summary::of(&(0..100).map(|v| us(4 + v / 10)).collect::<Vec<_>>()),
+            hop_stage: Summary::of(&(0..100).map(|v| us(6 + v - v / 10)).collect::<Vec<_>>()),
             wake: Summary::of(&(2..102).map(us).collect::<Vec<_>>()),
             wake_hot: Summary::of(&[us(14); 100]),
+            timer: Summary::of(&[us(4); 100]),
             stop: Summary::of(&[us(1900); 100]),
             cycles_sorted: cycles,
             lost: 0,
@@ -329,6 +365,10 @@ mod tests {
             "end to end: latch -> estimator",
             "  wire: latch -> last bit of the frame (modelled)",
             "  software path: frame in -> estimator",
+            "    of which: frame in -> published (real-time loop)",
+            "    of which: published -> estimator (iceoryx2)",
+            "floor: timer wake-up, late by (loop's priority)",
+            "real-time loop stage vs the timer wake-up: p50 2.00x (+4.0 us)",
             "floor: iceoryx2 hop, cold (between triggers)",
             "floor: eventfd wake-up, cold (between triggers)",
             "hot: iceoryx2 hop, back to back",
@@ -360,6 +400,9 @@ mod tests {
         find(&lines, "target stop p99 <= 1 cycle: met");
 
         let j = f.json();
+        let stages = &j["software_path_stages_us"];
+        assert_eq!(stages["frame_in_to_published"]["p50"], 8.0);
+        assert_eq!(stages["published_to_estimator"]["p50"], 51.0);
         assert_eq!(j["stop_latency"]["cycles"]["p99"], 1);
         assert_eq!(j["stop_latency"]["cycles"]["max"], 2);
         assert_eq!(j["targets"]["stop_p99_cycles"]["met"], true);
