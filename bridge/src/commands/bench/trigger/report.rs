@@ -88,9 +88,12 @@ impl Report {
         );
         let granted = |b: bool| if b { "granted" } else { "NOT granted" };
         say!(
-            "SCHED_FIFO: real-time loop {} (priority {}), simulated drives {} ({}), floors' sender {} ({}), {}; memory {}; CPU wake-up latency {} (cpuidle driver: {}); {} CPUs; load average {}",
+            "SCHED_FIFO: real-time loop {} (priority {}, {}), simulated drives {} ({}), floors' sender {} ({}), {}; memory {}; CPU wake-up latency {} (cpuidle driver: {}); {} CPUs; load average {}",
             granted(startup.realtime_priority),
             args.rt_priority,
+            startup
+                .rt_cpu
+                .map_or_else(|| "on any CPU".to_string(), |c| format!("on CPU {c}")),
             granted(self.sim_fifo),
             self.drive_priority,
             granted(self.main_fifo),
@@ -170,6 +173,7 @@ impl Report {
                 "estimator_sched_fifo": self.estimator_fifo,
                 "simulated_drives_priority": self.drive_priority,
                 "floor_sender_sched_fifo": self.main_fifo,
+                "rt_cpu": startup.rt_cpu,
                 "memory_locked": startup.memory_locked,
                 "cpu_latency_held": startup.cpu_latency_held,
                 "cpuidle_driver": f.cpuidle,
