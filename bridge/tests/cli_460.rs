@@ -1,7 +1,8 @@
 //! Cycle 460 from the command line, as an operator calibrates the probe before 451:
 //! `check` plans its moves, `run` measures and writes the probe table row into the
 //! machine's state directory (never `configs/`), prints the row with its standard
-//! uncertainties and puts the result into `--json`; a second run starts from that row.
+//! uncertainties and puts the result into `--json` and the history; a second run starts
+//! from that row.
 //! The simulated bus machine has no orientable spindle: the offset is kept, and said.
 
 #[allow(
@@ -45,7 +46,9 @@ fn check_then_run_460_writes_the_probe_row_into_the_state() {
     assert!(out.status.success(), "{}", said(&out));
 
     let row = state.join("probebridge/table-ac/table-ac.probes.toml");
+    let db = tmp.join("history.sqlite");
     let mut texts = Vec::new();
+    let mut reported = Vec::new();
     for pass in 1..=2 {
         let json = tmp.join(format!("r{pass}.json"));
         let out = common::run(
@@ -54,6 +57,7 @@ fn check_then_run_460_writes_the_probe_row_into_the_state() {
                 .args(["--scenario", scenario.to_str().unwrap()])
                 .args(["--json", json.to_str().unwrap(), "--yes"])
                 .args(["--out", tmp.to_str().unwrap()])
+                .args(["--history", db.to_str().unwrap()])
                 .args([
                     "--service",
                     &format!("pb-460-{}-{pass}", std::process::id()),
@@ -86,12 +90,38 @@ fn check_then_run_460_writes_the_probe_row_into_the_state() {
         );
         assert!(tmp.join("TCHPR460.TXT").is_file());
         texts.push(std::fs::read_to_string(&row).unwrap());
+        reported.push((c["q"].clone(), c["u"].clone()));
         if pass == 2 {
             // The second run started from the first's row.
             assert_eq!(cal["before"]["R"], cal["after"]["R"], "{cal}");
         }
     }
     assert!(texts[0].contains("name = \"TOUCH_PROBE\""), "{}", texts[0]);
+
+    // The history holds each run's row as the run reported it, with its uncertainties.
+    let out =
+        common::run(probebridge(&state).args(["history", "--db", db.to_str().unwrap(), "--json"]));
+    assert!(out.status.success(), "{}", said(&out));
+    let runs: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let runs = runs.as_array().unwrap();
+    assert_eq!(runs.len(), 2, "{runs:?}");
+    for (q, u) in &reported {
+        let kept = runs.iter().any(|r| {
+            let results = r["results"].as_array().unwrap();
+            ["R", "CAL_OF1", "CAL_OF2", "L"].iter().all(|k| {
+                results.iter().any(|x| {
+                    x["cycle"] == 460
+                        && x["name"] == *k
+                        && x["value"] == q[k]
+                        && x["u"] == u.get(k).cloned().unwrap_or(serde_json::Value::Null)
+                })
+            })
+        });
+        assert!(
+            kept,
+            "no run in the history with R, CAL_OF1, CAL_OF2, L = {q} ± {u}: {runs:?}"
+        );
+    }
     assert!(!shipped_row.exists(), "460 wrote into configs/");
 }
 
