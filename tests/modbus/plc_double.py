@@ -10,7 +10,11 @@ ball of radius R: the probe deflects when the ball centre is within R of the pla
 Moves run in the double's own time, SPEEDUP times faster than the wall clock, in
 1 ms cycles; the latch is the exact crossing point of the cycle's segment.
 
-Usage: plc_double.py --plane PX,PY,PZ,NX,NY,NZ --radius R [--word-order CDAB]
+With --spindle the double has an orientable spindle (command 5, orient spindle): it
+takes the angle from the first target's registers, answers done with result 0 and
+prints "orient ANGLE_MILLIDEG" on stdout; without it, command 5 is rejected (7).
+
+Usage: plc_double.py --plane PX,PY,PZ,NX,NY,NZ --radius R [--word-order CDAB] [--spindle]
 """
 
 import argparse
@@ -29,6 +33,7 @@ SPEEDUP = 50.0
 
 # result codes and status bits as the tables of docs/modbus.md give them
 OK, CONTACT, NOT_TRIGGERED, ALREADY_DEFLECTED, COLLISION = 0, 1, 2, 3, 4
+REJECTED = 7
 READY, BUSY, IN_POSITION, DEFLECTED, ARMED = 1, 2, 4, 8, 16
 
 
@@ -60,7 +65,7 @@ def swap(w):
 
 
 class Plc(ModbusBaseDeviceContext):
-    def __init__(self, plane, radius, order):
+    def __init__(self, plane, radius, order, spindle=False):
         self.point, n = plane[:3], plane[3:]
         norm = math.sqrt(sum(c * c for c in n))
         self.normal = [c / norm for c in n]
@@ -75,6 +80,8 @@ class Plc(ModbusBaseDeviceContext):
         self.time_us = 0
         self.motion = None  # (kind, target, feed mm/s, max_steps)
         self.armed = False
+        self.spindle = spindle
+        self.spindle_millideg = 0
 
     def reset(self):
         pass
@@ -125,6 +132,17 @@ class Plc(ModbusBaseDeviceContext):
         for i in range(6):
             if mask & (1 << i):
                 target[i] = get32(self.order, self.cmd[4 + 2 * i:6 + 2 * i]) / COUNTS
+        if code == 5:
+            angle = get32(self.order, self.cmd[4:6])
+            if not self.spindle or not 0 <= angle < 360000:
+                self.finish(REJECTED)
+            elif self.gap(self.pos) <= 0:
+                self.finish(ALREADY_DEFLECTED)
+            else:
+                self.spindle_millideg = angle
+                print(f"orient {angle}", flush=True)
+                self.finish(OK)
+            return
         if code == 1:
             self.motion = ("move", target, feed)
         elif code == 2:
@@ -183,8 +201,10 @@ async def main():
     ap.add_argument("--plane", required=True)
     ap.add_argument("--radius", type=float, required=True)
     ap.add_argument("--word-order", default="ABCD", choices=["ABCD", "CDAB", "BADC", "DCBA"])
+    ap.add_argument("--spindle", action="store_true")
     args = ap.parse_args()
-    plc = Plc([float(v) for v in args.plane.split(",")], args.radius, args.word_order)
+    plc = Plc([float(v) for v in args.plane.split(",")], args.radius, args.word_order,
+              args.spindle)
     server = ModbusTcpServer(ModbusServerContext(devices=plc, single=True), address=("127.0.0.1", 0))
     await server.serve_forever(background=True)
     port = server.transport.sockets[0].getsockname()[1]

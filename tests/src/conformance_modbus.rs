@@ -42,6 +42,9 @@ impl Machine for PlcHeld {
     fn health(&mut self) -> Result<(), MachineError> {
         self.machine.health()
     }
+    fn orient_spindle(&mut self, angle_deg: f64) -> Result<bool, MachineError> {
+        self.machine.orient_spindle(angle_deg)
+    }
 }
 
 /// The Modbus settings of `scenario`'s machine, or the default mailbox when its bus is

@@ -77,9 +77,9 @@ fn cycle_451_optimise() {
     same_results("451-optimise.h", "demo-sphere.toml");
 }
 
-/// Cycle 460 writes no Q results: its probe-table row is compared instead (R and L
-/// measured; the offset kept, the same on both, since neither simulated machine
-/// can orient its spindle).
+/// Cycle 460's probe-table row is compared (R and L measured; the offset kept, the same
+/// on both: the CANopen machine has no spindle drive, and this Modbus mailbox is the
+/// default one, without command 5; `probe_calibration` runs 460 with it).
 #[test]
 fn cycle_460_calibrate() {
     let sc = sim::Scenario::load(

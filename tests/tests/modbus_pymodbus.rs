@@ -18,7 +18,7 @@ mod pymodbus_venv;
 use pymodbus_venv::python;
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, ChildStdout, Command, Stdio};
 
 struct Double(Child);
 
@@ -31,31 +31,51 @@ impl Drop for Double {
 
 /// Starts the double on `plane` (point, normal) with ball radius `r`: its address.
 fn start(py: &PathBuf, plane: [f64; 6], r: f64) -> (Double, String) {
+    let (double, addr, _) = start_with(py, plane, r, &[]);
+    (double, addr)
+}
+
+/// As [`start`], with more arguments; also the rest of its stdout.
+fn start_with(
+    py: &PathBuf,
+    plane: [f64; 6],
+    r: f64,
+    extra: &[&str],
+) -> (Double, String, BufReader<ChildStdout>) {
     let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("modbus/plc_double.py");
     let plane = plane.map(|v| v.to_string()).join(",");
     let mut child = Command::new(py)
         .arg(script)
         .args(["--plane", &plane, "--radius", &r.to_string()])
         .args(["--word-order", "CDAB"])
+        .args(extra)
         .stdout(Stdio::piped())
         .spawn()
         .expect("start the PLC double");
     let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
+    let mut out = BufReader::new(child.stdout.take().unwrap());
+    out.read_line(&mut line).unwrap();
     let addr = line
         .trim()
         .strip_prefix("modbus tcp ")
         .unwrap_or_else(|| panic!("PLC double said {line:?}"))
         .to_string();
-    (Double(child), addr)
+    (Double(child), addr, out)
 }
 
 fn machine(sc: &sim::Scenario, addr: &str) -> (ModbusMachine, hal::config::MachineConfig) {
+    machine_tuned(sc, addr, |_| {})
+}
+
+fn machine_tuned(
+    sc: &sim::Scenario,
+    addr: &str,
+    tune: impl FnOnce(&mut ModbusBusConfig),
+) -> (ModbusMachine, hal::config::MachineConfig) {
     let mut bus = ModbusBusConfig::tcp(addr);
     bus.word_order = WordOrder::CDAB;
     bus.timeout_ms = 1000;
+    tune(&mut bus);
     let mut cfg = machine_config(sc);
     cfg.bus = BusConfig::Modbus(bus);
     let m = ModbusMachine::start(&cfg, NullSink, ModbusOptions::default()).unwrap();
@@ -139,4 +159,39 @@ fn cycle_431_against_the_pymodbus_double() {
     );
     assert!((q["Q158"] - 5.0).abs() < 1e-5, "{q:?}");
     assert!((q["Q159"] + 3.0).abs() < 1e-5, "{q:?}");
+}
+
+/// Command 5 as the double implements it from docs/modbus.md: the angle in 0.001° in
+/// the first target's registers (word order CDAB here), done with result 0; a double
+/// without the function rejects it, and the bridge says what to do.
+#[test]
+fn orient_spindle_against_the_pymodbus_double() {
+    let Some(py) = python() else { return };
+    let (_double, addr, mut out) =
+        start_with(&py, [0.0, 0.0, 10.0, 0.0, 0.0, 1.0], 3.0, &["--spindle"]);
+    let (mut m, _) = machine_tuned(&tilted(), &addr, |b| b.spindle_orientation = true);
+    m.move_to(&AxisPositions::linear([0.0, 0.0, 20.0]), 3000.0)
+        .unwrap();
+    for (deg, said) in [
+        (180.0, "orient 180000"),
+        (-90.0, "orient 270000"),
+        (0.0, "orient 0"),
+    ] {
+        assert!(m.orient_spindle(deg).unwrap(), "{deg}");
+        let mut line = String::new();
+        out.read_line(&mut line).unwrap();
+        assert_eq!(line.trim(), said, "{deg}°");
+    }
+
+    let (_plain, addr) = start(&py, [0.0, 0.0, 10.0, 0.0, 0.0, 1.0], 3.0);
+    let (mut m, _) = machine_tuned(&tilted(), &addr, |b| b.spindle_orientation = true);
+    let e = m.orient_spindle(180.0).unwrap_err();
+    assert!(
+        e.to_string().contains("command 5")
+            && e.to_string().contains("spindle_orientation = false"),
+        "{e}"
+    );
+    // Configured without it, the bridge asks nothing and says it cannot orient.
+    let (mut m, _) = machine(&tilted(), &addr);
+    assert!(!m.orient_spindle(180.0).unwrap());
 }

@@ -10,6 +10,7 @@ use cycles::results::{ProgramReport, Status};
 use cycles::runner::{run_program, RunOptions};
 use hal::Machine;
 use probebridge_tests::conformance::{Backend, CanInproc};
+use probebridge_tests::conformance_modbus::open_tcp;
 use probebridge_tests::world_machine::WorldMachine;
 use probebridge_tests::{cycles_config, scenario};
 
@@ -370,6 +371,83 @@ fn without_an_orientable_spindle_the_offset_is_kept_and_said() {
             c.q[name]
         );
     }
+}
+
+/// Over Modbus, a PLC with command 5 (orient spindle, `[bus] spindle_orientation`)
+/// turns the stylus with the spindle: 460 separates the offset as on the world's
+/// machine, through the mailbox and the simulated PLC's oriented stop.
+#[test]
+fn over_modbus_command_5_orients_the_spindle_and_460_finds_the_offset() {
+    let sc = sphere_scenario(&REAL, REAL.ball);
+    let cfg = cycles_config(&sc);
+    let mut m = open_tcp(&sc, |b| b.spindle_orientation = true);
+    let report = run_on(
+        &program(&[block_460(SPHERE_CENTRE, SPHERE_RADIUS, 0)]),
+        &cfg,
+        &mut m,
+        "460-modbus",
+    );
+    assert!(report.completed(), "{}", report.to_json());
+    let c = &report.cycles[0];
+    let cal = c.calibration.as_ref().expect("460's report");
+    assert!(cal.offset_measured && cal.length_measured, "{cal:?}");
+    for (name, want) in truth_460(&REAL) {
+        let got = c.q[name];
+        println!("460 over Modbus {name} {got:+.7} mm, the stylus {want:+.7} mm");
+        assert!(
+            (got - want).abs() <= 2e-4,
+            "{name} = {got}, the stylus has {want}"
+        );
+    }
+    assert!(
+        c.u.contains_key("CAL_OF1") && c.u.contains_key("CAL_OF2"),
+        "{:?}",
+        c.u
+    );
+    // The PLC left the spindle at 0°, where the cycle started.
+    assert_eq!(m.plc.with_program(|p| p.spindle_deg()), 0.0);
+}
+
+/// A bridge configured for command 5 against a PLC whose program lacks it: the PLC
+/// rejects the first orientation, which comes before any move; the cycle fails naming
+/// the command and the key, nothing moved and no probe row is written.
+#[test]
+fn over_modbus_a_plc_without_command_5_fails_460_before_anything_moves() {
+    let sc = sphere_scenario(&REAL, REAL.ball);
+    let cfg = cycles_config(&sc);
+    let mut m = open_tcp(&sc, |b| b.spindle_orientation = true);
+    m.plc.with_program(|p| p.knobs.no_orient_spindle = true);
+    let text = program(&[block_460(SPHERE_CENTRE, SPHERE_RADIUS, 0)]);
+    // The positioning blocks before the cycle run; the cycle itself must not move.
+    let report = run_on(&text, &cfg, &mut m, "460-modbus-rejected");
+    let c = report
+        .cycles
+        .iter()
+        .find(|c| c.cycle == 460)
+        .expect("the 460 block ran");
+    assert_eq!(c.status, Status::Error, "{}", report.to_json());
+    let why = c.message.clone().unwrap_or_default();
+    assert!(
+        why.contains("command 5") && why.contains("spindle_orientation = false"),
+        "{why}"
+    );
+    let start = [
+        SPHERE_CENTRE[0],
+        SPHERE_CENTRE[1],
+        SPHERE_CENTRE[2] + SPHERE_RADIUS + REAL.ball + 3.0,
+    ];
+    let here = m.positions().unwrap().xyz();
+    for i in 0..3 {
+        assert!(
+            (here[i] - start[i]).abs() < 1e-6,
+            "moved to {here:?} from {start:?}"
+        );
+    }
+    assert!(
+        !cfg.calibrations.path.exists(),
+        "a probe row was written: {}",
+        cfg.calibrations.path.display()
+    );
 }
 
 /// After 460 with a 3D calibration (8 directions per ring: the three lobes resolved),

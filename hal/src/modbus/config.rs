@@ -124,6 +124,10 @@ pub struct ModbusBusConfig {
     /// Let `poll` capture measure (set-up only; probing moves are refused otherwise).
     #[serde(default)]
     pub allow_poll: bool,
+    /// The PLC implements command 5, orient spindle (cycle 460 measures the stylus
+    /// centre offset with it; without, the offset is kept and the cycle says so).
+    #[serde(default)]
+    pub spindle_orientation: bool,
 }
 
 fn default_baud() -> u32 {
@@ -189,6 +193,7 @@ impl ModbusBusConfig {
             capture: CaptureKind::HwLatch,
             plc_cycle_us: default_plc_cycle_us(),
             allow_poll: false,
+            spindle_orientation: false,
         }
     }
 

@@ -23,6 +23,9 @@ pub mod cmd {
     pub const FEED: usize = 2;
     /// 6 x i32 counts, X Y Z A B C.
     pub const TARGETS: usize = 4;
+    /// Orient spindle: i32, 0.001°, 0 <= angle < 360 000, in the registers of the
+    /// first target (the axis mask is 0, the feed 0).
+    pub const SPINDLE_ANGLE: usize = TARGETS;
     pub const PROBE_EDGE: usize = 16;
     pub const LATCH_ACK: usize = 17;
     pub const HEARTBEAT: usize = 18;
@@ -60,6 +63,10 @@ pub enum CommandCode {
     Stop = 3,
     /// Clear a fault (the PLC decides whether it can).
     AcknowledgeFault = 4,
+    /// Turn the spindle to [`cmd::SPINDLE_ANGLE`] (an oriented spindle stop; the
+    /// stylus turns with it) and report done when it stands there. A PLC without an
+    /// orientable spindle answers rejected; with the probe deflected, already deflected.
+    OrientSpindle = 5,
 }
 
 impl CommandCode {
@@ -70,6 +77,7 @@ impl CommandCode {
             2 => CommandCode::Probe,
             3 => CommandCode::Stop,
             4 => CommandCode::AcknowledgeFault,
+            5 => CommandCode::OrientSpindle,
             _ => return None,
         })
     }

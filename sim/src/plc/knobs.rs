@@ -25,6 +25,9 @@ pub struct Knobs {
     /// The next contact is followed by this many spurious latches (more than the ring
     /// holds overflows it).
     pub extra_latches: u16,
+    /// The program lacks command 5, orient spindle (answers rejected), whatever the
+    /// bus configuration says: an integrator who did not implement it.
+    pub no_orient_spindle: bool,
 }
 
 impl Knobs {

@@ -36,7 +36,15 @@ enum Activity {
         t: f64,
         then: ResultCode,
     },
+    /// Orient spindle: turning to `to_deg`, done after `cycles_left` more cycles.
+    Orienting {
+        to_deg: f64,
+        cycles_left: u32,
+    },
 }
+
+/// How fast the simulated spindle turns to an oriented stop, deg/s (180° in 0.1 s).
+const SPINDLE_ORIENT_DEG_PER_S: f64 = 1800.0;
 
 /// The PLC: registers, motion, probe.
 pub struct PlcProgram {
@@ -62,6 +70,8 @@ pub struct PlcProgram {
     command_sequence: u16,
     armed: bool,
     fault: Option<u16>,
+    /// The program has command 5, orient spindle (`[bus] spindle_orientation`).
+    orientable_spindle: bool,
     latch_log: Option<std::sync::Arc<crate::machine::LatchLog>>,
     motion_watch: Option<crate::machine::MotionWatch>,
     pub knobs: Knobs,
@@ -118,6 +128,7 @@ impl PlcProgram {
             command_sequence: 0,
             armed: false,
             fault: None,
+            orientable_spindle: bus.spindle_orientation,
             latch_log: None,
             motion_watch: None,
             knobs: Knobs::default(),
@@ -159,6 +170,11 @@ impl PlcProgram {
     pub fn is_busy(&self) -> bool {
         !matches!(self.activity, Activity::Idle)
             || self.command[hal::modbus::mailbox::cmd::SEQUENCE] != self.command_sequence
+    }
+
+    /// Where the spindle stands (its last oriented stop), deg.
+    pub fn spindle_deg(&self) -> f64 {
+        self.world.spindle_deg()
     }
 
     /// Encoder positions.
@@ -248,7 +264,36 @@ impl PlcProgram {
                 self.finish(ResultCode::Ok);
             }
             CommandCode::Move | CommandCode::Probe => self.start_motion(code, block),
+            CommandCode::OrientSpindle => self.start_orient(block),
         }
+    }
+
+    /// Command 5: refused without an orientable spindle, with a fault, with an angle
+    /// out of 0..360°, and with the stylus deflected (turning would drag it).
+    fn start_orient(&mut self, block: &CommandBlock) {
+        if !self.orientable_spindle || self.knobs.no_orient_spindle {
+            return self.finish(ResultCode::Rejected);
+        }
+        if self.fault.is_some() {
+            return self.finish(ResultCode::Fault);
+        }
+        let milli = block.targets[0];
+        if !(0..360_000).contains(&milli) {
+            return self.finish(ResultCode::Rejected);
+        }
+        if self.world.deflected(&self.actual()) {
+            return self.finish(ResultCode::AlreadyDeflected);
+        }
+        let to_deg = milli as f64 / 1000.0;
+        let turn = (to_deg - self.world.spindle_deg()).rem_euclid(360.0);
+        let turn = turn.min(360.0 - turn);
+        let cycles = (turn / (SPINDLE_ORIENT_DEG_PER_S * self.cycle_s))
+            .ceil()
+            .max(1.0);
+        self.activity = Activity::Orienting {
+            to_deg,
+            cycles_left: cycles as u32,
+        };
     }
 
     fn start_motion(&mut self, code: CommandCode, block: &CommandBlock) {
@@ -286,6 +331,12 @@ impl PlcProgram {
     }
 
     fn brake(&mut self, then: ResultCode) {
+        if let Activity::Orienting { .. } = self.activity {
+            // The spindle halts where it is: not oriented (the world keeps the angle
+            // it was at; the bridge, told "stopped", assumes none).
+            self.activity = Activity::Idle;
+            return;
+        }
         if let Activity::Moving { profile, t } | Activity::Probing { profile, t } = self.activity {
             self.armed = false;
             self.activity = Activity::Stopping {
@@ -349,6 +400,20 @@ impl PlcProgram {
                     self.finish(then);
                 } else {
                     self.activity = Activity::Stopping { profile, t, then };
+                }
+            }
+            Activity::Orienting {
+                to_deg,
+                cycles_left,
+            } => {
+                if cycles_left <= 1 {
+                    self.world.orient_spindle(to_deg);
+                    self.finish(ResultCode::Ok);
+                } else {
+                    self.activity = Activity::Orienting {
+                        to_deg,
+                        cycles_left: cycles_left - 1,
+                    };
                 }
             }
         }

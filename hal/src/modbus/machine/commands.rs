@@ -119,6 +119,42 @@ impl Machine for ModbusMachine {
         self.run_id = run_id;
     }
 
+    /// Command 5, where `[bus] spindle_orientation` says the PLC has it; `Ok(false)`
+    /// (nothing asked) where it does not.
+    fn orient_spindle(&mut self, angle_deg: f64) -> Result<bool, MachineError> {
+        if !self.bus.spindle_orientation {
+            return Ok(false);
+        }
+        if !angle_deg.is_finite() {
+            return Err(MachineError::new(
+                ErrorKind::InvalidRequest,
+                format!("spindle angle {angle_deg} is not a number; nothing moved"),
+            ));
+        }
+        // Turning the spindle drags a stylus in contact across the surface.
+        if self.status.has(bits::DEFLECTED) {
+            return Err(MachineError::new(
+                ErrorKind::AlreadyDeflected,
+                "the stylus is in contact: the spindle is not turned with it deflected; retract first",
+            ));
+        }
+        let milli = (angle_deg.rem_euclid(360.0) * 1000.0).round() as i32 % 360_000;
+        let mut counts = [0i32; crate::axis::MAX_AXES];
+        counts[0] = milli;
+        let (s, _) = self.run_block(CommandCode::OrientSpindle, counts, 0, 0.0)?;
+        match ResultCode::from_u16(s.result) {
+            Some(ResultCode::Ok) => Ok(true),
+            Some(ResultCode::Rejected) => Err(MachineError::new(
+                ErrorKind::InvalidRequest,
+                format!(
+                    "the PLC rejected orient spindle (command 5) to {angle_deg:.3}°: its program has no orientable spindle. \
+                     Implement command 5 (docs/modbus.md) or set spindle_orientation = false in [bus]"
+                ),
+            )),
+            _ => Err(self.result_error(&s, "orient spindle", 0.0)),
+        }
+    }
+
     /// One status read: the connection (after the client's retries and reconnects),
     /// and the PLC's fault bit.
     fn health(&mut self) -> Result<(), MachineError> {

@@ -258,6 +258,17 @@ impl ModbusMachine {
                 )
             })?;
         }
+        self.run_block(command, counts, targets.mask() as u16, feed)
+    }
+
+    /// As [`Self::run`], with the target registers and the axis mask as written.
+    pub(super) fn run_block(
+        &mut self,
+        command: CommandCode,
+        counts: [i32; MAX_AXES],
+        axis_mask: u16,
+        feed: f64,
+    ) -> Result<(StatusBlock, Option<LatchSlot>), MachineError> {
         if self.abort_raised() {
             return Err(aborted_error("stop requested; nothing moved"));
         }
@@ -265,7 +276,7 @@ impl ModbusMachine {
         self.heartbeat = self.heartbeat.wrapping_add(1);
         let block = CommandBlock {
             command: command as u16,
-            axis_mask: targets.mask() as u16,
+            axis_mask,
             feed_milli: (feed * 1000.0).round().clamp(0.0, u32::MAX as f64) as u32,
             targets: counts,
             probe_edge: u16::from(command == CommandCode::Probe),
