@@ -1,7 +1,8 @@
 //! `probebridge serve` on the simulator with a pymodbus "PLC" (`tests/gateway/plc.py`,
-//! written from the register map in docs/gateway.md): programs 431, 444 and 451 started by
-//! number give the results of `probebridge run --json` (and their uncertainties) to
-//! the registers' precision;
+//! written from the register map in docs/gateway.md): programs 431, 444, 451 and 460
+//! started by number give the results of `probebridge run --json` (and their
+//! uncertainties; 460's probe table row in the calibration block) to the registers'
+//! precision;
 //! refusal while busy, abort mid-cycle, acknowledge after an error, a second
 //! connection refused, PLC heartbeat loss, SIGTERM and SIGHUP mid-cycle, a second
 //! SIGTERM during a slow stop, the lock and iceoryx2's root in the unit's runtime
@@ -142,9 +143,55 @@ fn run_json(program: &str, scenario: &str, name: &str) -> serde_json::Value {
         .clone()
 }
 
+/// Cycle 460's probe table row and its uncertainties in the calibration block equal
+/// the run's to float32's precision; no result slot holds anything. Any other cycle:
+/// the calibration block is empty.
+fn assert_same_calibration(plc: &serde_json::Value, run: &serde_json::Value) {
+    let cal = plc["cal"].as_object().unwrap();
+    let cal_u = plc["cal_u"].as_object().unwrap();
+    if run["cycle"] != 460 {
+        assert!(
+            cal.is_empty() && cal_u.is_empty(),
+            "a calibration row: {plc}"
+        );
+        return;
+    }
+    assert_eq!(plc["cycle"], 460);
+    for k in ["R", "CAL_OF1", "CAL_OF2", "L"] {
+        let v = run["q"][k].as_f64().unwrap();
+        let g = cal[k]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{k} missing: {plc}"));
+        assert!(
+            (g - v).abs() <= 1e-6 * v.abs().max(1.0),
+            "{k}: register {g}, run {v}"
+        );
+    }
+    let want_u = run["u"].as_object().unwrap();
+    assert!(!want_u.is_empty(), "460 reports uncertainties: {run}");
+    assert_eq!(
+        cal_u.len(),
+        want_u.len(),
+        "u of exactly the measured columns: {plc}"
+    );
+    for (k, v) in want_u {
+        let (g, v) = (cal_u[k].as_f64().unwrap(), v.as_f64().unwrap());
+        assert!(
+            (g - v).abs() <= 1e-6 * v.abs().max(1e-3),
+            "u of {k}: register {g}, run {v}"
+        );
+    }
+    assert!(plc["real"].as_object().unwrap().is_empty(), "{plc}");
+    assert!(plc["u"].as_object().unwrap().is_empty(), "{plc}");
+}
+
 /// Every Q result (and 451's errors by ISO name) equals the run's, to float32's
 /// precision and to the DINT's scale of 1e4.
 fn assert_same_results(plc: &serde_json::Value, run: &serde_json::Value) {
+    assert_same_calibration(plc, run);
+    if run["cycle"] == 460 {
+        return;
+    }
     let mut expected: Vec<(String, f64)> = run["q"]
         .as_object()
         .unwrap()
@@ -216,6 +263,7 @@ fn programs_started_by_number_give_the_results_of_run() {
         (431, "431-plane.h", "tilted-plane.toml"),
         (444, "444-freeform.h", "freeform.toml"),
         (451, "451-check.h", "demo-sphere.toml"),
+        (460, "460-calibrate.h", "demo-sphere.toml"),
     ] {
         let name = format!("results-{number}");
         let serve = Serve::start(&name, scenario, &[(number, program)], "");

@@ -14,6 +14,10 @@
 //!   result slot as REAL in the same slot order (NaN where the result has none: the
 //!   errors before optimisation, the dispersions, a missing result), and the sequence
 //!   again.
+//! - calibration block (`CALIB_BASE`, read-only, appended after the uncertainty block
+//!   without moving it): the result sequence, cycle 460's probe table row (R, CAL_OF1,
+//!   CAL_OF2, L) as REAL and their standard uncertainties as REAL (NaN when the cycle
+//!   the result block holds is not 460, or for a column it kept), and the sequence again.
 //!
 //! Reads and writes must lie inside one block; writes only inside the request block.
 
@@ -62,6 +66,15 @@ pub const UNC_SEQ_HEAD: u16 = UNCERT_BASE;
 pub const UNC_REAL: u16 = UNC_SEQ_HEAD + 1;
 pub const UNC_SEQ_TAIL: u16 = UNC_REAL + 2 * SLOTS as u16;
 pub const UNCERT_LEN: u16 = UNC_SEQ_TAIL - UNCERT_BASE + 1;
+
+/// Cycle 460's probe table columns, in register order (their names in the results).
+pub const CAL_COLUMNS: [&str; 4] = ["R", "CAL_OF1", "CAL_OF2", "L"];
+pub const CALIB_BASE: u16 = UNC_SEQ_TAIL + 1;
+pub const CAL_SEQ_HEAD: u16 = CALIB_BASE;
+pub const CAL_REAL: u16 = CAL_SEQ_HEAD + 1;
+pub const CAL_UNC: u16 = CAL_REAL + 2 * CAL_COLUMNS.len() as u16;
+pub const CAL_SEQ_TAIL: u16 = CAL_UNC + 2 * CAL_COLUMNS.len() as u16;
+pub const CALIB_LEN: u16 = CAL_SEQ_TAIL - CALIB_BASE + 1;
 
 /// The key of a slot's standard uncertainty in the values of
 /// [`RegisterMap::set_results`]: `u.` and the slot's name (`u.Q158`, `u.after.EX0C`).
@@ -168,7 +181,7 @@ pub struct RegisterMap {
 impl RegisterMap {
     pub fn new(order: WordOrder, int_scale: f64) -> Self {
         let mut m = Self {
-            regs: vec![0; usize::from(UNC_SEQ_TAIL) + 1],
+            regs: vec![0; usize::from(CAL_SEQ_TAIL) + 1],
             order,
             int_scale,
         };
@@ -183,6 +196,7 @@ impl RegisterMap {
             (STATE_BASE, STATE_LEN),
             (RESULT_BASE, RESULT_LEN),
             (UNCERT_BASE, UNCERT_LEN),
+            (CALIB_BASE, CALIB_LEN),
         ]
         .into_iter()
         .find(|&(base, len)| addr >= base && end <= u32::from(base) + u32::from(len))
@@ -286,7 +300,26 @@ impl RegisterMap {
             self.regs[d] = a;
             self.regs[d + 1] = b;
         }
-        for at in [RES_SEQ_HEAD, RES_SEQ_TAIL, UNC_SEQ_HEAD, UNC_SEQ_TAIL] {
+        for (i, name) in CAL_COLUMNS.iter().enumerate() {
+            for (base, key) in [
+                (CAL_REAL, name.to_string()),
+                (CAL_UNC, uncertainty_key(name)),
+            ] {
+                let v = values.get(&key).map_or(f32::NAN, |v| *v as f32);
+                let [a, b] = self.order.split(v.to_bits());
+                let r = usize::from(base) + 2 * i;
+                self.regs[r] = a;
+                self.regs[r + 1] = b;
+            }
+        }
+        for at in [
+            RES_SEQ_HEAD,
+            RES_SEQ_TAIL,
+            UNC_SEQ_HEAD,
+            UNC_SEQ_TAIL,
+            CAL_SEQ_HEAD,
+            CAL_SEQ_TAIL,
+        ] {
             self.regs[usize::from(at)] = seq;
         }
     }
@@ -329,6 +362,52 @@ mod tests {
             (UNCERT_BASE, UNC_REAL, UNC_SEQ_TAIL, UNCERT_LEN),
             (330, 331, 463, 134)
         );
+        // So does the calibration block, after it.
+        assert_eq!(
+            (CALIB_BASE, CAL_REAL, CAL_UNC, CAL_SEQ_TAIL, CALIB_LEN),
+            (464, 465, 473, 481, 18)
+        );
+    }
+
+    #[test]
+    fn golden_calibration_block() {
+        let values: BTreeMap<String, f64> = [
+            ("R".to_string(), 2.5),
+            (uncertainty_key("R"), 0.5),
+            ("CAL_OF1".into(), 0.25),
+            ("L".into(), -2.0),
+        ]
+        .into_iter()
+        .collect();
+        let mut m = RegisterMap::new(WordOrder::LowFirst, 10_000.0);
+        m.set_results(5, &values);
+        // 2.5f32 = 0x4020_0000, 0.25 = 0x3E80_0000, -2.0 = 0xC000_0000, low word first.
+        let regs = m.read(CALIB_BASE, CALIB_LEN).unwrap();
+        assert_eq!(
+            regs,
+            vec![
+                5, 0, 0x4020, 0, 0x3E80, 0, 0x7FC0, 0,
+                0xC000, // R, CAL_OF1, CAL_OF2 (kept: NaN), L
+                0, 0x3F00, 0, 0x7FC0, 0, 0x7FC0, 0, 0x7FC0, // u of R only
+                5
+            ]
+        );
+        // Not in any result slot, and not readable across the blocks' border.
+        assert!(slot_names()
+            .iter()
+            .all(|n| !CAL_COLUMNS.contains(&n.as_str())));
+        assert_eq!(
+            m.read(UNC_SEQ_TAIL, 2),
+            Err(MapException::IllegalDataAddress)
+        );
+        assert_eq!(
+            m.read(CAL_SEQ_TAIL, 2),
+            Err(MapException::IllegalDataAddress)
+        );
+        // A run without 460: every column NaN.
+        m.set_results(6, &BTreeMap::new());
+        assert_eq!(m.read(CAL_REAL, 2).unwrap(), vec![0, 0x7FC0]);
+        assert_eq!((m.get(CAL_SEQ_HEAD), m.get(CAL_SEQ_TAIL)), (6, 6));
     }
 
     #[test]
@@ -356,10 +435,6 @@ mod tests {
             Err(MapException::IllegalDataAddress)
         );
         assert!(m.read(UNCERT_BASE, 125).is_ok());
-        assert_eq!(
-            m.read(UNC_SEQ_TAIL, 2),
-            Err(MapException::IllegalDataAddress)
-        );
     }
 
     #[test]

@@ -15,6 +15,8 @@ REQ, SEQ, PROGRAM, FLAGS, PARAMS, HEARTBEAT = 0, 1, 2, 3, 4, 20
 ACK_SEQ, ACK_CODE, REASON, STATE, BITS, PROGRESS, ERR_KIND, ERR_CODE, POINT = range(32, 41)
 RES_HEAD, RES_REAL, RES_DINT, RES_TAIL = 64, 65, 197, 329
 UNC_HEAD, UNC_REAL, UNC_TAIL = 330, 331, 463
+CAL_HEAD, CAL_REAL, CAL_UNC, CAL_TAIL = 464, 465, 473, 481
+CAL_COLUMNS = ("R", "CAL_OF1", "CAL_OF2", "L")
 START, ABORT, ACK = 1, 2, 3
 IDLE, BUSY, DONE, ERROR, ABORTED = range(5)
 NAMES = (
@@ -105,6 +107,20 @@ class Plc:
         return u
 
 
+    def calibration(self, seq):
+        regs = self.read(CAL_HEAD, CAL_TAIL - CAL_HEAD + 1)
+        head, tail = regs[0], regs[CAL_TAIL - CAL_HEAD]
+        check(head == tail == seq, f"calibration sequence {head}/{tail} for request {seq}")
+        cal, cal_u = {}, {}
+        for i, name in enumerate(CAL_COLUMNS):
+            for base, out in ((CAL_REAL, cal), (CAL_UNC, cal_u)):
+                a = base - CAL_HEAD + 2 * i
+                f = struct.unpack(">f", struct.pack(">HH", regs[a], regs[a + 1]))[0]
+                if f == f:
+                    out[name] = f
+        return cal, cal_u
+
+
 # Parameters 1..8 of every start of `run`: recorded with the run in the history.
 PARAMS = (1.5, -2.25, 0.0, 0.0, 0.0, 0.0, 0.0, 1000.125)
 
@@ -118,8 +134,9 @@ def run(plc, program):
     check(st[4] & 0b100100 == 0b100100, f"done and results-valid bits: {st[4]:#x}")
     real, dint = plc.results(seq)
     u = plc.uncertainties(seq)
+    cal, cal_u = plc.calibration(seq)
     cycle = plc.read(43, 1)[0]
-    return {"cycle": cycle, "real": real, "dint": dint, "u": u}
+    return {"cycle": cycle, "real": real, "dint": dint, "u": u, "cal": cal, "cal_u": cal_u}
 
 
 def busy_abort(plc, program, other, again):
