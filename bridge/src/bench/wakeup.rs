@@ -131,14 +131,13 @@ pub struct Pinger {
 }
 
 impl Pinger {
-    /// Forks the partner, under SCHED_FIFO at `priority` (0: ordinary); with `pin`,
-    /// the caller on CPU 0 and the partner on CPU 1 (when there are two).
-    pub fn start(priority: i32, pin_cpus: bool) -> Result<Self, String> {
+    /// Forks the partner, under SCHED_FIFO at `priority` (0: ordinary); with `cpus`
+    /// = (caller's, partner's), each pinned there (the caller stays pinned).
+    pub fn start(priority: i32, cpus: Option<(usize, usize)>) -> Result<Self, String> {
         let page = SharedPage::new()?;
         let (ping, pong) = (eventfd()?, eventfd()?);
-        let two_cpus = std::thread::available_parallelism().map_or(1, |n| n.get()) >= 2;
-        let pin_cpus = pin_cpus && two_cpus;
-        let parent_cpu = pin_cpus && pin(0);
+        let parent_cpu = cpus.is_some_and(|(caller, _)| pin(caller));
+        let partner_cpu = cpus.map(|(_, p)| p);
         // SAFETY: fork in a process with other threads: the child only makes
         // async-signal-safe calls (sched_setaffinity, sched_setscheduler, read, write,
         // clock_gettime, _exit) on memory that exists before the fork, and allocates
@@ -148,7 +147,7 @@ impl Pinger {
             return Err(format!("fork: {}", std::io::Error::last_os_error()));
         }
         if pid == 0 {
-            partner(&page, &ping, &pong, pin_cpus, priority);
+            partner(&page, &ping, &pong, partner_cpu, priority);
         }
         let child = if wait(&pong) {
             page.stamp().load(Ordering::Acquire)
@@ -186,8 +185,8 @@ impl Drop for Pinger {
 }
 
 /// The forked partner: answers pings until told to quit, then leaves.
-fn partner(page: &SharedPage, ping: &Fd, pong: &Fd, pin_cpus: bool, priority: i32) -> ! {
-    let pinned = pin_cpus && pin(1);
+fn partner(page: &SharedPage, ping: &Fd, pong: &Fd, cpu: Option<usize>, priority: i32) -> ! {
+    let pinned = cpu.is_some_and(pin);
     let fifo = priority > 0 && hal::rt::set_fifo_priority(priority);
     let stamp = page.stamp();
     stamp.store(
@@ -219,7 +218,8 @@ pub fn measure(count: usize, warmup: usize, priority: i32) -> Result<Wakeup, Str
     };
     let parent_fifo = priority > 0 && hal::rt::set_fifo_priority(priority);
     let mut latencies_ns = Vec::with_capacity(count);
-    let started = Pinger::start(priority, true);
+    let two_cpus = std::thread::available_parallelism().map_or(1, |n| n.get()) >= 2;
+    let started = Pinger::start(priority, two_cpus.then_some((0, 1)));
     let (cross_cpu, fifo) = match started {
         Ok(mut pinger) => {
             for i in 0..count + warmup {
@@ -267,7 +267,7 @@ mod tests {
 
     #[test]
     fn a_pinger_answers_each_ping_and_its_partner_leaves_when_dropped() {
-        let mut p = Pinger::start(0, false).unwrap();
+        let mut p = Pinger::start(0, None).unwrap();
         for _ in 0..3 {
             assert!(p.ping().is_some_and(|ns| ns > 0));
         }

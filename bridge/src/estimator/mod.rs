@@ -138,16 +138,15 @@ pub fn run_estimator_with(
     );
 
     let armed = options.armed_receive.enabled();
+    // Asleep or spinning, off the real-time loop's CPU.
+    let cpus = armed::leave_the_realtime_cpu();
     let _ = writeln!(
         log,
         "estimator: armed receive {}",
         match (armed, options.armed_receive) {
-            (true, _) => format!(
-                "on (polls the contacts during probing moves; {})",
-                armed::leave_the_realtime_cpu()
-            ),
-            (false, ArmedReceive::Off) => "off (armed_receive = \"off\")".into(),
-            (false, ArmedReceive::Auto) => "off (auto: no CPU to spare for it)".into(),
+            (true, _) => format!("on (polls the contacts during probing moves; {cpus})"),
+            (false, ArmedReceive::Off) => format!("off (armed_receive = \"off\"; {cpus})"),
+            (false, ArmedReceive::Auto) => format!("off (auto: no CPU to spare for it; {cpus})"),
         }
     );
     let mut intake = Intake {

@@ -229,7 +229,13 @@ pub(super) fn start_rig(
         CanMachine::start(cfg, master_transport, sink, options).map_err(|e| e.to_string())?;
     let floor = ContactPublisher::new(&floor_ws.prefix).map_err(|e| e.to_string())?;
     floor.update_connections().map_err(|e| e.to_string())?;
-    let pinger = bench::wakeup::Pinger::start(args.estimator_priority.max(0), false);
+    // The cold eventfd floor on the trigger's CPUs: this thread (the floors' sender)
+    // on the real-time loop's, the partner on the estimators'.
+    let floor_cpus = startup.rt_cpu.and_then(|rt| {
+        let other = hal::rt::allowed_cpus().into_iter().find(|&c| c != rt)?;
+        Some((rt, other))
+    });
+    let pinger = bench::wakeup::Pinger::start(args.estimator_priority.max(0), floor_cpus);
     let timer = bench::timer_wakeup::TimerFloor::start(args.rt_priority.max(0), startup.rt_cpu);
     // This thread sends the floors: below the drives, above the estimators.
     let sender_priority = args.rt_priority - 2;
