@@ -31,6 +31,14 @@ pub fn allowed_cpus() -> Vec<usize> {
     }
 }
 
+/// The CPUs online (`_SC_NPROCESSORS_ONLN`: 0..n), whatever this thread's mask: a
+/// process whose parent was pinned may widen its own mask within its cpuset.
+pub fn online_cpus() -> Vec<usize> {
+    // SAFETY: sysconf has no preconditions.
+    let n = unsafe { libc::sysconf(libc::_SC_NPROCESSORS_ONLN) };
+    (0..n.max(1) as usize).collect()
+}
+
 /// The CPU the real-time loop takes: the last of `allowed` when there are two or more
 /// (the others are left to the estimator's armed receive and everything else, so a
 /// spinning estimator and the loop never share a CPU); `None` on one CPU.

@@ -26,6 +26,10 @@ pub struct EstimatorArgs {
     /// CPU to spare) or always sleep until woken ("off").
     #[arg(long, value_enum, default_value_t = ArmedReceive::Auto)]
     pub armed_receive: ArmedReceive,
+    /// Keep off this CPU (the one the real-time loop is pinned to, as `bench trigger`
+    /// pins it). Default: the scheduler places the estimator.
+    #[arg(long, value_name = "CPU")]
+    pub avoid_cpu: Option<usize>,
 }
 
 pub fn run(args: EstimatorArgs) -> Result<(), String> {
@@ -36,6 +40,7 @@ pub fn run(args: EstimatorArgs) -> Result<(), String> {
         record_times: args.record_times,
         record_capacity: args.record_capacity.unwrap_or(DEFAULT_RECORD_CAPACITY),
         armed_receive: args.armed_receive,
+        avoid_cpu: args.avoid_cpu,
     };
     run_estimator_with(&args.service, &options, &stop, std::io::stderr()).map_err(|e| e.to_string())
 }

@@ -66,6 +66,8 @@ pub struct EstimatorOptions {
     pub record_capacity: usize,
     /// Poll for the contact during probing moves (config `[estimator] armed_receive`).
     pub armed_receive: ArmedReceive,
+    /// Keep off this CPU (the real-time loop's, where it is pinned); `None`: anywhere.
+    pub avoid_cpu: Option<usize>,
 }
 
 /// [`run_estimator_with`] with default options (quiet, no signal handlers).
@@ -138,8 +140,10 @@ pub fn run_estimator_with(
     );
 
     let armed = options.armed_receive.enabled();
-    // Asleep or spinning, off the real-time loop's CPU.
-    let cpus = armed::leave_the_realtime_cpu();
+    // Asleep or spinning, off the real-time loop's CPU where it has one.
+    let cpus = options
+        .avoid_cpu
+        .map_or_else(|| "on any CPU".to_string(), armed::leave_cpu);
     let _ = writeln!(
         log,
         "estimator: armed receive {}",

@@ -178,14 +178,7 @@ impl Session {
                         0
                     };
                     let drives = bus.endpoint_for_devices();
-                    let opts_realtime = opts.realtime;
                     let sim = SimRunner::spawn_with_init(machine, drives, move || {
-                        // With the real-time loop, off the armed estimator's CPUs.
-                        if opts_realtime {
-                            if let Some(cpu) = hal::rt::realtime_cpu() {
-                                hal::rt::pin_thread(&[cpu]);
-                            }
-                        }
                         if drives_priority > 0 {
                             hal::rt::set_fifo_priority(drives_priority);
                         }

@@ -58,6 +58,11 @@ pub struct MasterOptions {
     /// answered as [`ErrorKind::Aborted`] (the drives stay enabled), and no further
     /// command is sent until the flag is re-armed ([`AbortFlag::rearm`]).
     pub abort: Option<AbortFlag>,
+    /// Pin the loop thread to this CPU (`bench trigger` does, with
+    /// [`crate::rt::realtime_cpu`]); `None`: the scheduler places it. Not the default:
+    /// in the emulated VM step a pinned loop lost its vCPU under load and a move did not
+    /// settle in time.
+    pub rt_cpu: Option<usize>,
 }
 
 impl Default for MasterOptions {
@@ -68,6 +73,7 @@ impl Default for MasterOptions {
             run_id: 1,
             command_timeout: Duration::from_secs(600),
             abort: None,
+            rt_cpu: None,
         }
     }
 }
@@ -90,10 +96,9 @@ pub struct CanMachine {
 
 /// SCHED_FIFO at `priority` for the calling thread (0: do not ask) and locked memory;
 /// what was granted.
-fn apply_rt_settings(priority: i32) -> (bool, bool, Option<usize>) {
+fn apply_rt_settings(priority: i32, rt_cpu: Option<usize>) -> (bool, bool, Option<usize>) {
     let fifo = priority > 0 && crate::rt::set_fifo_priority(priority);
-    // Its own CPU, the last: the estimator's armed receive spins on the others.
-    let cpu = crate::rt::realtime_cpu().filter(|&c| crate::rt::pin_thread(&[c]));
+    let cpu = rt_cpu.filter(|&c| crate::rt::pin_thread(&[c]));
     (fifo, crate::rt::lock_memory(), cpu)
 }
 
@@ -142,11 +147,12 @@ impl CanMachine {
             let stats = stats.clone();
             let realtime = matches!(options.pacing, Pacing::RealTime);
             let priority = if realtime { options.rt_priority } else { 0 };
+            let rt_cpu = options.rt_cpu;
             std::thread::Builder::new()
                 .name("probebridge-rt".into())
                 .spawn(move || {
                     let got = if realtime {
-                        apply_rt_settings(priority)
+                        apply_rt_settings(priority, rt_cpu)
                     } else {
                         (false, false, None)
                     };

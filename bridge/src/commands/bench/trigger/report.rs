@@ -114,7 +114,7 @@ impl Report {
                 "NOT held"
             },
             f.cpuidle.as_deref().unwrap_or("not reported"),
-            std::thread::available_parallelism().map_or(0, |n| n.get()),
+            hal::rt::online_cpus().len(),
             load_average()
         );
         if let Some(e) = &self.measured.cold_timer_error {
@@ -163,7 +163,7 @@ impl Report {
             "bus_load_latch_cycle": self.startup.bus_load.burst_percent,
             "sink": "direct",
             "elapsed_s": m.elapsed.as_secs_f64(),
-            "cpus": std::thread::available_parallelism().map_or(0, |n| n.get()),
+            "cpus": hal::rt::online_cpus().len(),
             "load_average": load_average(),
             "realtime": {
                 "sched_fifo": startup.realtime_priority,

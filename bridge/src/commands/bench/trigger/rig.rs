@@ -101,6 +101,24 @@ pub(super) fn bench_machine(
     Ok((scenario, cfg, notes))
 }
 
+/// The CPU the bench pins the real-time loop to: [`hal::rt::realtime_cpu`] of the
+/// process as it started (taken once: the floors' sender is pinned to it afterwards,
+/// and a second mode must find the same layout).
+pub(super) fn bench_rt_cpu() -> Option<usize> {
+    bench_cpus().map(|(rt, _)| rt)
+}
+
+/// The real-time loop's CPU and another (the estimators'), taken once as for
+/// [`bench_rt_cpu`].
+fn bench_cpus() -> Option<(usize, usize)> {
+    static CPUS: std::sync::OnceLock<Option<(usize, usize)>> = std::sync::OnceLock::new();
+    *CPUS.get_or_init(|| {
+        let allowed = hal::rt::allowed_cpus();
+        let rt = hal::rt::realtime_cpu_of(&allowed)?;
+        Some((rt, allowed.into_iter().find(|&c| c != rt)?))
+    })
+}
+
 /// The estimator process (under SCHED_FIFO when asked) recording receive times;
 /// whether it got SCHED_FIFO.
 pub(super) fn spawn_estimator(
@@ -126,6 +144,9 @@ pub(super) fn spawn_estimator(
         "--armed-receive",
         mode.as_str(),
     ]);
+    if let Some(rt) = bench_rt_cpu() {
+        command.args(["--avoid-cpu", &rt.to_string()]);
+    }
     let log = std::fs::File::create(estimator_log)
         .map_err(|e| format!("{}: {e}", estimator_log.display()))?;
     command.stderr(Stdio::from(log));
@@ -203,7 +224,7 @@ pub(super) fn start_rig(
     let sim = SimRunner::spawn_with_init(sim_machine, sim_transport, move || {
         // On the real-time loop's CPU: hardware takes no host CPU, and here the drives
         // never take the one the estimator's armed receive spins on.
-        if let Some(cpu) = hal::rt::realtime_cpu() {
+        if let Some(cpu) = bench_rt_cpu() {
             hal::rt::pin_thread(&[cpu]);
         }
         let _ = sim_fifo_tx.send(drive_priority > 0 && hal::rt::set_fifo_priority(drive_priority));
@@ -218,6 +239,8 @@ pub(super) fn start_rig(
         run_id: TRIGGER_RUN,
         command_timeout: Duration::from_secs(10),
         abort: None,
+        // The loop on its own CPU, the estimators on the others (`--avoid-cpu`).
+        rt_cpu: bench_rt_cpu(),
     };
     tell!(
         "bench: bringing up the drives ({} bus, SYNC every {} us; estimator receive {}) ...",
@@ -231,10 +254,7 @@ pub(super) fn start_rig(
     floor.update_connections().map_err(|e| e.to_string())?;
     // The cold eventfd floor on the trigger's CPUs: this thread (the floors' sender)
     // on the real-time loop's, the partner on the estimators'.
-    let floor_cpus = startup.rt_cpu.and_then(|rt| {
-        let other = hal::rt::allowed_cpus().into_iter().find(|&c| c != rt)?;
-        Some((rt, other))
-    });
+    let floor_cpus = bench_cpus().filter(|(rt, _)| startup.rt_cpu == Some(*rt));
     let pinger = bench::wakeup::Pinger::start(args.estimator_priority.max(0), floor_cpus);
     let timer = bench::timer_wakeup::TimerFloor::start(args.rt_priority.max(0), startup.rt_cpu);
     // This thread sends the floors: below the drives, above the estimators.
