@@ -88,7 +88,10 @@ impl LoopConfig {
             period_ns: bus.sync_period_us as u64 * 1000,
             pacing,
             in_position_window: 0.001,
-            settle_timeout_ns: 2_000_000_000,
+            // Settling waits for the drives' actual positions, one TPDO1 per SYNC: a bus
+            // whose drives may be silent for up to the heartbeat timeout (a slow or
+            // emulated host) gets 3 of those, as enabling does.
+            settle_timeout_ns: (3 * bus.heartbeat_timeout_ms as u64 * 1_000_000).max(2_000_000_000),
             // Enabling is three state transitions, each a round trip per drive
             // (RPDO1 out, TPDO1 back): a bus whose drives may be silent for up to
             // the heartbeat timeout (a slow or emulated host) gets that long for each.
@@ -859,9 +862,9 @@ mod tests {
     }
 
     /// A bus whose drives may be silent for seconds (a slow or emulated host) gives
-    /// each of the three enable transitions that long.
+    /// each of the three enable transitions that long, and a move 3 times that to settle.
     #[test]
-    fn the_enable_timeout_follows_the_heartbeat_timeout() {
+    fn the_enable_and_settle_timeouts_follow_the_heartbeat_timeout() {
         let mut m = machine();
         let pacing = Pacing::Lockstep {
             answer_timeout: core::time::Duration::ZERO,
@@ -870,11 +873,19 @@ mod tests {
             LoopConfig::from_machine(&m, pacing).enable_timeout_ns,
             2_000_000_000
         );
+        assert_eq!(
+            LoopConfig::from_machine(&m, pacing).settle_timeout_ns,
+            2_000_000_000
+        );
         let mut bus = CanOpenBusConfig::DEFAULT;
         bus.heartbeat_timeout_ms = 2000;
         m.bus = crate::config::BusConfig::CanOpen(bus);
         assert_eq!(
             LoopConfig::from_machine(&m, pacing).enable_timeout_ns,
+            6_000_000_000
+        );
+        assert_eq!(
+            LoopConfig::from_machine(&m, pacing).settle_timeout_ns,
             6_000_000_000
         );
     }
