@@ -60,8 +60,7 @@ pub struct MasterOptions {
     pub abort: Option<AbortFlag>,
     /// Pin the loop thread to this CPU (`bench trigger` does, with
     /// [`crate::rt::realtime_cpu`]); `None`: the scheduler places it. Not the default:
-    /// in the emulated VM step a pinned loop lost its vCPU under load and a move did not
-    /// settle in time.
+    /// measured by the bench only, not on the machines' own hosts.
     pub rt_cpu: Option<usize>,
 }
 
