@@ -46,11 +46,6 @@ pub fn realtime_cpu_of(allowed: &[usize]) -> Option<usize> {
     (allowed.len() >= 2).then(|| allowed[allowed.len() - 1])
 }
 
-/// [`realtime_cpu_of`] the calling thread's [`allowed_cpus`].
-pub fn realtime_cpu() -> Option<usize> {
-    realtime_cpu_of(&allowed_cpus())
-}
-
 /// Restricts the calling thread to `cpus`; `false` when refused (or `cpus` is empty).
 pub fn pin_thread(cpus: &[usize]) -> bool {
     if cpus.is_empty() {

@@ -37,8 +37,8 @@ pub struct StartupReport {
     /// CPU wake-up latency is held at 0 µs while the loop runs (see
     /// [`crate::rt::hold_cpu_latency_zero`]).
     pub cpu_latency_held: bool,
-    /// The CPU the loop thread is pinned to ([`crate::rt::realtime_cpu`]; `None`: not
-    /// pinned, one CPU or not in real time).
+    /// The CPU the loop thread is pinned to ([`MasterOptions::rt_cpu`]; `None`: not
+    /// asked, refused, or not in real time).
     pub rt_cpu: Option<usize>,
     /// Each drive: axis, node and the device name it reports.
     pub drives: Vec<String>,
@@ -59,7 +59,7 @@ pub struct MasterOptions {
     /// command is sent until the flag is re-armed ([`AbortFlag::rearm`]).
     pub abort: Option<AbortFlag>,
     /// Pin the loop thread to this CPU (`bench trigger` does, with
-    /// [`crate::rt::realtime_cpu`]); `None`: the scheduler places it. Not the default:
+    /// [`crate::rt::realtime_cpu_of`] its CPUs); `None`: the scheduler places it. Not the default:
     /// measured by the bench only, not on the machines' own hosts.
     pub rt_cpu: Option<usize>,
 }

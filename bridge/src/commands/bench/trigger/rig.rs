@@ -101,7 +101,7 @@ pub(super) fn bench_machine(
     Ok((scenario, cfg, notes))
 }
 
-/// The CPU the bench pins the real-time loop to: [`hal::rt::realtime_cpu`] of the
+/// The CPU the bench pins the real-time loop to: [`hal::rt::realtime_cpu_of`] the
 /// process as it started (taken once: the floors' sender is pinned to it afterwards,
 /// and a second mode must find the same layout).
 pub(super) fn bench_rt_cpu() -> Option<usize> {
