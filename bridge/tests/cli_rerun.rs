@@ -220,3 +220,73 @@ fn mode_0_protocol_says_the_preset_was_not_set() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("preset not set (mode 0)"), "{stdout}");
 }
+
+/// A run stopped mid-451 (an abort, an E-stop) leaves the table tilted. The shipped
+/// examples on the tilting table level it at the safe height before they go over the
+/// sphere, so the next run measures as on a level table instead of probing where the
+/// sphere was.
+#[test]
+fn the_examples_on_the_tilting_table_level_it_before_going_over_the_sphere() {
+    let tmp = common::tmpdir("rerun-tilted");
+    for (i, program) in ["451-check.h", "460-calibrate.h"].iter().enumerate() {
+        let shipped = configs().join("programs").join(program);
+        let text = std::fs::read_to_string(&shipped).unwrap();
+        // The table as a stopped 451 left it: at A-60 C+45, the probe above it.
+        let tool_call = text
+            .lines()
+            .find(|l| l.contains("TOOL CALL"))
+            .unwrap_or_else(|| panic!("{program}: no TOOL CALL"));
+        let tilted = text.replacen(
+            tool_call,
+            &format!("{tool_call}\nL Z+150 R0 FMAX M91\nL A-60 C+45 R0 FMAX M91"),
+            1,
+        );
+        assert_ne!(tilted, text);
+        let mut results = Vec::new();
+        for (j, path) in [shipped.clone(), tmp.join(program)].iter().enumerate() {
+            if j == 1 {
+                std::fs::write(path, &tilted).unwrap();
+            }
+            let json = tmp.join(format!("{program}.{j}.json"));
+            // A state directory of each run's own: the same start, tilted or not.
+            let state = tmp.join(format!("xdg-{i}-{j}"));
+            let out = common::run(
+                probebridge(&state)
+                    .args(["run", path.to_str().unwrap()])
+                    .args([
+                        "--scenario",
+                        configs()
+                            .join("scenarios/demo-sphere.toml")
+                            .to_str()
+                            .unwrap(),
+                    ])
+                    .args(["--json", json.to_str().unwrap(), "--yes"])
+                    .args([
+                        "--service",
+                        &format!("pb-tilted-{}-{i}-{j}", std::process::id()),
+                    ]),
+            );
+            assert!(
+                out.status.success(),
+                "{program}, {}:\n{}{}",
+                if j == 0 { "level" } else { "tilted first" },
+                String::from_utf8_lossy(&out.stdout),
+                String::from_utf8_lossy(&out.stderr)
+            );
+            let v: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+            results.push(q_values(&v));
+        }
+        assert_eq!(results[0].len(), results[1].len(), "{program}");
+        for (a, b) in results[0].iter().zip(&results[1]) {
+            assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
+            for (k, x) in a {
+                assert!(
+                    (x - b[k]).abs() < 1e-6,
+                    "{program}: {k} {x} level, {} after a tilted start",
+                    b[k]
+                );
+            }
+        }
+    }
+}

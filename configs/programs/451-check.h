@@ -12,9 +12,10 @@
 11 CYCL DEF 247 DATUM SETTING ~
     Q339=+1        ;DATUM NUMBER
 12 L Z+150 R0 FMAX M91
-13 L X+50 Y-30 R0 FMAX M91
-14 L Z+102.5 R0 FMAX M91
-15 TCH PROBE 451 MEASURE KINEMATICS ~
+13 L A+0 C+0 R0 FMAX M91 ; the table level first, at the safe height: a run stopped mid-cycle leaves it tilted
+14 L X+50 Y-30 R0 FMAX M91
+15 L Z+102.5 R0 FMAX M91
+16 TCH PROBE 451 MEASURE KINEMATICS ~
     Q406=+0        ;MODE ~
     Q407=+12.5     ;SPHERE RADIUS ~
     Q320=+0        ;SET-UP CLEARANCE ~
@@ -36,5 +37,5 @@
     Q423=+4        ;NO. OF PROBE POINTS ~
     Q431=+1        ;PRESET ~
     Q432=+0        ;BACKLASH, ANG. RANGE
-16 L Z+150 R0 FMAX M91
-17 END PGM 451-check MM
+17 L Z+150 R0 FMAX M91
+18 END PGM 451-check MM

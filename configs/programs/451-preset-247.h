@@ -7,12 +7,13 @@
 6 ; centre relative to preset 1 (about 0). Mode 0 changes nothing.
 7 TOOL CALL "TOUCH_PROBE" Z
 8 L Z+150 R0 FMAX M91
-9 CYCL DEF 247 DATUM SETTING ~
+9 L A+0 C+0 R0 FMAX M91 ; the table level first, at the safe height: a run stopped mid-cycle leaves it tilted
+10 CYCL DEF 247 DATUM SETTING ~
     Q339=+1        ;DATUM NUMBER
-10 L X+0 Y+100 R0 FMAX
-11 L Z+30 R0 FMAX
-12 ; the probe is 100 mm from the sphere in Y
-13 TCH PROBE 451 MEASURE KINEMATICS ~
+11 L X+0 Y+100 R0 FMAX
+12 L Z+30 R0 FMAX
+13 ; the probe is 100 mm from the sphere in Y
+14 TCH PROBE 451 MEASURE KINEMATICS ~
     Q406=+0        ;MODE ~
     Q407=+12.5     ;SPHERE RADIUS ~
     Q320=+0        ;SET-UP CLEARANCE ~
@@ -34,5 +35,5 @@
     Q423=+4        ;NO. OF PROBE POINTS ~
     Q431=+0        ;PRESET ~
     Q432=+0        ;BACKLASH, ANG. RANGE
-14 L Z+70 R0 FMAX
-15 END PGM 451-preset-247 MM
+15 L Z+70 R0 FMAX
+16 END PGM 451-preset-247 MM

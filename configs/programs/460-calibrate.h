@@ -10,9 +10,10 @@
 9 ; before 451, and again whenever the stylus was changed or knocked.
 10 TOOL CALL "TOUCH_PROBE" Z
 11 L Z+150 R0 FMAX M91
-12 L X+50 Y-30 R0 FMAX M91
-13 L Z+98.5 R0 FMAX M91
-14 TCH PROBE 460 CALIBRATION OF TS ON A SPHERE ~
+12 L A+0 C+0 R0 FMAX M91 ; the table level first, at the safe height: a run stopped mid-cycle leaves it tilted
+13 L X+50 Y-30 R0 FMAX M91
+14 L Z+98.5 R0 FMAX M91
+15 TCH PROBE 460 CALIBRATION OF TS ON A SPHERE ~
     Q407=+12.5     ;RADIUS OF CALIB. SPHERE ~
     Q320=+0        ;SET-UP CLEARANCE ~
     Q301=+1        ;MOVE TO CLEARANCE ~
@@ -21,5 +22,5 @@
     Q433=+1        ;CALIBRATE LENGTH ~
     Q434=+80       ;DATUM FOR LENGTH ~
     Q455=+0        ;NO. OF POINTS IN 3D CAL.
-15 L Z+150 R0 FMAX M91
-16 END PGM 460-calibrate MM
+16 L Z+150 R0 FMAX M91
+17 END PGM 460-calibrate MM

@@ -18,9 +18,10 @@
     Q410=+0        ;MODE ~
     Q409=+1        ;MEMORY DESIGNATION
 12 L Z+150 R0 FMAX M91
-13 L X+50 Y-30 R0 FMAX M91
-14 L Z+102.5 R0 FMAX M91
-16 TCH PROBE 451 MEASURE KINEMATICS ~
+13 L A+0 C+0 R0 FMAX M91 ; the table level first, at the safe height: a run stopped mid-cycle leaves it tilted
+14 L X+50 Y-30 R0 FMAX M91
+15 L Z+102.5 R0 FMAX M91
+17 TCH PROBE 451 MEASURE KINEMATICS ~
     Q406=+1        ;MODE ~
     Q407=+12.5     ;SPHERE RADIUS ~
     Q320=+0        ;SET-UP CLEARANCE ~
@@ -42,8 +43,8 @@
     Q423=+4        ;NO. OF PROBE POINTS ~
     Q431=+1        ;PRESET ~
     Q432=+0        ;BACKLASH, ANG. RANGE
-17 L Z+150 R0 FMAX M91
-18 TCH PROBE 450 SAVE KINEMATICS ~
+18 L Z+150 R0 FMAX M91
+19 TCH PROBE 450 SAVE KINEMATICS ~
     Q410=+1        ;MODE ~
     Q409=+1        ;MEMORY DESIGNATION
-19 END PGM 450-save-restore-vcan MM
+20 END PGM 450-save-restore-vcan MM
