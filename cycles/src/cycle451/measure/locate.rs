@@ -43,9 +43,10 @@ impl<M: Machine> Measure<'_, '_, M> {
                     step,
                     kind,
                     message: format!(
-                        "{message}; before cycle 451 position the probe over the sphere centre (at most {:.3} mm off it in the working plane), about Q320 + SET_UP = {:.3} mm above the sphere",
+                        "{message}; before cycle 451 position the probe over the sphere centre (at most {:.3} mm off it in the working plane), about Q320 + SET_UP = {:.3} mm above the sphere{}",
                         LOCATE_REACH * rs,
-                        self.clearance()
+                        self.clearance(),
+                        turned_table(&self.start)
                     ),
                 },
                 e => e,
@@ -186,4 +187,25 @@ impl<M: Machine> Measure<'_, '_, M> {
         self.move_xyz("moving over the sphere at the safe height", above)?;
         self.move_xyz("approaching the sphere", pole)
     }
+}
+
+/// Where the rotary axes stood when the sphere was not found, if any was off 0: a run
+/// stopped mid-cycle leaves the table turned, and the sphere turned with it.
+fn turned_table(start: &Angles) -> String {
+    let off: Vec<(Axis, f64)> = Axis::ROTARY
+        .iter()
+        .zip(start)
+        .filter(|(_, a)| a.abs() > 1e-4)
+        .map(|(axis, a)| (*axis, *a))
+        .collect();
+    if off.is_empty() {
+        return String::new();
+    }
+    let stood: Vec<String> = off.iter().map(|(x, a)| format!("{x}{a:+.4}")).collect();
+    let zero: Vec<String> = off.iter().map(|(x, _)| format!("{x}+0")).collect();
+    format!(
+        "; the rotary axes stood at {} (not 0), and the sphere turned with them: bring them to 0 at a safe height first (L {} R0 FMAX M91)",
+        stood.join(" "),
+        zero.join(" ")
+    )
 }
