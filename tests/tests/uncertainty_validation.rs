@@ -1,5 +1,6 @@
 //! The standard uncertainties the cycles report, validated, not asserted: many seeded
-//! noisy simulations of a cycle 451 and of a cycle 431, each run's reported `u` of
+//! noisy simulations of a cycle 451, of a cycle 431 and of a cycle 460 (on a probe with
+//! the three lobes of a kinematic seat), each run's reported `u` of
 //! every quantity against the scatter of that quantity over the runs (their RMS `u`
 //! within ±15 % of the empirical standard deviation) and the coverage of the truth by
 //! ±2u (90..99 % of the runs). The truth is the same cycle run without noise on the
@@ -7,14 +8,17 @@
 //! beside it). The table is printed (`--nocapture`).
 //!
 //! The runs use the kinematic simulated machine (the world without its bus,
-//! [`probebridge_tests::kinematic_machine`]): the same probe physics, hundreds of times
-//! faster than the CANopen path. `RUNS` each, always on; `PB_UNCERTAINTY_RUNS=N` runs
-//! more.
+//! [`probebridge_tests::kinematic_machine`]; for 460, whose offset needs the spindle
+//! oriented, [`probebridge_tests::world_machine`]): the same probe physics, hundreds of
+//! times faster than the CANopen path. `RUNS` each, always on; `PB_UNCERTAINTY_RUNS=N`
+//! runs more.
 
 use cycles::program::Program;
 use cycles::results::{ProgramReport, Status};
 use cycles::runner::{run_program, RunOptions};
+use hal::{Machine, MachineError};
 use probebridge_tests::kinematic_machine::KinematicMachine;
+use probebridge_tests::world_machine::WorldMachine;
 use probebridge_tests::{cycles_config, scenario};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -34,6 +38,15 @@ fn runs() -> usize {
 }
 
 fn run(program: &str, sc: &sim::Scenario, tag: &str) -> ProgramReport {
+    run_on(program, sc, tag, &mut KinematicMachine::open(sc))
+}
+
+fn run_on<M: Machine<Error = MachineError>>(
+    program: &str,
+    sc: &sim::Scenario,
+    tag: &str,
+    m: &mut M,
+) -> ProgramReport {
     let mut cfg = cycles_config(sc);
     for p in &mut cfg.probes {
         p.repeatability_2sigma = 2.0 * NOISE;
@@ -41,7 +54,6 @@ fn run(program: &str, sc: &sim::Scenario, tag: &str) -> ProgramReport {
     let program = Program::parse(program, &cfg).unwrap_or_else(|e| panic!("{e}"));
     let out: PathBuf = std::env::temp_dir().join(format!("pb-uncert-{tag}-{}", std::process::id()));
     std::fs::create_dir_all(&out).unwrap();
-    let mut m = KinematicMachine::open(sc);
     let mut confirm = |_: &str| true;
     let mut progress = |_| {};
     let mut opts = RunOptions {
@@ -51,8 +63,12 @@ fn run(program: &str, sc: &sim::Scenario, tag: &str) -> ProgramReport {
         kinematics: Some(out.join("kinematics.toml")),
         estimator: None,
     };
-    let report = run_program(&program, &mut m, &cfg, &mut opts);
+    let report = run_program(&program, m, &cfg, &mut opts);
     let _ = std::fs::remove_dir_all(&out);
+    // The probe table row a 460 wrote (each run has its own folder).
+    if let Some(dir) = cfg.calibrations.path.parent() {
+        let _ = std::fs::remove_dir_all(dir);
+    }
     assert!(
         report.cycles.iter().all(|c| c.status == Status::Ok),
         "{}",
@@ -313,4 +329,93 @@ fn cycle_431_reported_uncertainties_match_the_scatter_of_seeded_runs() {
         ["Q158", "Q159", "Q170", "Q171", "Q172", "Q173", "Q174", "Q175"]
     );
     check(&table("431", &samples, &truth, &unit_431));
+}
+
+// --------------------------------------------------------------------------------
+// Cycle 460 on a probe with lobing.
+
+/// The sphere of the 460 runs (machine coordinates, mm).
+const SPHERE_460: ([f64; 3], f64) = ([30.0, -20.0, 40.0], 20.0);
+
+/// A kinematic probe as its makers publish it: 4 µm of lobing (three lobes, the first
+/// at 10°), another pre-travel along the stylus, the ball 3 µm/-2 µm off the spindle
+/// axis and 4 µm longer than the table says; the table's R is the ball's.
+fn scenario_460(seed: u64, noise: f64) -> sim::Scenario {
+    let (c, r) = SPHERE_460;
+    scenario(&format!(
+        r#"
+machine = "table-ac"
+seed = {seed}
+[probe]
+ball_radius = 3.0
+pretravel = 0.005
+pretravel_axial = 0.007
+lobing = 0.004
+lobing_phase = 10.0
+offset = [0.003, -0.002]
+length_error = 0.004
+table_radius = 3.0
+noise = {noise:?}
+[[sphere]]
+center = [{}, {}, {}]
+radius = {r}
+"#,
+        c[0], c[1], c[2]
+    ))
+}
+
+/// Q423 = 8 points a ring (the three lobes resolved), the length against the sphere
+/// centre's height, no 3D table; from the probe put over the pole in machine
+/// coordinates (SET_UP 2 mm plus 1 mm above it).
+fn program_460() -> String {
+    let (c, r) = SPHERE_460;
+    format!(
+        "0 BEGIN PGM U460 MM\n1 TOOL CALL \"TOUCH_PROBE\" Z\n2 L Z+200 R0 FMAX M91\n3 L X{:+} Y{:+} R0 FMAX M91\n4 L Z{:+} R0 FMAX M91\n\
+5 TCH PROBE 460 CALIBRATION OF TS ON A SPHERE ~\n  Q407={r:+} ~\n  Q320=+0 ~\n  Q301=+1 ~\n  Q423=+8 ~\n  Q380=+0 ~\n  Q433=+1 ~\n  Q434={:+} ~\n  Q455=+0\n\
+6 L Z+200 R0 FMAX M91\n7 END PGM U460 MM\n",
+        c[0],
+        c[1],
+        c[2] + r + 3.0 + 2.0 + 1.0,
+        c[2]
+    )
+}
+
+fn run_460(sc: &sim::Scenario, tag: &str) -> ProgramReport {
+    run_on(&program_460(), sc, tag, &mut WorldMachine::new(sc))
+}
+
+fn results_460(report: &ProgramReport) -> BTreeMap<String, (f64, f64)> {
+    let c = report
+        .cycles
+        .iter()
+        .find(|c| c.cycle == 460)
+        .expect("the 460 block ran");
+    c.u.iter().map(|(n, u)| (n.clone(), (c.q[n], *u))).collect()
+}
+
+fn unit_460(_: &str) -> (&'static str, f64) {
+    ("µm", 1000.0)
+}
+
+/// The lobes are modelled in the equator's circles, not counted as the contacts'
+/// scatter: R, the offset and L are as uncertain as 460 says.
+#[test]
+fn cycle_460_reported_uncertainties_match_the_scatter_of_seeded_runs_with_lobing() {
+    let truth: BTreeMap<String, f64> = results_460(&run_460(&scenario_460(1, 0.0), "460-truth"))
+        .into_iter()
+        .map(|(n, (v, _))| (n, v))
+        .collect();
+    println!("460 without noise (the stylus: R 2.995, CAL_OF1 0.003, CAL_OF2 -0.002, L 0.002 mm): {truth:?}");
+    let mut samples = Samples::new();
+    for seed in 0..runs() {
+        let report = run_460(&scenario_460(1000 + seed as u64, NOISE), "460");
+        for (name, (v, u)) in results_460(&report) {
+            samples.entry(name).or_default().push((v, u));
+        }
+    }
+    assert_eq!(
+        samples.keys().map(String::as_str).collect::<Vec<_>>(),
+        ["CAL_OF1", "CAL_OF2", "L", "R"]
+    );
+    check(&table("460", &samples, &truth, &unit_460));
 }
