@@ -481,7 +481,7 @@ fn stalled_and_capped(serve: &Serve, py: &Path) {
 fn a_start_while_the_plc_runs_one_is_refused_and_an_abort_ends_a_451() {
     let Some(py) = python() else { return };
     let machine = MACHINE;
-    let serve = Serve::start(
+    let mut serve = Serve::start(
         "abort",
         "demo-sphere.toml",
         &[(451, "451-check.h"), (431, "431-plane.h")],
@@ -520,9 +520,22 @@ fn a_start_while_the_plc_runs_one_is_refused_and_an_abort_ends_a_451() {
         (Some("serve"), Some("aborted"))
     );
 
-    // The MES's own 451, aborted by the MES.
+    // The MES's own 451, aborted by the MES once it has probed a point, on a fresh
+    // machine: the PLC's 451 was cut short anywhere (the table tilted, the stylus on
+    // the sphere), where a next 451 may miss the sphere or not start. The service
+    // comes back on the same state folder: its certificate is kept, and the MES it
+    // trusted connects again without a new trust.
+    let cert = std::fs::read(serve.dir.join("pki/own/cert.der")).unwrap();
+    assert_eq!(serve.stop().code(), Some(0), "{}", serve.log());
+    let dir = serve.dir.clone();
+    drop(serve);
+    let serve = Serve::spawn(dir.clone(), &dir.join("gateway.toml"), &[]);
+    assert_eq!(std::fs::read(dir.join("pki/own/cert.der")).unwrap(), cert);
+    assert_eq!(serve.mes(&py, machine, &["connect"])["connected"], true);
     let a = serve.mes(&py, machine, &["start_abort", "451"]);
     assert_eq!(a["abort"][0], 0, "{a}");
+    assert_eq!(a["states"], serde_json::json!(["busy", "aborted"]), "{a}");
+    assert!(a["after"]["Monitoring/Point"].as_u64() >= Some(1), "{a}");
     assert_eq!(a["after"]["Monitoring/RunState"], "aborted", "{a}");
     assert_eq!(a["after"]["Monitoring/ErrorKind"], 20, "{a}");
     assert_eq!(

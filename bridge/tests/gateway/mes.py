@@ -108,13 +108,19 @@ class Changes:
         self.seen.setdefault(str(node.nodeid.Identifier), []).append((val, latency))
         self.event.set()
 
-    def values(self, ident):
-        return [v for v, _ in self.seen.get(ident, [])]
+    def values(self, ident, since=None):
+        return [v for v, _ in self.seen.get(ident, [])[(since or {}).get(ident, 0):]]
 
-    async def wait_for(self, ident, pred):
+    def mark(self):
+        """Where each item's values stand now: `since` for values() and wait_for(),
+        so that a wait is not answered by a value from before (a subscription's first
+        notification is the last run's)."""
+        return {k: len(v) for k, v in self.seen.items()}
+
+    async def wait_for(self, ident, pred, since=None):
         deadline = time.monotonic() + TIMEOUT
         while time.monotonic() < deadline:
-            if any(pred(v) for v in self.values(ident)):
+            if any(pred(v) for v in self.values(ident, since)):
                 return
             self.event.clear()
             try:
@@ -244,18 +250,26 @@ async def start_abort(mes, program):
         production = await mes.child(machine, ns, "Production")
         changes = Changes()
         sub = await c.create_subscription(10, changes)
+        state, point = "Machine.Monitoring.RunState", "Machine.Monitoring.Point"
         await sub.subscribe_data_change([await mes.child(machine, ns, p)
                                          for p in ("Monitoring/RunState", "Monitoring/Point")])
+        # The first notifications are the last run's (the PLC's aborted 451, its
+        # points): only what comes after them is this run's.
+        await changes.wait_for(state, lambda v: v is not None)
+        await changes.wait_for(point, lambda v: True)
+        before = changes.mark()
         started = await call(c, production, "StartProgram", ua.Variant(program, ua.VariantType.UInt16),
                              ua.Variant([0.0] * 8, ua.VariantType.Float), True)
         check(started[0] == 0, f"started: {started}")
-        await changes.wait_for("Machine.Monitoring.Point", lambda v: v is not None and v >= 1)
+        await changes.wait_for(state, lambda v: v == "busy", before)
+        await changes.wait_for(point, lambda v: v is not None and v >= 1, before)
         aborted = await call(c, production, "Abort")
-        await changes.wait_for("Machine.Monitoring.RunState", lambda v: v in ("aborted", "done", "error"))
+        await changes.wait_for(state, lambda v: v in ("aborted", "done", "error"), before)
         after = await read_values(mes, c, ns, machine, [
             "Monitoring/RunState", "Monitoring/ErrorKind", "Monitoring/Point",
             "Production/ActiveProgram/State", "Production/ActiveProgram/StartedBy"])
-        return {"started": started, "abort": aborted, "after": after}
+        return {"started": started, "abort": aborted, "after": after,
+                "states": changes.values(state, before)}
 
 
 async def stalled(mes, queued):
