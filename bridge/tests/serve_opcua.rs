@@ -4,8 +4,9 @@
 //! browse by browse names, read identification and state, subscribe (the change
 //! latencies, measured with the client's clock, are printed; only a generous bound is
 //! asserted), StartProgram of a 431 as a user over Basic256Sha256 SignAndEncrypt with
-//! the results of the PLC face and of the history, refusals (anonymous, wrong
-//! password, the PLC's run), an abort of a 451, a subscriber that never publishes,
+//! the results of the PLC face and of the history, a 460's probe table row as the
+//! PLC face's calibration block has it, refusals (anonymous, wrong password, the
+//! PLC's run), an abort of a 451, a subscriber that never publishes,
 //! the connection cap, asyncua's `uals`/`uaread`; the configuration's errors; the
 //! face's death ending the service.
 //!
@@ -484,12 +485,17 @@ fn a_start_while_the_plc_runs_one_is_refused_and_an_abort_ends_a_451() {
     let mut serve = Serve::start(
         "abort",
         "demo-sphere.toml",
-        &[(451, "451-check.h"), (431, "431-plane.h")],
+        &[
+            (451, "451-check.h"),
+            (431, "431-plane.h"),
+            (460, "460-calibrate.h"),
+        ],
         "may_start = true\n",
         &[],
         true,
     );
     trust_the_mes(&serve, &py, machine);
+    the_460_as_the_plc(&serve, &py);
     // The PLC runs a 451: the MES's start is refused as busy, its abort ends the run.
     serve.plc(&py, &["start_busy", "451"]);
     let w = serve.mes(&py, machine, &["while_plc_runs", "431"]);
@@ -549,6 +555,49 @@ fn a_start_while_the_plc_runs_one_is_refused_and_an_abort_ends_a_451() {
             && r["program_number"] == 451),
         "{h:?}"
     );
+}
+
+/// The MES's 460 (on the fresh machine, before any abort): Cycle460 shows the probe
+/// table row by its column names and their uncertainties, as the PLC face's
+/// calibration block and the history have them.
+fn the_460_as_the_plc(serve: &Serve, py: &Path) {
+    let mes = serve.mes(py, MACHINE, &["run", "460"]);
+    assert_eq!(
+        (
+            mes["run01"]["Source"].as_str(),
+            mes["run01"]["Status"].as_str()
+        ),
+        (Some("opcua"), Some("done"))
+    );
+    let plc = serve.plc(py, &["last"]);
+    assert_eq!(plc["cycle"], 460, "{plc}");
+    let got = mes["results"].as_object().unwrap();
+    assert_eq!(got.len(), 8, "the 4 columns and their u: {got:?}");
+    let h = history(&serve.dir);
+    let row = h
+        .iter()
+        .find(|r| r["source"] == "opcua" && r["program_number"] == 460)
+        .expect("the MES's 460 in the history");
+    assert_eq!(row["status"], "done");
+    let near = |a: f64, b: f64, floor: f64| (a - b).abs() <= 1e-6 * a.abs().max(floor);
+    for col in ["R", "CAL_OF1", "CAL_OF2", "L"] {
+        let v = got[col].as_f64().unwrap_or_else(|| panic!("{col}: {mes}"));
+        let recorded = row["results"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|x| x["cycle"] == 460 && x["name"] == col)
+            .unwrap_or_else(|| panic!("{col} in the history: {row}"));
+        assert_eq!(recorded["value"].as_f64(), Some(v), "{col}");
+        let p = plc["cal"][col].as_f64().unwrap();
+        assert!(near(v, p, 1.0), "{col}: OPC UA {v}, PLC {p}");
+        let u = &got[&format!("u.{col}")];
+        match plc["cal_u"][col].as_f64() {
+            Some(pu) => assert!(near(u.as_f64().unwrap(), pu, 1e-3), "u.{col}: {u} / {pu}"),
+            None => assert!(u.is_null(), "u.{col}: {u}, none on the PLC face"),
+        }
+    }
+    assert!(!plc["cal_u"].as_object().unwrap().is_empty(), "{plc}");
 }
 
 #[test]

@@ -136,14 +136,15 @@ async def call(c, production, name, *args):
     return await production.call_method(method, *args)
 
 
-async def run431(mes, program):
+async def run_program(mes, program, cycle):
     """As the user, over Basic256Sha256 SignAndEncrypt: subscribe, start the program,
-    see it run to done; the results by name and the last run of the history."""
+    see it run to done; the results of `cycle` by name and the last run of the
+    history."""
     c = await mes.client(USER, PASSWORD)
     async with c:
         ns, machine = await mes.machine_node(c)
         watched = ["Monitoring/RunState", "Monitoring/ProgressPermille",
-                   "Production/ActiveProgram/State", "Measurements/Cycle431/ResultValues"]
+                   "Production/ActiveProgram/State", f"Measurements/Cycle{cycle}/ResultValues"]
         nodes = [await mes.child(machine, ns, p) for p in watched]
         changes = Changes()
         sub = await c.create_subscription(10, changes)
@@ -165,13 +166,12 @@ async def run431(mes, program):
                 break
             check(time.monotonic() < deadline, f"the run's end: {states}")
             await asyncio.sleep(0.01)
-        check(states[-1] == "done", f"431 done: {states}")
-        await changes.wait_for("Machine.Measurements.Cycle431.ResultValues", lambda v: v)
-        cycle = await mes.child(machine, ns, "Measurements/Cycle431")
+        check(states[-1] == "done", f"{program} done: {states}")
+        await changes.wait_for(f"Machine.Measurements.Cycle{cycle}.ResultValues", lambda v: v)
         results = {}
-        for n in await cycle.get_children():
+        for n in await (await mes.child(machine, ns, f"Measurements/Cycle{cycle}")).get_children():
             name = (await n.read_browse_name()).Name
-            if name.startswith("Q"):
+            if name not in ("Time", "ResultNames", "ResultValues"):
                 results[name] = await n.read_value()
         # The last runs are read from the history once the run has ended: wait for it.
         run = await mes.child(machine, ns, "Measurements/LastRuns/Run01")
@@ -327,7 +327,8 @@ async def main():
     if cmd == "browse":
         out = await browse(mes)
     elif cmd == "run":
-        out = await run431(mes, int(args[0]))
+        # run PROGRAM [CYCLE]: the cycle whose results to read (default: the number).
+        out = await run_program(mes, int(args[0]), int(args[-1]))
     elif cmd == "refusals":
         out = await refusals(mes, int(args[0]))
     elif cmd == "while_plc_runs":
