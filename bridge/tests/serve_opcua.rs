@@ -349,6 +349,10 @@ fn browse_and_tools(serve: &Serve, py: &Path) {
     assert_eq!(v["Monitoring/MachineOk"], true);
     assert_eq!(v["Monitoring/Bus"], "simulator");
     assert_eq!(v["Monitoring/RunState"], "idle");
+    assert!(
+        ["BadNotWritable", "BadUserAccessDenied"].contains(&b["anonymous_write"].as_str().unwrap()),
+        "{b}"
+    );
 
     // asyncua's own tools, as the docs show them.
     let ls = serve.ua_tool(py, "uals", &["-n", "i=85", "-d", "3"]);
@@ -400,17 +404,34 @@ fn the_431_as_the_plc(serve: &Serve, py: &Path) {
         states.contains(&"busy") && states.last() == Some(&"done"),
         "{states:?}"
     );
-    assert_eq!(mes["active"]["Production/ActiveProgram/StartedBy"], "opcua");
-    assert_eq!(mes["active"]["Production/ActiveProgram/State"], "Ended");
+    let active = &mes["active"];
+    assert_eq!(active["Production/ActiveProgram/StartedBy"], "opcua");
+    assert_eq!(active["Production/ActiveProgram/State"], "Ended");
+    assert_eq!(active["Production/ActiveProgram/Number"], 431);
+    let (start, end) = (
+        active["Production/ActiveProgram/StartTime"].as_f64(),
+        active["Production/ActiveProgram/EndTime"].as_f64(),
+    );
+    assert!(
+        matches!((start, end), (Some(s), Some(e)) if s <= e),
+        "the run's start and end times: {active}"
+    );
+    // The PLC face's result block holds this run's results too (under a result
+    // sequence that is not the PLC's request sequence).
+    let plc_now = serve.plc(py, &["last"]);
+    assert_eq!(plc_now["cycle"], 431, "{plc_now}");
     let results = mes["results"].as_object().unwrap();
-    let real = plc["real"].as_object().unwrap();
-    assert_eq!(results.len(), real.len(), "{results:?} / {real:?}");
-    for (name, v) in results {
-        let (v, p) = (v.as_f64().unwrap(), real[name].as_f64().unwrap());
-        assert!(
-            (v - p).abs() <= 1e-6 * v.abs().max(1.0),
-            "{name}: OPC UA {v}, PLC {p}"
-        );
+    // The same run on both faces, and the PLC's own 431 of the same plane before.
+    for real in [&plc_now["real"], &plc["real"]] {
+        let real = real.as_object().unwrap();
+        assert_eq!(results.len(), real.len(), "{results:?} / {real:?}");
+        for (name, v) in results {
+            let (v, p) = (v.as_f64().unwrap(), real[name].as_f64().unwrap());
+            assert!(
+                (v - p).abs() <= 1e-6 * v.abs().max(1.0),
+                "{name}: OPC UA {v}, PLC {p}"
+            );
+        }
     }
     let h = history(&serve.dir);
     let row = h
@@ -540,7 +561,13 @@ fn a_start_while_the_plc_runs_one_is_refused_and_an_abort_ends_a_451() {
     assert_eq!(serve.mes(&py, machine, &["connect"])["connected"], true);
     let a = serve.mes(&py, machine, &["start_abort", "451"]);
     assert_eq!(a["abort"][0], 0, "{a}");
-    assert_eq!(a["states"], serde_json::json!(["busy", "aborted"]), "{a}");
+    assert_eq!(
+        a["states"],
+        serde_json::json!(["busy", "aborted", "idle"]),
+        "aborted, then acknowledged: {a}"
+    );
+    assert_eq!(a["acknowledge"][0], 0, "{a}");
+    assert_eq!(a["error_kind_after_ack"], 0, "{a}");
     assert!(a["after"]["Monitoring/Point"].as_u64() >= Some(1), "{a}");
     assert_eq!(a["after"]["Monitoring/RunState"], "aborted", "{a}");
     assert_eq!(a["after"]["Monitoring/ErrorKind"], 20, "{a}");

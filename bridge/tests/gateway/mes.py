@@ -89,7 +89,15 @@ async def browse(mes):
         ])
         methods = sorted([(await n.read_browse_name()).Name
                           for n in await (await mes.child(machine, ns, "Production")).get_methods()])
-        return {"children": names, "values": values, "methods": methods}
+        # Anonymous clients read only (every variable is read-only).
+        try:
+            await (await mes.child(machine, ns, "Monitoring/RunState")).write_value(
+                ua.Variant("busy", ua.VariantType.String))
+            write = "written"
+        except ua.UaStatusCodeError as e:
+            write = type(e).__name__
+        return {"children": names, "values": values, "methods": methods,
+                "anonymous_write": write}
 
 
 class Changes:
@@ -186,7 +194,11 @@ async def run_program(mes, program, cycle):
             run01[k] = str(run01[k])
         active = await read_values(mes, c, ns, machine, [
             "Production/ActiveProgram/Number", "Production/ActiveProgram/State",
-            "Production/ActiveProgram/StartedBy"])
+            "Production/ActiveProgram/StartedBy", "Production/ActiveProgram/StartTime",
+            "Production/ActiveProgram/EndTime"])
+        for k in ("StartTime", "EndTime"):
+            t = active[f"Production/ActiveProgram/{k}"]
+            active[f"Production/ActiveProgram/{k}"] = t.timestamp() if t else None
         latencies = [lat for vals in changes.seen.values() for _, lat in vals[1:] if lat is not None]
         await sub.delete()
         return {"states": states, "results": results, "run01": run01, "active": active,
@@ -268,7 +280,11 @@ async def start_abort(mes, program):
         after = await read_values(mes, c, ns, machine, [
             "Monitoring/RunState", "Monitoring/ErrorKind", "Monitoring/Point",
             "Production/ActiveProgram/State", "Production/ActiveProgram/StartedBy"])
+        acknowledged = await call(c, production, "Acknowledge")
+        await changes.wait_for(state, lambda v: v == "idle", before)
+        error_kind = await (await mes.child(machine, ns, "Monitoring/ErrorKind")).read_value()
         return {"started": started, "abort": aborted, "after": after,
+                "acknowledge": acknowledged, "error_kind_after_ack": error_kind,
                 "states": changes.values(state, before)}
 
 
