@@ -455,6 +455,22 @@ fn the_431_as_the_plc(serve: &Serve, py: &Path) {
         (Some("opcua"), Some("done"))
     );
     assert_eq!(run01["Parameters"], row["parameters"]);
+    // Run01's results: every result of the history's row as `CYCLE.NAME`.
+    let (names, values) = (
+        run01["ResultNames"].as_array().unwrap(),
+        run01["ResultValues"].as_array().unwrap(),
+    );
+    assert_eq!(names.len(), values.len(), "{run01}");
+    let recorded = row["results"].as_array().unwrap();
+    assert!(!recorded.is_empty(), "{row}");
+    for x in recorded {
+        let name = format!("{}.{}", x["cycle"], x["name"].as_str().unwrap());
+        let i = names
+            .iter()
+            .position(|n| n.as_str() == Some(name.as_str()))
+            .unwrap_or_else(|| panic!("{name} in Run01: {run01}"));
+        assert_eq!(values[i], x["value"], "{name}");
+    }
 }
 
 /// A subscriber that never publishes; the connection cap.
