@@ -4,8 +4,9 @@
 //! browse by browse names, read identification and state, subscribe (the change
 //! latencies, measured with the client's clock, are printed; only a generous bound is
 //! asserted), StartProgram of a 431 as a user over Basic256Sha256 SignAndEncrypt with
-//! the results of the PLC face and of the history, refusals (anonymous, wrong
-//! password, the PLC's run), an abort of a 451, a subscriber that never publishes,
+//! the results of the PLC face and of the history, a 460's probe table row as the
+//! PLC face's calibration block has it, refusals (anonymous, wrong password, the
+//! PLC's run), an abort of a 451, a subscriber that never publishes,
 //! the connection cap, asyncua's `uals`/`uaread`; the configuration's errors; the
 //! face's death ending the service.
 //!
@@ -348,6 +349,10 @@ fn browse_and_tools(serve: &Serve, py: &Path) {
     assert_eq!(v["Monitoring/MachineOk"], true);
     assert_eq!(v["Monitoring/Bus"], "simulator");
     assert_eq!(v["Monitoring/RunState"], "idle");
+    assert!(
+        ["BadNotWritable", "BadUserAccessDenied"].contains(&b["anonymous_write"].as_str().unwrap()),
+        "{b}"
+    );
 
     // asyncua's own tools, as the docs show them.
     let ls = serve.ua_tool(py, "uals", &["-n", "i=85", "-d", "3"]);
@@ -399,17 +404,34 @@ fn the_431_as_the_plc(serve: &Serve, py: &Path) {
         states.contains(&"busy") && states.last() == Some(&"done"),
         "{states:?}"
     );
-    assert_eq!(mes["active"]["Production/ActiveProgram/StartedBy"], "opcua");
-    assert_eq!(mes["active"]["Production/ActiveProgram/State"], "Ended");
+    let active = &mes["active"];
+    assert_eq!(active["Production/ActiveProgram/StartedBy"], "opcua");
+    assert_eq!(active["Production/ActiveProgram/State"], "Ended");
+    assert_eq!(active["Production/ActiveProgram/Number"], 431);
+    let (start, end) = (
+        active["Production/ActiveProgram/StartTime"].as_f64(),
+        active["Production/ActiveProgram/EndTime"].as_f64(),
+    );
+    assert!(
+        matches!((start, end), (Some(s), Some(e)) if s <= e),
+        "the run's start and end times: {active}"
+    );
+    // The PLC face's result block holds this run's results too (under a result
+    // sequence that is not the PLC's request sequence).
+    let plc_now = serve.plc(py, &["last"]);
+    assert_eq!(plc_now["cycle"], 431, "{plc_now}");
     let results = mes["results"].as_object().unwrap();
-    let real = plc["real"].as_object().unwrap();
-    assert_eq!(results.len(), real.len(), "{results:?} / {real:?}");
-    for (name, v) in results {
-        let (v, p) = (v.as_f64().unwrap(), real[name].as_f64().unwrap());
-        assert!(
-            (v - p).abs() <= 1e-6 * v.abs().max(1.0),
-            "{name}: OPC UA {v}, PLC {p}"
-        );
+    // The same run on both faces, and the PLC's own 431 of the same plane before.
+    for real in [&plc_now["real"], &plc["real"]] {
+        let real = real.as_object().unwrap();
+        assert_eq!(results.len(), real.len(), "{results:?} / {real:?}");
+        for (name, v) in results {
+            let (v, p) = (v.as_f64().unwrap(), real[name].as_f64().unwrap());
+            assert!(
+                (v - p).abs() <= 1e-6 * v.abs().max(1.0),
+                "{name}: OPC UA {v}, PLC {p}"
+            );
+        }
     }
     let h = history(&serve.dir);
     let row = h
@@ -433,6 +455,22 @@ fn the_431_as_the_plc(serve: &Serve, py: &Path) {
         (Some("opcua"), Some("done"))
     );
     assert_eq!(run01["Parameters"], row["parameters"]);
+    // Run01's results: every result of the history's row as `CYCLE.NAME`.
+    let (names, values) = (
+        run01["ResultNames"].as_array().unwrap(),
+        run01["ResultValues"].as_array().unwrap(),
+    );
+    assert_eq!(names.len(), values.len(), "{run01}");
+    let recorded = row["results"].as_array().unwrap();
+    assert!(!recorded.is_empty(), "{row}");
+    for x in recorded {
+        let name = format!("{}.{}", x["cycle"], x["name"].as_str().unwrap());
+        let i = names
+            .iter()
+            .position(|n| n.as_str() == Some(name.as_str()))
+            .unwrap_or_else(|| panic!("{name} in Run01: {run01}"));
+        assert_eq!(values[i], x["value"], "{name}");
+    }
 }
 
 /// A subscriber that never publishes; the connection cap.
@@ -481,15 +519,20 @@ fn stalled_and_capped(serve: &Serve, py: &Path) {
 fn a_start_while_the_plc_runs_one_is_refused_and_an_abort_ends_a_451() {
     let Some(py) = python() else { return };
     let machine = MACHINE;
-    let serve = Serve::start(
+    let mut serve = Serve::start(
         "abort",
         "demo-sphere.toml",
-        &[(451, "451-check.h"), (431, "431-plane.h")],
+        &[
+            (451, "451-check.h"),
+            (431, "431-plane.h"),
+            (460, "460-calibrate.h"),
+        ],
         "may_start = true\n",
         &[],
         true,
     );
     trust_the_mes(&serve, &py, machine);
+    the_460_as_the_plc(&serve, &py);
     // The PLC runs a 451: the MES's start is refused as busy, its abort ends the run.
     serve.plc(&py, &["start_busy", "451"]);
     let w = serve.mes(&py, machine, &["while_plc_runs", "431"]);
@@ -520,9 +563,28 @@ fn a_start_while_the_plc_runs_one_is_refused_and_an_abort_ends_a_451() {
         (Some("serve"), Some("aborted"))
     );
 
-    // The MES's own 451, aborted by the MES.
+    // The MES's own 451, aborted by the MES once it has probed a point, on a fresh
+    // machine: the PLC's 451 was cut short anywhere (the table tilted, the stylus on
+    // the sphere), where a next 451 may miss the sphere or not start. The service
+    // comes back on the same state folder: its certificate is kept, and the MES it
+    // trusted connects again without a new trust.
+    let cert = std::fs::read(serve.dir.join("pki/own/cert.der")).unwrap();
+    assert_eq!(serve.stop().code(), Some(0), "{}", serve.log());
+    let dir = serve.dir.clone();
+    drop(serve);
+    let serve = Serve::spawn(dir.clone(), &dir.join("gateway.toml"), &[]);
+    assert_eq!(std::fs::read(dir.join("pki/own/cert.der")).unwrap(), cert);
+    assert_eq!(serve.mes(&py, machine, &["connect"])["connected"], true);
     let a = serve.mes(&py, machine, &["start_abort", "451"]);
     assert_eq!(a["abort"][0], 0, "{a}");
+    assert_eq!(
+        a["states"],
+        serde_json::json!(["busy", "aborted", "idle"]),
+        "aborted, then acknowledged: {a}"
+    );
+    assert_eq!(a["acknowledge"][0], 0, "{a}");
+    assert_eq!(a["error_kind_after_ack"], 0, "{a}");
+    assert!(a["after"]["Monitoring/Point"].as_u64() >= Some(1), "{a}");
     assert_eq!(a["after"]["Monitoring/RunState"], "aborted", "{a}");
     assert_eq!(a["after"]["Monitoring/ErrorKind"], 20, "{a}");
     assert_eq!(
@@ -536,6 +598,49 @@ fn a_start_while_the_plc_runs_one_is_refused_and_an_abort_ends_a_451() {
             && r["program_number"] == 451),
         "{h:?}"
     );
+}
+
+/// The MES's 460 (on the fresh machine, before any abort): Cycle460 shows the probe
+/// table row by its column names and their uncertainties, as the PLC face's
+/// calibration block and the history have them.
+fn the_460_as_the_plc(serve: &Serve, py: &Path) {
+    let mes = serve.mes(py, MACHINE, &["run", "460"]);
+    assert_eq!(
+        (
+            mes["run01"]["Source"].as_str(),
+            mes["run01"]["Status"].as_str()
+        ),
+        (Some("opcua"), Some("done"))
+    );
+    let plc = serve.plc(py, &["last"]);
+    assert_eq!(plc["cycle"], 460, "{plc}");
+    let got = mes["results"].as_object().unwrap();
+    assert_eq!(got.len(), 8, "the 4 columns and their u: {got:?}");
+    let h = history(&serve.dir);
+    let row = h
+        .iter()
+        .find(|r| r["source"] == "opcua" && r["program_number"] == 460)
+        .expect("the MES's 460 in the history");
+    assert_eq!(row["status"], "done");
+    let near = |a: f64, b: f64, floor: f64| (a - b).abs() <= 1e-6 * a.abs().max(floor);
+    for col in ["R", "CAL_OF1", "CAL_OF2", "L"] {
+        let v = got[col].as_f64().unwrap_or_else(|| panic!("{col}: {mes}"));
+        let recorded = row["results"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|x| x["cycle"] == 460 && x["name"] == col)
+            .unwrap_or_else(|| panic!("{col} in the history: {row}"));
+        assert_eq!(recorded["value"].as_f64(), Some(v), "{col}");
+        let p = plc["cal"][col].as_f64().unwrap();
+        assert!(near(v, p, 1.0), "{col}: OPC UA {v}, PLC {p}");
+        let u = &got[&format!("u.{col}")];
+        match plc["cal_u"][col].as_f64() {
+            Some(pu) => assert!(near(u.as_f64().unwrap(), pu, 1e-3), "u.{col}: {u} / {pu}"),
+            None => assert!(u.is_null(), "u.{col}: {u}, none on the PLC face"),
+        }
+    }
+    assert!(!plc["cal_u"].as_object().unwrap().is_empty(), "{plc}");
 }
 
 #[test]

@@ -54,7 +54,8 @@ pub struct RunInfo {
     pub outcome: Option<Outcome>,
 }
 
-/// The last results of one cycle number (431, 444, 451): when, and the values by name.
+/// The last results of one cycle number (431, 444, 451, 460): when, and the values by
+/// name.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CycleResults {
     pub at: SystemTime,

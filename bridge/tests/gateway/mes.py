@@ -89,7 +89,15 @@ async def browse(mes):
         ])
         methods = sorted([(await n.read_browse_name()).Name
                           for n in await (await mes.child(machine, ns, "Production")).get_methods()])
-        return {"children": names, "values": values, "methods": methods}
+        # Anonymous clients read only (every variable is read-only).
+        try:
+            await (await mes.child(machine, ns, "Monitoring/RunState")).write_value(
+                ua.Variant("busy", ua.VariantType.String))
+            write = "written"
+        except ua.UaStatusCodeError as e:
+            write = type(e).__name__
+        return {"children": names, "values": values, "methods": methods,
+                "anonymous_write": write}
 
 
 class Changes:
@@ -108,13 +116,19 @@ class Changes:
         self.seen.setdefault(str(node.nodeid.Identifier), []).append((val, latency))
         self.event.set()
 
-    def values(self, ident):
-        return [v for v, _ in self.seen.get(ident, [])]
+    def values(self, ident, since=None):
+        return [v for v, _ in self.seen.get(ident, [])[(since or {}).get(ident, 0):]]
 
-    async def wait_for(self, ident, pred):
+    def mark(self):
+        """Where each item's values stand now: `since` for values() and wait_for(),
+        so that a wait is not answered by a value from before (a subscription's first
+        notification is the last run's)."""
+        return {k: len(v) for k, v in self.seen.items()}
+
+    async def wait_for(self, ident, pred, since=None):
         deadline = time.monotonic() + TIMEOUT
         while time.monotonic() < deadline:
-            if any(pred(v) for v in self.values(ident)):
+            if any(pred(v) for v in self.values(ident, since)):
                 return
             self.event.clear()
             try:
@@ -130,14 +144,15 @@ async def call(c, production, name, *args):
     return await production.call_method(method, *args)
 
 
-async def run431(mes, program):
+async def run_program(mes, program, cycle):
     """As the user, over Basic256Sha256 SignAndEncrypt: subscribe, start the program,
-    see it run to done; the results by name and the last run of the history."""
+    see it run to done; the results of `cycle` by name and the last run of the
+    history."""
     c = await mes.client(USER, PASSWORD)
     async with c:
         ns, machine = await mes.machine_node(c)
         watched = ["Monitoring/RunState", "Monitoring/ProgressPermille",
-                   "Production/ActiveProgram/State", "Measurements/Cycle431/ResultValues"]
+                   "Production/ActiveProgram/State", f"Measurements/Cycle{cycle}/ResultValues"]
         nodes = [await mes.child(machine, ns, p) for p in watched]
         changes = Changes()
         sub = await c.create_subscription(10, changes)
@@ -159,13 +174,12 @@ async def run431(mes, program):
                 break
             check(time.monotonic() < deadline, f"the run's end: {states}")
             await asyncio.sleep(0.01)
-        check(states[-1] == "done", f"431 done: {states}")
-        await changes.wait_for("Machine.Measurements.Cycle431.ResultValues", lambda v: v)
-        cycle = await mes.child(machine, ns, "Measurements/Cycle431")
+        check(states[-1] == "done", f"{program} done: {states}")
+        await changes.wait_for(f"Machine.Measurements.Cycle{cycle}.ResultValues", lambda v: v)
         results = {}
-        for n in await cycle.get_children():
+        for n in await (await mes.child(machine, ns, f"Measurements/Cycle{cycle}")).get_children():
             name = (await n.read_browse_name()).Name
-            if name.startswith("Q"):
+            if name not in ("Time", "ResultNames", "ResultValues"):
                 results[name] = await n.read_value()
         # The last runs are read from the history once the run has ended: wait for it.
         run = await mes.child(machine, ns, "Measurements/LastRuns/Run01")
@@ -180,7 +194,11 @@ async def run431(mes, program):
             run01[k] = str(run01[k])
         active = await read_values(mes, c, ns, machine, [
             "Production/ActiveProgram/Number", "Production/ActiveProgram/State",
-            "Production/ActiveProgram/StartedBy"])
+            "Production/ActiveProgram/StartedBy", "Production/ActiveProgram/StartTime",
+            "Production/ActiveProgram/EndTime"])
+        for k in ("StartTime", "EndTime"):
+            t = active[f"Production/ActiveProgram/{k}"]
+            active[f"Production/ActiveProgram/{k}"] = t.timestamp() if t else None
         latencies = [lat for vals in changes.seen.values() for _, lat in vals[1:] if lat is not None]
         await sub.delete()
         return {"states": states, "results": results, "run01": run01, "active": active,
@@ -244,18 +262,30 @@ async def start_abort(mes, program):
         production = await mes.child(machine, ns, "Production")
         changes = Changes()
         sub = await c.create_subscription(10, changes)
+        state, point = "Machine.Monitoring.RunState", "Machine.Monitoring.Point"
         await sub.subscribe_data_change([await mes.child(machine, ns, p)
                                          for p in ("Monitoring/RunState", "Monitoring/Point")])
+        # The first notifications are the last run's (the PLC's aborted 451, its
+        # points): only what comes after them is this run's.
+        await changes.wait_for(state, lambda v: v is not None)
+        await changes.wait_for(point, lambda v: True)
+        before = changes.mark()
         started = await call(c, production, "StartProgram", ua.Variant(program, ua.VariantType.UInt16),
                              ua.Variant([0.0] * 8, ua.VariantType.Float), True)
         check(started[0] == 0, f"started: {started}")
-        await changes.wait_for("Machine.Monitoring.Point", lambda v: v is not None and v >= 1)
+        await changes.wait_for(state, lambda v: v == "busy", before)
+        await changes.wait_for(point, lambda v: v is not None and v >= 1, before)
         aborted = await call(c, production, "Abort")
-        await changes.wait_for("Machine.Monitoring.RunState", lambda v: v in ("aborted", "done", "error"))
+        await changes.wait_for(state, lambda v: v in ("aborted", "done", "error"), before)
         after = await read_values(mes, c, ns, machine, [
             "Monitoring/RunState", "Monitoring/ErrorKind", "Monitoring/Point",
             "Production/ActiveProgram/State", "Production/ActiveProgram/StartedBy"])
-        return {"started": started, "abort": aborted, "after": after}
+        acknowledged = await call(c, production, "Acknowledge")
+        await changes.wait_for(state, lambda v: v == "idle", before)
+        error_kind = await (await mes.child(machine, ns, "Monitoring/ErrorKind")).read_value()
+        return {"started": started, "abort": aborted, "after": after,
+                "acknowledge": acknowledged, "error_kind_after_ack": error_kind,
+                "states": changes.values(state, before)}
 
 
 async def stalled(mes, queued):
@@ -313,7 +343,8 @@ async def main():
     if cmd == "browse":
         out = await browse(mes)
     elif cmd == "run":
-        out = await run431(mes, int(args[0]))
+        # run PROGRAM [CYCLE]: the cycle whose results to read (default: the number).
+        out = await run_program(mes, int(args[0]), int(args[-1]))
     elif cmd == "refusals":
         out = await refusals(mes, int(args[0]))
     elif cmd == "while_plc_runs":

@@ -139,6 +139,18 @@ def run(plc, program):
     return {"cycle": cycle, "real": real, "dint": dint, "u": u, "cal": cal, "cal_u": cal_u}
 
 
+def last(plc):
+    """The result, uncertainty and calibration blocks as they are: the last run's,
+    whichever face started it (a run of the OPC UA face has a result sequence of its
+    own, not the PLC's request sequence)."""
+    seq = plc.read(RES_HEAD, 1)[0]
+    real, dint = plc.results(seq)
+    u = plc.uncertainties(seq)
+    cal, cal_u = plc.calibration(seq)
+    cycle = plc.read(43, 1)[0]
+    return {"cycle": cycle, "real": real, "dint": dint, "u": u, "cal": cal, "cal_u": cal_u}
+
+
 def busy_abort(plc, program, other, again):
     st = plc.request(START, program, flags=1)
     check(st[1] == START, f"start accepted: {st}")
@@ -297,6 +309,8 @@ def main():
     plc = Plc(host, port)
     if scenario == "run":
         out = run(plc, args[0])
+    elif scenario == "last":
+        out = last(plc)
     elif scenario == "busy_abort":
         out = busy_abort(plc, args[0], args[1], args[2])
     elif scenario == "ack_error":

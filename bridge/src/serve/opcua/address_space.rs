@@ -7,6 +7,7 @@
 //! Node ids are strings `Machine.<path>` (stable, whatever the machine's name); the
 //! browse names carry the names a client browses by.
 
+use super::super::register_map::{uncertainty_key, CAL_COLUMNS};
 use super::auth::{ABORT, ACKNOWLEDGE, START_PROGRAM};
 use opcua::nodes::{MethodBuilder, ObjectBuilder, VariableBuilder};
 use opcua::server::address_space::AddressSpace;
@@ -19,7 +20,9 @@ use std::collections::BTreeMap;
 /// The namespace of the gateway's nodes.
 pub const NAMESPACE: &str = "urn:probebridge:machine";
 
-/// The cycles with a results object, and the result names each shows.
+/// The cycles with a results object, and the result names each shows: the PLC face's
+/// result slots of each cycle, and for 460 its calibration block (the probe table row
+/// and the columns' standard uncertainties).
 pub fn cycle_result_names() -> Vec<(u16, Vec<String>)> {
     let q = |r: std::ops::RangeInclusive<u16>| r.map(|n| format!("Q{n}")).collect::<Vec<_>>();
     let mut c431 = q(158..=159);
@@ -33,7 +36,9 @@ pub fn cycle_result_names() -> Vec<(u16, Vec<String>)> {
             .into_iter()
             .filter(|n| n.contains('.')),
     );
-    vec![(431, c431), (444, c444), (451, c451)]
+    let mut c460: Vec<String> = CAL_COLUMNS.iter().map(|c| c.to_string()).collect();
+    c460.extend(CAL_COLUMNS.iter().map(|c| uncertainty_key(c)));
+    vec![(431, c431), (444, c444), (451, c451), (460, c460)]
 }
 
 /// The variables the face keeps up to date, by what they show.

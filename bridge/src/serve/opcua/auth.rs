@@ -133,3 +133,35 @@ impl AuthManager for Auth {
         v
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use opcua::server::ANONYMOUS_USER_TOKEN_ID;
+
+    fn method(name: &str) -> NodeId {
+        NodeId::new(2, format!("Machine.Production.{name}"))
+    }
+
+    #[test]
+    fn users_call_the_methods_anonymous_clients_none_start_only_with_may_start() {
+        let user = UserToken(format!("{USER_PREFIX}mes"));
+        let anonymous = UserToken(ANONYMOUS_USER_TOKEN_ID.to_string());
+        for may_start in [false, true] {
+            let auth = Auth::new(Users::default(), true, may_start);
+            assert_eq!(
+                auth.is_user_executable(&user, &method(START_PROGRAM)),
+                may_start
+            );
+            for m in [ABORT, ACKNOWLEDGE] {
+                assert!(auth.is_user_executable(&user, &method(m)), "{m}");
+            }
+            for m in [START_PROGRAM, ABORT, ACKNOWLEDGE] {
+                assert!(!auth.is_user_executable(&anonymous, &method(m)), "{m}");
+            }
+            // Only the machine's methods: not a method of namespace 0 of that name.
+            let other = NodeId::new(0, format!("Machine.Production.{ABORT}"));
+            assert!(!auth.is_user_executable(&user, &other));
+        }
+    }
+}
