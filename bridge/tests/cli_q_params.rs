@@ -31,7 +31,8 @@ radius = 12.5
 "#;
 
 /// Cycle 451 in mode 0 with one measuring point on A (+90) and three on C, then the
-/// seed's example exactly as printed (blocks 11..18), then FN 11 on Q143 against the
+/// seed's example as printed (blocks 11..18; the seed prints `:` for the comments' `;`
+/// in blocks 14, 16 and 18, see docs/q-parameters.md), then FN 11 on Q143 against the
 /// limit `limit`.
 fn program(limit: &str) -> String {
     format!(

@@ -411,6 +411,12 @@ fn parse_errors_name_their_line() {
         ("1 FN 1: Q1 = +2 * +3", 2, "FN 1: expected"),
         ("1 CALL LBL 0", 2, "label 0"),
         ("1 Q1 = FOO 3", 2, "FOO: unknown function"),
+        // As the 451 seed prints three of its comments: `:` where `;` is meant.
+        (
+            "1 QL1 = TONUMB ( SRC_QS0 ) :QS0 to a number",
+            2,
+            "unexpected character ':' (a comment starts with ';')",
+        ),
     ] {
         let e = Program::parse(&wrap(body), &cfg).unwrap_err();
         let shown = e.to_string();
