@@ -477,6 +477,38 @@ fn q_parameters_as_cycle_parameter_values() {
     assert!(m.probes.is_empty());
 }
 
+/// An error that only the measured value makes (a division by a result that is 0):
+/// `check` cannot know it and lets the program start; the run stops at its line after
+/// the cycle, and the move after it is not made.
+#[test]
+fn an_error_on_a_measured_value_stops_at_its_line_before_the_next_move() {
+    let body = "1 TOOL CALL \"TOUCH_PROBE\" Z\n2 TCH PROBE 444 PROBING 3D ~\n  Q263=+10 ~\n  Q264=+5 ~\n  Q294=+0.25 ~\n  Q581=+0 ~\n  Q582=+0 ~\n  Q583=+1 ~\n  Q320=+1 ~\n  Q260=+100\n3 Q5 = Q164 + 0.25\n4 Q6 = 1 / Q5\n5 L Z+50 R0 FMAX";
+    let dir = common::temp_dir("q-measured-error");
+    let cfg = cfg_in(&dir);
+    let p = program(&wrap(body), &cfg);
+    preflight_program(&p, 0b111, &cfg, &dir.join("k.toml"))
+        .unwrap_or_else(|e| panic!("check cannot know the measured value: {e}"));
+    let (r, m) = run_in(&dir, body);
+    assert_eq!(r.cycles.len(), 1);
+    assert!(
+        (r.cycles[0].q["Q164"] + 0.25).abs() < 1e-9,
+        "{:?}",
+        r.cycles[0].q
+    );
+    let stopped = r.stopped.as_deref().unwrap();
+    // Physical line 13: BEGIN PGM, TOOL CALL, the cycle's nine lines, Q5, then Q6.
+    assert!(
+        stopped.starts_with("line 13: ") && stopped.contains("division by zero"),
+        "{stopped}"
+    );
+    assert!(!m.probes.is_empty());
+    assert!(
+        m.moves.iter().all(|(p, _)| (p[2] - 50.0).abs() > 1e-9),
+        "the L block after the error moved: {:?}",
+        m.moves
+    );
+}
+
 /// STRCOMP and INSTR, as the TNC has them: a text comparison gives a number the jumps
 /// compare.
 #[test]
