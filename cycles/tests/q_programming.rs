@@ -509,6 +509,31 @@ fn an_error_on_a_measured_value_stops_at_its_line_before_the_next_move() {
     );
 }
 
+/// A move on a measured value: `check` cannot know it; the run checks it against the
+/// limits once the value is known, and stops at its line before it moves.
+#[test]
+fn a_move_on_a_measured_value_is_checked_before_it_moves() {
+    let body = "1 TOOL CALL \"TOUCH_PROBE\" Z\n2 TCH PROBE 444 PROBING 3D ~\n  Q263=+10 ~\n  Q264=+5 ~\n  Q294=+0.25 ~\n  Q581=+0 ~\n  Q582=+0 ~\n  Q583=+1 ~\n  Q320=+1 ~\n  Q260=+100\n3 Q20 = Q164 * 100000\n4 L X+Q20 R0 FMAX";
+    let dir = common::temp_dir("q-measured-move");
+    let cfg = cfg_in(&dir);
+    let p = program(&wrap(body), &cfg);
+    preflight_program(&p, 0b111, &cfg, &dir.join("k.toml"))
+        .unwrap_or_else(|e| panic!("check cannot know the measured value: {e}"));
+    let (r, m) = run_in(&dir, body);
+    assert_eq!(r.cycles.len(), 1);
+    assert!((num(&r, "Q20") + 25000.0).abs() < 1e-6);
+    let stopped = r.stopped.as_deref().unwrap();
+    assert!(
+        stopped.contains("line 13") && stopped.contains("software limits"),
+        "{stopped}"
+    );
+    assert!(
+        m.moves.iter().all(|(p, _)| p[0] > -1000.0),
+        "the L block outside the limits moved: {:?}",
+        m.moves
+    );
+}
+
 /// STRCOMP and INSTR, as the TNC has them: a text comparison gives a number the jumps
 /// compare.
 #[test]
