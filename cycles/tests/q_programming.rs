@@ -534,6 +534,54 @@ fn a_move_on_a_measured_value_is_checked_before_it_moves() {
     );
 }
 
+/// The results docs/q-parameters.md lists for 431 and 444 are readable by the program
+/// after the cycle, with the values the cycle wrote.
+#[test]
+fn the_results_of_431_and_444_are_readable_after_the_cycle() {
+    let c431 = "2 TCH PROBE 431 MEASURE PLANE ~\n  Q263=+0 ~\n  Q264=+0 ~\n  Q294=+0.5 ~\n  Q265=+50 ~\n  Q266=+0 ~\n  Q295=+0.5 ~\n  Q296=+0 ~\n  Q297=+50 ~\n  Q298=+0.5 ~\n  Q320=+0 ~\n  Q260=+50 ~\n  Q281=+0";
+    let c444 = "2 TCH PROBE 444 PROBING 3D ~\n  Q263=+10 ~\n  Q264=+5 ~\n  Q294=+0.25 ~\n  Q581=+0 ~\n  Q582=+0 ~\n  Q583=+1 ~\n  Q320=+1 ~\n  Q260=+100";
+    for (cycle, names) in [
+        (
+            c431,
+            &[
+                "Q158", "Q159", "Q170", "Q171", "Q172", "Q173", "Q174", "Q175",
+            ][..],
+        ),
+        (
+            c444,
+            &[
+                "Q151", "Q152", "Q153", "Q161", "Q162", "Q163", "Q164", "Q183",
+            ][..],
+        ),
+    ] {
+        let reads: Vec<String> = names
+            .iter()
+            .enumerate()
+            .map(|(i, q)| format!("{} QL{i} = {q} + 0", 3 + i))
+            .collect();
+        let body = format!(
+            "1 TOOL CALL \"TOUCH_PROBE\" Z\n{cycle}\n{}",
+            reads.join("\n")
+        );
+        let dir = common::temp_dir("q-results");
+        let cfg = cfg_in(&dir);
+        preflight_program(
+            &program(&wrap(&body), &cfg),
+            0b111,
+            &cfg,
+            &dir.join("k.toml"),
+        )
+        .unwrap_or_else(|e| panic!("check knows what the cycle writes: {e}"));
+        let (r, _) = run_in(&dir, &body);
+        assert!(r.completed(), "{:?}", r.stopped);
+        for (i, q) in names.iter().enumerate() {
+            let written = r.cycles[0].q[*q];
+            assert_eq!(num(&r, &format!("QL{i}")), written, "{q}");
+            assert_eq!(num(&r, q), written, "{q} in the run's parameters");
+        }
+    }
+}
+
 /// STRCOMP and INSTR, as the TNC has them: a text comparison gives a number the jumps
 /// compare.
 #[test]
