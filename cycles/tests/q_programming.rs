@@ -197,17 +197,19 @@ fn loop_with_a_counter_moves_each_time() {
     let (r, m) = run_in(
         &dir,
         "1 Q1 = 0
-2 LBL \"STEP\"
-3 Q1 = Q1 + 1
-4 L X+Q1 Y-Q1 Z+50 R0 F500
-5 FN 12: IF +Q1 LT +4 GOTO LBL \"STEP\"",
+2 Q2 = 250 * 2
+3 LBL \"STEP\"
+4 Q1 = Q1 + 1
+5 L X+Q1 Y-Q1 Z+50 R0 FQ2
+6 FN 12: IF +Q1 LT +4 GOTO LBL \"STEP\"",
     );
     assert!(r.completed(), "{:?}", r.stopped);
     assert_eq!(num(&r, "Q1"), 4.0);
     let xs: Vec<[f64; 3]> = m.moves.iter().map(|(p, _)| *p).collect();
     assert_eq!(xs.len(), 4, "{xs:?}");
     assert_eq!(xs[3], [4.0, -4.0, 50.0]);
-    assert!(m.moves.iter().all(|(_, f)| *f == 500.0));
+    // The feed from FQ2, as the program computed it.
+    assert!(m.moves.iter().all(|(_, f)| *f == 500.0), "{:?}", m.moves);
 }
 
 #[test]
