@@ -2,12 +2,11 @@
 //! written from the register map in docs/gateway.md): programs 431, 444, 451 and 460
 //! started by number give the results of `probebridge run --json` (and their
 //! uncertainties; 460's probe table row in the calibration block) to the registers'
-//! precision;
-//! refusal while busy, abort mid-cycle, acknowledge after an error, FN 14 as error
-//! kind 31 with its number, the start confirming a 451 on an M-function table, a second
-//! connection refused, PLC heartbeat loss, SIGTERM and SIGHUP mid-cycle, a second
-//! SIGTERM during a slow stop, the lock and iceoryx2's root in the unit's runtime
-//! folder.
+//! precision; refusal while busy, abort mid-cycle, acknowledge after an error, FN 14
+//! as error kind 31 with its number, QR kept across a restart, the start confirming a
+//! 451 on an M-function table, a second connection refused, PLC heartbeat loss,
+//! SIGTERM and SIGHUP mid-cycle, a second SIGTERM during a slow stop, the lock and
+//! iceoryx2's root in the unit's runtime folder.
 //!
 //! Python with pymodbus: `PROBEBRIDGE_PYTHON`, else `/opt/probebridge-venv/bin/python`
 //! (`scripts/install-test-peers`). Skipped with a line saying why where neither is
@@ -464,6 +463,48 @@ fn with_m_strobe_rot_ax_pos_the_plcs_start_confirms_451() {
     assert!(
         log.contains("confirmed=true") && log.contains("mStrobeRotAxPos:"),
         "{log}"
+    );
+}
+
+/// QR parameters are kept with the machine's state across runs and restarts of the
+/// gateway (issue 27): a program sets QR1, the service restarts on the same state, the
+/// next program finds it and counts it on, and the one after finds the count.
+#[test]
+fn qr_parameters_are_kept_across_a_restart_of_the_gateway() {
+    let Some(py) = python() else { return };
+    let dir = tmpdir("serve-qr");
+    let state = dir.join("state");
+    let envs = [("STATE_DIRECTORY", state.as_os_str())];
+    let mut serve = Serve::start_in(dir.clone(), "qr", "demo-sphere.toml", &[], "", &envs);
+    std::fs::write(
+        dir.join("programs/101.h"),
+        "0 BEGIN PGM S MM\n1 QR1 = 41\n2 END PGM S MM\n",
+    )
+    .unwrap();
+    // Done when QR1 was 41 before it, else FN 14 with 1 (undefined: another error).
+    std::fs::write(
+        dir.join("programs/102.h"),
+        "0 BEGIN PGM C MM\n1 QR1 = QR1 + 1\n2 FN 10: IF +QR1 NE +42 GOTO LBL 9\n3 M30\n\
+         4 LBL 9\n5 FN 14: ERROR = 1\n6 END PGM C MM\n",
+    )
+    .unwrap();
+    let got = serve.plc(&py, &["run_unconfirmed", "101"]);
+    assert_eq!(got["state"], 2, "{got}\n{}", serve.log());
+    assert!(serve.stop().success());
+    let serve = Serve::start_in(dir.clone(), "qr", "demo-sphere.toml", &[], "", &envs);
+    let got = serve.plc(&py, &["run_unconfirmed", "102"]);
+    assert_eq!(
+        got["state"],
+        2,
+        "QR1 kept across the restart: {got}\n{}",
+        serve.log()
+    );
+    // Counted on and kept again: 43 now, so the same program stops through FN 14.
+    let got = serve.plc(&py, &["program_error", "102"]);
+    assert_eq!(
+        (&got["error_kind"], &got["error_code"]),
+        (&31.into(), &1.into()),
+        "{got}"
     );
 }
 
