@@ -2,11 +2,11 @@
 //! written from the register map in docs/gateway.md): programs 431, 444, 451 and 460
 //! started by number give the results of `probebridge run --json` (and their
 //! uncertainties; 460's probe table row in the calibration block) to the registers'
-//! precision;
-//! refusal while busy, abort mid-cycle, acknowledge after an error, a second
-//! connection refused, PLC heartbeat loss, SIGTERM and SIGHUP mid-cycle, a second
-//! SIGTERM during a slow stop, the lock and iceoryx2's root in the unit's runtime
-//! folder.
+//! precision; refusal while busy, abort mid-cycle, acknowledge after an error, FN 14
+//! as error kind 31 with its number, QR kept across a restart, the start confirming a
+//! 451 on an M-function table, a second connection refused, PLC heartbeat loss,
+//! SIGTERM and SIGHUP mid-cycle, a second SIGTERM during a slow stop, the lock and
+//! iceoryx2's root in the unit's runtime folder.
 //!
 //! Python with pymodbus: `PROBEBRIDGE_PYTHON`, else `/opt/probebridge-venv/bin/python`
 //! (`scripts/install-test-peers`). Skipped with a line saying why where neither is
@@ -388,6 +388,124 @@ fn an_error_must_be_acknowledged() {
         "",
     );
     serve.plc(&py, &["ack_error", "444", "451"]);
+}
+
+/// A program that stops itself with `FN 14: ERROR = n` (issue 27): the PLC sees a
+/// failed run with error kind 31 and n in the error code register, and the history
+/// keeps the run as an error.
+#[test]
+fn fn14_is_a_failed_run_with_its_number() {
+    let Some(py) = python() else { return };
+    let serve = Serve::start("fn14", "demo-sphere.toml", &[], "");
+    // Read at the start, as every program is: nothing moves before the FN 14.
+    std::fs::write(
+        serve.dir.join("programs/777.h"),
+        "0 BEGIN PGM E MM\n1 Q1 = 2\n2 FN 11: IF +Q1 GT +1 GOTO LBL 9\n3 M30\n\
+         4 LBL 9\n5 FN 14: ERROR = 1234\n6 END PGM E MM\n",
+    )
+    .unwrap();
+    let got = serve.plc(&py, &["program_error", "777"]);
+    assert_eq!(got["error_kind"], 31, "{got}\n{}", serve.log());
+    assert_eq!(got["error_code"], 1234, "{got}");
+    let h = serve.history();
+    assert_eq!(h.len(), 1, "{h:?}");
+    assert_eq!(h[0]["status"], "error", "{h:?}");
+}
+
+/// `[cycles] mStrobeRotAxPos` (issue 27): the seeds want the start of a 451 with the
+/// rotary axes at 0 deg confirmed; on the gateway the PLC's start request is that
+/// confirmation, so a start without the confirm flag measures.
+#[test]
+fn with_m_strobe_rot_ax_pos_the_plcs_start_confirms_451() {
+    let Some(py) = python() else { return };
+    let files = tmpdir("serve-m203-files");
+    // The machine's name and its shipped preset table (the state's seed) beside it.
+    let machine = files.join("table-ac.toml");
+    std::fs::copy(
+        configs().join("machines/table-ac.presets.toml"),
+        files.join("table-ac.presets.toml"),
+    )
+    .unwrap();
+    let shipped = std::fs::read_to_string(configs().join("machines/table-ac.toml")).unwrap();
+    assert!(
+        shipped.contains("\n[cycles]\n"),
+        "table-ac has a [cycles] table"
+    );
+    std::fs::write(
+        &machine,
+        shipped.replace("\n[cycles]\n", "\n[cycles]\nmStrobeRotAxPos = 203\n"),
+    )
+    .unwrap();
+    let scenario = files.join("demo-sphere-m203.toml");
+    let demo = std::fs::read_to_string(configs().join("scenarios/demo-sphere.toml")).unwrap();
+    assert!(demo.contains("\nmachine = \"table-ac\"\n"), "{demo}");
+    std::fs::write(
+        &scenario,
+        demo.replace(
+            "\nmachine = \"table-ac\"\n",
+            &format!("\nmachine = {:?}\n", machine.to_str().unwrap()),
+        ),
+    )
+    .unwrap();
+    let serve = Serve::start("m203", scenario.to_str().unwrap(), &[], "");
+    // 451-check with a retraction height (the PLC turns the table with the probe
+    // clear) and C alone, to keep it short.
+    let program = std::fs::read_to_string(configs().join("programs/451-check.h"))
+        .unwrap()
+        .replace("Q408=+0 ", "Q408=+150 ")
+        .replace("Q411=-90 ", "Q411=+0 ")
+        .replace("Q412=+90 ", "Q412=+0 ")
+        .replace("Q414=+3 ", "Q414=+0 ");
+    std::fs::write(serve.dir.join("programs/451.h"), program).unwrap();
+    let got = serve.plc(&py, &["run_unconfirmed", "451"]);
+    assert_eq!(got["state"], 2, "done: {got}\n{}", serve.log());
+    let log = serve.log();
+    assert!(
+        log.contains("confirmed=true") && log.contains("mStrobeRotAxPos:"),
+        "{log}"
+    );
+}
+
+/// QR parameters are kept with the machine's state across runs and restarts of the
+/// gateway (issue 27): a program sets QR1, the service restarts on the same state, the
+/// next program finds it and counts it on, and the one after finds the count.
+#[test]
+fn qr_parameters_are_kept_across_a_restart_of_the_gateway() {
+    let Some(py) = python() else { return };
+    let dir = tmpdir("serve-qr");
+    let state = dir.join("state");
+    let envs = [("STATE_DIRECTORY", state.as_os_str())];
+    let mut serve = Serve::start_in(dir.clone(), "qr", "demo-sphere.toml", &[], "", &envs);
+    std::fs::write(
+        dir.join("programs/101.h"),
+        "0 BEGIN PGM S MM\n1 QR1 = 41\n2 END PGM S MM\n",
+    )
+    .unwrap();
+    // Done when QR1 was 41 before it, else FN 14 with 1 (undefined: another error).
+    std::fs::write(
+        dir.join("programs/102.h"),
+        "0 BEGIN PGM C MM\n1 QR1 = QR1 + 1\n2 FN 10: IF +QR1 NE +42 GOTO LBL 9\n3 M30\n\
+         4 LBL 9\n5 FN 14: ERROR = 1\n6 END PGM C MM\n",
+    )
+    .unwrap();
+    let got = serve.plc(&py, &["run_unconfirmed", "101"]);
+    assert_eq!(got["state"], 2, "{got}\n{}", serve.log());
+    assert!(serve.stop().success());
+    let serve = Serve::start_in(dir.clone(), "qr", "demo-sphere.toml", &[], "", &envs);
+    let got = serve.plc(&py, &["run_unconfirmed", "102"]);
+    assert_eq!(
+        got["state"],
+        2,
+        "QR1 kept across the restart: {got}\n{}",
+        serve.log()
+    );
+    // Counted on and kept again: 43 now, so the same program stops through FN 14.
+    let got = serve.plc(&py, &["program_error", "102"]);
+    assert_eq!(
+        (&got["error_kind"], &got["error_code"]),
+        (&31.into(), &1.into()),
+        "{got}"
+    );
 }
 
 #[test]

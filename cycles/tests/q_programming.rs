@@ -197,17 +197,19 @@ fn loop_with_a_counter_moves_each_time() {
     let (r, m) = run_in(
         &dir,
         "1 Q1 = 0
-2 LBL \"STEP\"
-3 Q1 = Q1 + 1
-4 L X+Q1 Y-Q1 Z+50 R0 F500
-5 FN 12: IF +Q1 LT +4 GOTO LBL \"STEP\"",
+2 Q2 = 250 * 2
+3 LBL \"STEP\"
+4 Q1 = Q1 + 1
+5 L X+Q1 Y-Q1 Z+50 R0 FQ2
+6 FN 12: IF +Q1 LT +4 GOTO LBL \"STEP\"",
     );
     assert!(r.completed(), "{:?}", r.stopped);
     assert_eq!(num(&r, "Q1"), 4.0);
     let xs: Vec<[f64; 3]> = m.moves.iter().map(|(p, _)| *p).collect();
     assert_eq!(xs.len(), 4, "{xs:?}");
     assert_eq!(xs[3], [4.0, -4.0, 50.0]);
-    assert!(m.moves.iter().all(|(_, f)| *f == 500.0));
+    // The feed from FQ2, as the program computed it.
+    assert!(m.moves.iter().all(|(_, f)| *f == 500.0), "{:?}", m.moves);
 }
 
 #[test]
@@ -411,6 +413,12 @@ fn parse_errors_name_their_line() {
         ("1 FN 1: Q1 = +2 * +3", 2, "FN 1: expected"),
         ("1 CALL LBL 0", 2, "label 0"),
         ("1 Q1 = FOO 3", 2, "FOO: unknown function"),
+        // As the 451 seed prints three of its comments: `:` where `;` is meant.
+        (
+            "1 QL1 = TONUMB ( SRC_QS0 ) :QS0 to a number",
+            2,
+            "unexpected character ':' (a comment starts with ';')",
+        ),
     ] {
         let e = Program::parse(&wrap(body), &cfg).unwrap_err();
         let shown = e.to_string();
@@ -469,6 +477,111 @@ fn q_parameters_as_cycle_parameter_values() {
         "{stopped}"
     );
     assert!(m.probes.is_empty());
+}
+
+/// An error that only the measured value makes (a division by a result that is 0):
+/// `check` cannot know it and lets the program start; the run stops at its line after
+/// the cycle, and the move after it is not made.
+#[test]
+fn an_error_on_a_measured_value_stops_at_its_line_before_the_next_move() {
+    let body = "1 TOOL CALL \"TOUCH_PROBE\" Z\n2 TCH PROBE 444 PROBING 3D ~\n  Q263=+10 ~\n  Q264=+5 ~\n  Q294=+0.25 ~\n  Q581=+0 ~\n  Q582=+0 ~\n  Q583=+1 ~\n  Q320=+1 ~\n  Q260=+100\n3 Q5 = Q164 + 0.25\n4 Q6 = 1 / Q5\n5 L Z+50 R0 FMAX";
+    let dir = common::temp_dir("q-measured-error");
+    let cfg = cfg_in(&dir);
+    let p = program(&wrap(body), &cfg);
+    preflight_program(&p, 0b111, &cfg, &dir.join("k.toml"))
+        .unwrap_or_else(|e| panic!("check cannot know the measured value: {e}"));
+    let (r, m) = run_in(&dir, body);
+    assert_eq!(r.cycles.len(), 1);
+    assert!(
+        (r.cycles[0].q["Q164"] + 0.25).abs() < 1e-9,
+        "{:?}",
+        r.cycles[0].q
+    );
+    let stopped = r.stopped.as_deref().unwrap();
+    // Physical line 13: BEGIN PGM, TOOL CALL, the cycle's nine lines, Q5, then Q6.
+    assert!(
+        stopped.starts_with("line 13: ") && stopped.contains("division by zero"),
+        "{stopped}"
+    );
+    assert!(!m.probes.is_empty());
+    assert!(
+        m.moves.iter().all(|(p, _)| (p[2] - 50.0).abs() > 1e-9),
+        "the L block after the error moved: {:?}",
+        m.moves
+    );
+}
+
+/// A move on a measured value: `check` cannot know it; the run checks it against the
+/// limits once the value is known, and stops at its line before it moves.
+#[test]
+fn a_move_on_a_measured_value_is_checked_before_it_moves() {
+    let body = "1 TOOL CALL \"TOUCH_PROBE\" Z\n2 TCH PROBE 444 PROBING 3D ~\n  Q263=+10 ~\n  Q264=+5 ~\n  Q294=+0.25 ~\n  Q581=+0 ~\n  Q582=+0 ~\n  Q583=+1 ~\n  Q320=+1 ~\n  Q260=+100\n3 Q20 = Q164 * 100000\n4 L X+Q20 R0 FMAX";
+    let dir = common::temp_dir("q-measured-move");
+    let cfg = cfg_in(&dir);
+    let p = program(&wrap(body), &cfg);
+    preflight_program(&p, 0b111, &cfg, &dir.join("k.toml"))
+        .unwrap_or_else(|e| panic!("check cannot know the measured value: {e}"));
+    let (r, m) = run_in(&dir, body);
+    assert_eq!(r.cycles.len(), 1);
+    assert!((num(&r, "Q20") + 25000.0).abs() < 1e-6);
+    let stopped = r.stopped.as_deref().unwrap();
+    assert!(
+        stopped.contains("line 13") && stopped.contains("software limits"),
+        "{stopped}"
+    );
+    assert!(
+        m.moves.iter().all(|(p, _)| p[0] > -1000.0),
+        "the L block outside the limits moved: {:?}",
+        m.moves
+    );
+}
+
+/// The results docs/q-parameters.md lists for 431 and 444 are readable by the program
+/// after the cycle, with the values the cycle wrote.
+#[test]
+fn the_results_of_431_and_444_are_readable_after_the_cycle() {
+    let c431 = "2 TCH PROBE 431 MEASURE PLANE ~\n  Q263=+0 ~\n  Q264=+0 ~\n  Q294=+0.5 ~\n  Q265=+50 ~\n  Q266=+0 ~\n  Q295=+0.5 ~\n  Q296=+0 ~\n  Q297=+50 ~\n  Q298=+0.5 ~\n  Q320=+0 ~\n  Q260=+50 ~\n  Q281=+0";
+    let c444 = "2 TCH PROBE 444 PROBING 3D ~\n  Q263=+10 ~\n  Q264=+5 ~\n  Q294=+0.25 ~\n  Q581=+0 ~\n  Q582=+0 ~\n  Q583=+1 ~\n  Q320=+1 ~\n  Q260=+100";
+    for (cycle, names) in [
+        (
+            c431,
+            &[
+                "Q158", "Q159", "Q170", "Q171", "Q172", "Q173", "Q174", "Q175",
+            ][..],
+        ),
+        (
+            c444,
+            &[
+                "Q151", "Q152", "Q153", "Q161", "Q162", "Q163", "Q164", "Q183",
+            ][..],
+        ),
+    ] {
+        let reads: Vec<String> = names
+            .iter()
+            .enumerate()
+            .map(|(i, q)| format!("{} QL{i} = {q} + 0", 3 + i))
+            .collect();
+        let body = format!(
+            "1 TOOL CALL \"TOUCH_PROBE\" Z\n{cycle}\n{}",
+            reads.join("\n")
+        );
+        let dir = common::temp_dir("q-results");
+        let cfg = cfg_in(&dir);
+        preflight_program(
+            &program(&wrap(&body), &cfg),
+            0b111,
+            &cfg,
+            &dir.join("k.toml"),
+        )
+        .unwrap_or_else(|e| panic!("check knows what the cycle writes: {e}"));
+        let (r, _) = run_in(&dir, &body);
+        assert!(r.completed(), "{:?}", r.stopped);
+        for (i, q) in names.iter().enumerate() {
+            let written = r.cycles[0].q[*q];
+            assert_eq!(num(&r, &format!("QL{i}")), written, "{q}");
+            assert_eq!(num(&r, q), written, "{q} in the run's parameters");
+        }
+    }
 }
 
 /// STRCOMP and INSTR, as the TNC has them: a text comparison gives a number the jumps

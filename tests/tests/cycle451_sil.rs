@@ -966,3 +966,67 @@ fn a_tool_axis_the_machine_has_no_spindle_for_is_refused() {
         "{e}"
     );
 }
+
+// ---------------------------------------------------------------------------------
+// Rotary axes positioned by an M function (`[cycles] mStrobeRotAxPos`).
+
+/// The seeds: with the rotary axes positioned by an M function, 451 starts only with
+/// every rotary axis at 0 deg and only once that is confirmed (collision danger);
+/// otherwise it stops before it moves or asks anything further.
+#[test]
+fn with_m_strobe_rot_ax_pos_451_starts_only_at_0_deg_and_confirmed() {
+    let sc = demo_sphere();
+    let mut cfg = cycles_config(&sc);
+    cfg.parameters.strobe_rot_ax_pos = 203;
+    let p = P451 {
+        mode: 0,
+        q408: 150.0,
+        c: Ax(90.0, 270.0, 0.0, 3),
+        points: 3,
+        ..P451::default()
+    };
+    let at_zero = program(&p, [50.0, -30.0, 80.0]);
+    // C turned to 10 deg before the cycle: refused, naming the axis and its angle,
+    // before the operator is even asked.
+    let turned = at_zero
+        .replace("\n3 TCH PROBE 451", "\n3 L C+10 R0 FMAX\n4 TCH PROBE 451")
+        .replace("\n4 END PGM", "\n5 END PGM");
+    let dir = temp_dir("m203-turned");
+    let r = run_with(&turned, &sc, &cfg, &dir, true);
+    let c = only_cycle(&r);
+    assert_eq!(c.status, Status::Error, "{:?}", c.message);
+    let said = c.message.as_deref().unwrap();
+    assert!(
+        said.contains("every rotary axis at 0 deg")
+            && said.contains("C is at +10.0000 deg")
+            && said.contains("nothing moved"),
+        "{said}"
+    );
+    assert!(r.confirmations.is_empty(), "{:?}", r.confirmations);
+    assert!(!r.report.completed());
+    // At 0 deg, but the operator does not confirm: stopped, asked exactly once.
+    let dir = temp_dir("m203-unconfirmed");
+    let r = run_with(&at_zero, &sc, &cfg, &dir, false);
+    let c = only_cycle(&r);
+    assert_eq!(c.status, Status::Error, "{:?}", c.message);
+    assert!(
+        c.message
+            .as_deref()
+            .unwrap()
+            .contains("was not confirmed; nothing moved"),
+        "{:?}",
+        c.message
+    );
+    assert_eq!(r.confirmations.len(), 1, "{:?}", r.confirmations);
+    assert!(
+        r.confirmations[0].starts_with(cycles::cycle451::rotary_m_function::ROTARY_AT_ZERO)
+            && r.confirmations[0].contains("collision"),
+        "{}",
+        r.confirmations[0]
+    );
+    // Confirmed: it measures.
+    let dir = temp_dir("m203-confirmed");
+    let r = run_with(&at_zero, &sc, &cfg, &dir, true);
+    ok_cycle(&r);
+    assert_eq!(spheres_measured(&json(&r)), 4);
+}

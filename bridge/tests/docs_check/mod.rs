@@ -12,13 +12,19 @@
 //! - every command line shown in a fenced block whose first word is `probebridge`
 //!   (also `./target/release/probebridge`, `cargo run ... -p probebridge -- ...`, after a
 //!   `$ ` prompt) parses with the current CLI;
-//! - README.md still shows the two commands CI and the tests run.
+//! - README.md still shows the two commands CI and the tests run, and stays a front
+//!   door of at most [`README_MAX_LINES`] lines (the reference lives in docs/);
+//! - each crate's `lib.rs` points to its section of ARCHITECTURE.md, and the section
+//!   is there.
 
 use super::Cli;
 use clap::Parser;
 use std::collections::HashSet;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+
+/// The most lines README.md may have (issue 24): past it, it is a reference again.
+const README_MAX_LINES: usize = 250;
 
 /// The workspace root (this crate is `bridge/`).
 fn root() -> PathBuf {
@@ -554,6 +560,57 @@ fn the_readme_still_shows_the_two_commands() {
             "README.md must show `{wanted}` in a fenced block (CI and the tests run it)"
         );
     }
+}
+
+#[test]
+fn the_readme_stays_a_front_door() {
+    let readme = std::fs::read_to_string(root().join("README.md")).expect("README.md");
+    let n = readme.lines().count();
+    assert!(
+        n <= README_MAX_LINES,
+        "README.md has {n} lines, at most {README_MAX_LINES}: it is the front door; \
+         move the reference into a page of docs/ and link it from \"Where to go next\""
+    );
+}
+
+/// The workspace's members, as the root `Cargo.toml` lists them.
+fn members(root: &Path) -> Vec<String> {
+    let manifest = std::fs::read_to_string(root.join("Cargo.toml")).expect("Cargo.toml");
+    let list = manifest
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("members = ["))
+        .expect("Cargo.toml lists its members on one line");
+    list.trim_end_matches(']')
+        .split(',')
+        .map(|m| m.trim().trim_matches('"').to_string())
+        .filter(|m| !m.is_empty())
+        .collect()
+}
+
+#[test]
+fn each_crates_lib_rs_points_to_its_section_of_architecture_md() {
+    let root = root();
+    let arch = std::fs::read_to_string(root.join("ARCHITECTURE.md")).expect("ARCHITECTURE.md");
+    let sections = anchors(&arch);
+    let crates = members(&root);
+    assert!(crates.len() >= 6, "the members were found: {crates:?}");
+    let mut wrong = Vec::new();
+    for member in &crates {
+        let lib = format!("{member}/src/lib.rs");
+        let text = std::fs::read_to_string(root.join(&lib)).unwrap_or_default();
+        let doc: String = text
+            .lines()
+            .filter_map(|l| l.trim_start().strip_prefix("//!"))
+            .collect::<Vec<_>>()
+            .join("\n");
+        let link = format!("ARCHITECTURE.md#{member}");
+        if !doc.contains(&link) {
+            wrong.push(format!("  {lib}: its crate doc does not name `{link}`"));
+        } else if !sections.contains(member.as_str()) {
+            wrong.push(format!("  {lib}: ARCHITECTURE.md has no section #{member}"));
+        }
+    }
+    assert!(wrong.is_empty(), "{}", wrong.join("\n"));
 }
 
 #[test]

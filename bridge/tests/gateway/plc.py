@@ -188,6 +188,25 @@ def ack_error(plc, failing, good):
     return {"error_kind": 0}
 
 
+def program_error(plc, program):
+    """A program that stops itself with FN 14: ERROR = n: a failed run, the error kind
+    and code registers as docs/gateway.md gives them, the results not valid."""
+    st = plc.request(START, program, flags=1)
+    check(st[1] == START, f"start accepted: {st}")
+    st = plc.wait(lambda s: s[3] != BUSY)
+    check(st[3] == ERROR, f"program {program} ends in error: {st}")
+    check(st[4] & 0b100100 == 0, f"neither done nor results valid: {st[4]:#x}")
+    return {"error_kind": st[6], "error_code": st[7]}
+
+
+def run_unconfirmed(plc, program):
+    """As `run`, with the confirm flag clear."""
+    st = plc.request(START, program, flags=0)
+    check(st[1] == START, f"start accepted: {st}")
+    st = plc.wait(lambda s: s[3] != BUSY)
+    return {"state": st[3], "error_kind": st[6], "error_code": st[7]}
+
+
 def raw_read(host, port, addr, count):
     """FC3 as bytes on a socket of its own; the exception code, or None."""
     with socket.create_connection((host, port), timeout=10) as s:
@@ -315,6 +334,10 @@ def main():
         out = busy_abort(plc, args[0], args[1], args[2])
     elif scenario == "ack_error":
         out = ack_error(plc, args[0], args[1])
+    elif scenario == "program_error":
+        out = program_error(plc, args[0])
+    elif scenario == "run_unconfirmed":
+        out = run_unconfirmed(plc, args[0])
     elif scenario == "second_connection":
         out = second_connection(plc, host, port)
     elif scenario == "state":

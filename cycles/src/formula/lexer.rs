@@ -95,7 +95,13 @@ pub(super) fn lex(s: &str) -> Result<Vec<Tok>, String> {
             }
             _ => {
                 let ch = s[i..].chars().next().unwrap_or('?');
-                return Err(format!("unexpected character '{ch}'"));
+                // The 451 seed prints `:` for `;` before three of its comments.
+                let hint = if ch == ':' {
+                    " (a comment starts with ';')"
+                } else {
+                    ""
+                };
+                return Err(format!("unexpected character '{ch}'{hint}"));
             }
         }
     }
