@@ -808,21 +808,15 @@ fn watched(
     (m, seen)
 }
 
-/// Watched on the simulated machine as it moves: whenever a rotary axis is moving,
-/// no linear axis moves, and the ball centre stands at least Q407 + R + SET_UP + Q320
-/// above the sphere centre along the tool axis (Q408 = 0), or Q407 + R + SET_UP
-/// (Q408 > 0), less 0.05 mm for the injected errors. On the A/C table (Q431 = 1 and
-/// 3, Q431 = 0 with the axes left off their reference, Q408 > 0 with Q432), the B head
-/// over a C table, and both horizontal machines (tool axis Y and X); the results are
-/// those of the other tests (ok, same kinematics).
-#[test]
-fn while_a_rotary_axis_moves_the_ball_stands_above_the_sphere() {
-    // (scenario, tool axis, sphere centre, params, blocks before the cycle: None =
-    // a start over the sphere, Some = preset row 1 at the centre, the probe away; the
-    // program turns the axes there, high above the sphere: only the cycle's turns
-    // are the subject).
-    type Case = (&'static str, char, [f64; 3], P451, Option<&'static str>);
-    let cases: Vec<Case> = vec![
+// (scenario, tool axis, sphere centre, params, blocks before the cycle: None =
+// a start over the sphere, Some = preset row 1 at the centre, the probe away; the
+// program turns the axes there, high above the sphere: only the cycle's turns
+// are the subject).
+type WatchCase = (&'static str, char, [f64; 3], P451, Option<&'static str>);
+
+/// The cases of [`while_a_rotary_axis_moves_the_ball_stands_above_the_sphere`].
+fn watched_cases() -> Vec<WatchCase> {
+    vec![
         (
             "demo-sphere.toml",
             'Z',
@@ -898,7 +892,19 @@ fn while_a_rotary_axis_moves_the_ball_stands_above_the_sphere() {
             },
             None,
         ),
-    ];
+    ]
+}
+
+/// Watched on the simulated machine as it moves: whenever a rotary axis is moving,
+/// no linear axis moves, and the ball centre stands at least Q407 + R + SET_UP + Q320
+/// above the sphere centre along the tool axis (Q408 = 0), or Q407 + R + SET_UP
+/// (Q408 > 0), less 0.05 mm for the injected errors. On the A/C table (Q431 = 1 and
+/// 3, Q431 = 0 with the axes left off their reference, Q408 > 0 with Q432), the B head
+/// over a C table, and both horizontal machines (tool axis Y and X); the results are
+/// those of the other tests (ok, same kinematics).
+#[test]
+fn while_a_rotary_axis_moves_the_ball_stands_above_the_sphere() {
+    let cases = watched_cases();
     for (k, (name, axis, centre, p, before)) in cases.into_iter().enumerate() {
         let sc = load(name);
         let mut cfg = cycles_config(&sc);
