@@ -120,13 +120,17 @@ struct Run {
 }
 
 fn run_text(text: &str, sc: &sim::Scenario, cfg: &cycles::CyclesConfig, tag: &str) -> Run {
+    run_on(text, CanInproc::open(sc), cfg, tag)
+}
+
+/// As [`run_text`], on the machine `m` (a simulator with a motion watch).
+fn run_on<M: hal::Machine>(text: &str, mut m: M, cfg: &cycles::CyclesConfig, tag: &str) -> Run {
     let program = Program::parse(text, cfg).unwrap_or_else(|e| panic!("{e}\n{text}"));
     let dir = temp_dir(tag);
     let kinematics = dir.join("kinematics.toml");
     let check = preflight_program(&program, cfg.machine.axis_mask(), cfg, &kinematics)
         .err()
         .map(|e| e.to_string());
-    let mut m = CanInproc::open(sc);
     let mut events = Vec::new();
     let mut confirm = |_: &str| true;
     let mut progress = |e| events.push(e);
@@ -300,10 +304,12 @@ fn a_start_whose_pole_probe_misses_stops_and_nothing_else_moves() {
     }
 }
 
-/// `cfg` with preset row 1 at `centre`, activated by cycle 247 in the program.
+/// `cfg` with preset row 1 at `centre` (instead of the shipped table's row 1),
+/// activated by cycle 247 in the program.
 fn with_preset_row(cfg: &mut cycles::CyclesConfig, centre: [f64; 3]) {
     let mut row = cycles::preset_table::Preset::origin(1);
     [row.x, row.y, row.z] = centre;
+    cfg.presets.rows.retain(|r| r.number != 1);
     cfg.presets.rows.push(row);
 }
 
@@ -737,5 +743,304 @@ fn rotary_axes_turn_only_at_a_height_that_clears_the_sphere() {
         result(&r);
         let turns = turns_clear_the_sphere(&sc, set_up, &r.events);
         assert!(turns >= 4, "case {k} ({name}): only {turns} turns");
+    }
+}
+
+/// What the simulated machine did while a rotary axis moved, sampled at every SYNC:
+/// the motion itself, not the commanded targets.
+#[derive(Debug)]
+struct Turning {
+    /// Samples with a rotary axis moving since the last one.
+    samples: usize,
+    /// The lowest height of the ball centre above the sphere centre along the tool
+    /// axis in those samples (machine coordinates, the scenario's true kinematics),
+    /// and the axes there.
+    lowest: (f64, hal::AxisPositions),
+    /// The first samples where a linear axis moved together with a rotary one.
+    together: Vec<String>,
+}
+
+/// A simulated machine for `sc` whose motion watch records [`Turning`] for the
+/// scenario's sphere and the tool axis `t`.
+fn watched(
+    sc: &sim::Scenario,
+    t: usize,
+) -> (
+    impl hal::Machine<Error = hal::MachineError>,
+    std::sync::Arc<std::sync::Mutex<Turning>>,
+) {
+    use hal::{Axis, AxisPositions};
+    use std::sync::{Arc, Mutex};
+    let kin = sim::kinematics::TrueKinematics::new(&sc.machine, &sc.truth);
+    let sphere = sc.spheres[0].center;
+    let seen = Arc::new(Mutex::new(Turning {
+        samples: 0,
+        lowest: (f64::INFINITY, AxisPositions::new()),
+        together: Vec::new(),
+    }));
+    let out = seen.clone();
+    let last = Mutex::new(None::<AxisPositions>);
+    let watch: sim::machine::MotionWatch = Arc::new(move |p: &AxisPositions| {
+        let Some(q) = last.lock().unwrap().replace(*p) else {
+            return;
+        };
+        let moved = |axes: &[Axis], tol: f64| {
+            axes.iter().any(
+                |a| matches!((p.get(*a), q.get(*a)), (Some(x), Some(y)) if (x - y).abs() > tol),
+            )
+        };
+        if !moved(&Axis::ROTARY, 1e-9) {
+            return;
+        }
+        let mut s = out.lock().unwrap();
+        s.samples += 1;
+        for at in [q, *p] {
+            let h = (kin.ball_centre_in_machine(&at) - kin.table_to_machine(&at, sphere))[t];
+            if h < s.lowest.0 {
+                s.lowest = (h, at);
+            }
+        }
+        if moved(&Axis::LINEAR, 1e-6) && s.together.len() < 3 {
+            s.together.push(format!("{q} -> {p}"));
+        }
+    });
+    let m = CanInproc::open_abortable(sc, hal::AbortFlag::fresh(), watch);
+    (m, seen)
+}
+
+// (scenario, tool axis, sphere centre, params, blocks before the cycle: None =
+// a start over the sphere, Some = preset row 1 at the centre, the probe away; the
+// program turns the axes there, high above the sphere: only the cycle's turns
+// are the subject).
+type WatchCase = (&'static str, char, [f64; 3], P451, Option<&'static str>);
+
+/// The cases of [`while_a_rotary_axis_moves_the_ball_stands_above_the_sphere`].
+fn watched_cases() -> Vec<WatchCase> {
+    vec![
+        (
+            "demo-sphere.toml",
+            'Z',
+            [50.0, -30.0, 80.0],
+            P451 {
+                a: Ax(-80.0, 70.0, 0.0, 3),
+                c: Ax(30.0, 300.0, 0.0, 3),
+                q320: 0.5,
+                ..P451::default()
+            },
+            None,
+        ),
+        (
+            "demo-sphere.toml",
+            'Z',
+            [50.0, -30.0, 80.0],
+            P451 {
+                preset: 0,
+                a: Ax(55.0, -45.0, 0.0, 2),
+                c: Ax(90.0, 270.0, 0.0, 2),
+                ..P451::default()
+            },
+            Some("11 L Z+250 R0 FMAX\n12 L A-35 C+150 R0 FMAX\n"),
+        ),
+        (
+            "demo-sphere.toml",
+            'Z',
+            [50.0, -30.0, 80.0],
+            P451 {
+                a: Ax(-60.0, 75.0, 0.0, 2),
+                c: Ax(200.0, 20.0, 0.0, 2),
+                backlash: 0.8,
+                q408: 44.0,
+                preset: 3,
+                ..P451::default()
+            },
+            None,
+        ),
+        (
+            "head-b-table-c.toml",
+            'Z',
+            [40.0, 25.0, 60.0],
+            P451 {
+                b: Ax(75.0, -85.0, 0.0, 3),
+                c: Ax(270.0, 90.0, 0.0, 2),
+                points: 3,
+                ..P451::default()
+            },
+            None,
+        ),
+        (
+            "horizontal-y-sphere.toml",
+            'Y',
+            [50.0, -30.0, 80.0],
+            P451 {
+                a: Ax(65.0, -55.0, 0.0, 2),
+                c: Ax(-100.0, 170.0, 0.0, 2),
+                q320: 0.8,
+                backlash: 0.5,
+                ..P451::default()
+            },
+            None,
+        ),
+        (
+            "horizontal-x-head-b-table-c.toml",
+            'X',
+            [40.0, 25.0, 60.0],
+            P451 {
+                b: Ax(35.0, -55.0, 0.0, 2),
+                c: Ax(110.0, 250.0, 0.0, 2),
+                points: 3,
+                ..P451::default()
+            },
+            None,
+        ),
+    ]
+}
+
+/// Watched on the simulated machine as it moves: whenever a rotary axis is moving,
+/// no linear axis moves, and the ball centre stands at least Q407 + R + SET_UP + Q320
+/// above the sphere centre along the tool axis (Q408 = 0), or Q407 + R + SET_UP
+/// (Q408 > 0), less 0.05 mm for the injected errors. On the A/C table (Q431 = 1 and
+/// 3, Q431 = 0 with the axes left off their reference, Q408 > 0 with Q432), the B head
+/// over a C table, and both horizontal machines (tool axis Y and X); the results are
+/// those of the other tests (ok, same kinematics).
+#[test]
+fn while_a_rotary_axis_moves_the_ball_stands_above_the_sphere() {
+    let cases = watched_cases();
+    for (k, (name, axis, centre, p, before)) in cases.into_iter().enumerate() {
+        let sc = load(name);
+        let mut cfg = cycles_config(&sc);
+        let t = "XYZ".find(axis).unwrap();
+        let set_up = cfg.probe("TOUCH_PROBE").unwrap().set_up;
+        let rs = p.radius + sc.probe.ball_radius;
+        let text = match before {
+            None => program(
+                &p,
+                axis,
+                start_at(centre, t, rs, 0.0, 0.0, set_up + p.q320),
+                "",
+            ),
+            Some(turn) => {
+                with_preset_row(&mut cfg, centre);
+                let mut away = [70.0, 0.0, 0.0];
+                away[t] = 60.0;
+                let base = "10 CYCL DEF 247 DATUM SETTING ~\n  Q339=+1 ;DATUM NUMBER\n";
+                program(&p, axis, away, &format!("{base}{turn}"))
+            }
+        };
+        let (m, seen) = watched(&sc, t);
+        let r = run_on(&text, m, &cfg, "watched");
+        result(&r);
+        let seen = seen.lock().unwrap();
+        let clear = if p.q408 > 0.0 { 0.0 } else { p.q320 };
+        let need = rs + set_up + clear - 0.05;
+        eprintln!(
+            "case {k} ({name}): {} samples with a rotary axis moving, the ball at least {:.4} mm above the sphere centre (needed {need:.4})",
+            seen.samples, seen.lowest.0
+        );
+        assert!(
+            seen.samples > 100,
+            "case {k} ({name}): {} samples with a rotary axis moving",
+            seen.samples
+        );
+        assert!(
+            seen.lowest.0 >= need,
+            "case {k} ({name}): a rotary axis moved with the ball {:.4} mm above the sphere centre along the tool axis (at least {need:.4} needed) at {}",
+            seen.lowest.0,
+            seen.lowest.1
+        );
+        assert!(
+            seen.together.is_empty(),
+            "case {k} ({name}): a linear axis moved with a rotary one: {:?}",
+            seen.together
+        );
+    }
+}
+
+/// Q408 = 0 where the height that clears the sphere at every angle of a turn is
+/// outside the software limits (the sphere far from the rotary axes rises with
+/// them): `check` and `run` refuse the block, naming the turn, the height and the
+/// limits, before anything moves. A/C table with tool axis Z (a turn between
+/// measurements; Q431 = 0 with A left where the sphere stands high), and tool axis Y.
+#[test]
+fn a_turn_whose_clearing_height_is_outside_the_limits_is_refused() {
+    // The far sphere: Q407 + R + SET_UP over its highest point on the way is above
+    // the tool axis's upper limit, its pole at A = 0 is not.
+    let far = |name: &str, c: [f64; 3]| {
+        let mut sc = load(name);
+        sc.spheres[0].center = c.into();
+        sc
+    };
+    let p = P451 {
+        mode: 0,
+        a: Ax(-60.0, 60.0, 0.0, 2),
+        ..P451::default()
+    };
+    let q431_0 = format!(
+        "0 BEGIN PGM K451 MM\n1 TOOL CALL \"TOUCH_PROBE\" Z\n2 L Z+390 R0 FMAX M91\n\
+3 L X+120 Y-250 R0 FMAX M91\n4 L A-40 R0 FMAX\n\
+10 CYCL DEF 247 DATUM SETTING ~\n  Q339=+1 ;DATUM NUMBER\n{}99 END PGM K451 MM\n",
+        block451(&P451 {
+            preset: 0,
+            a: Ax(-30.0, 30.0, 0.0, 2),
+            ..p.clone()
+        })
+    );
+    // (scenario, program, preset row 1, the height's axis and its limit).
+    let cases = vec![
+        (
+            far("demo-sphere.toml", [50.0, -250.0, 300.0]),
+            program(&p, 'Z', [50.0, -250.0, 317.5], ""),
+            None,
+            "Z",
+        ),
+        (
+            far("horizontal-y-sphere.toml", [50.0, 195.0, 205.0]),
+            program(
+                &P451 {
+                    q320: 1.0,
+                    ..p.clone()
+                },
+                'Y',
+                [50.0, 213.5, 205.0],
+                "",
+            ),
+            None,
+            "Y",
+        ),
+        (
+            far("demo-sphere.toml", [50.0, -250.0, 300.0]),
+            q431_0,
+            Some([50.0, -250.0, 300.0]),
+            "Z",
+        ),
+    ];
+    for (k, (sc, text, row, axis)) in cases.into_iter().enumerate() {
+        let mut cfg = cycles_config(&sc);
+        if let Some(c) = row {
+            with_preset_row(&mut cfg, c);
+        }
+        let r = run_text(&text, &sc, &cfg, "turn-limits");
+        let check = r
+            .check
+            .clone()
+            .unwrap_or_else(|| panic!("case {k}: check accepted a turn above the limits"));
+        let msg = check.split_once("): ").map_or(check.as_str(), |(_, m)| m);
+        assert!(
+            msg.starts_with("the rotary axes turn from A")
+                && msg.contains(&format!("only with the probe at {axis}+"))
+                && msg.contains("outside the software limits -")
+                && msg.contains("nothing moved"),
+            "case {k}: {check}"
+        );
+        let stopped = r.report.stopped.clone().unwrap_or_default();
+        assert!(
+            stopped.contains(msg),
+            "case {k}: run: {stopped}\ncheck: {check}"
+        );
+        assert!(
+            !r.events
+                .iter()
+                .any(|e| matches!(e, ProgressEvent::Move { .. } | ProgressEvent::Probe { .. })),
+            "case {k}: something moved"
+        );
     }
 }

@@ -142,6 +142,9 @@ impl<M: Machine> Measure<'_, '_, M> {
         let t = self.tool.tool_index();
         let q408 = self.plan.params.retract_height;
         let clear = self.clear_height(&[start, first], self.reach());
+        if (0..3).any(|s| (first[s] - start[s]).abs() > 1e-9) {
+            self.turn_height_in_limits(&[start, first], clear)?;
+        }
         let mut height = pole[t].max(here[t]).max(clear);
         if q408 > 0.0 {
             height = height.max(self.preset[t] + q408);

@@ -164,10 +164,9 @@ impl<M: Machine> Measure<'_, '_, M> {
                 .map_err(|e| CycleError::machine("reading the axis positions", &e))?
                 .xyz();
             let pole = self.predicted_pole(&to);
-            let height = self
-                .clear_height(&turn, self.reach())
-                .max(pole[t])
-                .max(here[t]);
+            let clear = self.clear_height(&turn, self.reach());
+            self.turn_height_in_limits(&turn, clear)?;
+            let height = clear.max(pole[t]).max(here[t]);
             let up = AxisPositions::new().with(Axis::LINEAR[t], height);
             self.mv(
                 "moving up to clear the sphere before the rotary axes turn",
@@ -202,6 +201,31 @@ impl<M: Machine> Measure<'_, '_, M> {
         };
         self.move_xyz(over, above)?;
         self.move_xyz("approaching the sphere", pole)
+    }
+
+    /// Q408 = 0: refuses a turn through `turn` (its angles in order) when `height`, the
+    /// tool-axis coordinate that clears the sphere at every angle of it, is outside the
+    /// software limits: the probe may not turn lower, and cannot go higher.
+    pub(super) fn turn_height_in_limits(
+        &self,
+        turn: &[Angles],
+        height: f64,
+    ) -> Result<(), CycleError> {
+        let axis = Axis::LINEAR[self.tool.tool_index()];
+        let Some(c) = self.ctx.cfg.machine.axis(axis) else {
+            return Ok(());
+        };
+        if (c.min..=c.max).contains(&height) {
+            return Ok(());
+        }
+        let (from, to) = (turn[0], turn[turn.len() - 1]);
+        Err(CycleError::Plan(format!(
+            "the rotary axes turn from {} to {} only with the probe at {axis}{height:+.4}, where the ball clears the sphere by Q320 + SET_UP at every angle on the way (the sphere rises with them); that is outside the software limits {:+.4} .. {:+.4}; measure a smaller angle range, or put the sphere nearer the rotary axes; nothing moved",
+            self.rotary(&from),
+            self.rotary(&to),
+            c.min,
+            c.max
+        )))
     }
 
     /// Q408 > 0: the probe stands there unmonitored while the rotary axes turn, so
