@@ -1,7 +1,7 @@
 0 BEGIN PGM 451-check-vcan MM
 ; configs/programs/451-check.h for the vcan VM (tests/vcan/cases): the same
-; cycle 451 in mode 0 with Q253 (pre-positioning feed) 5000 instead of 750, so it
-; runs in about 2 min of real time instead of 5. tests/vcan/check.rs makes sure the
+; cycle 451 in mode 0 with Q253 (pre-positioning feed) 10000 (the axes' max feed) instead of 750, so it
+; runs in about 1 min of real time instead of 5. tests/vcan/check.rs makes sure the
 ; two differ in nothing else.
 1 ; Cycle 451 MEASURE KINEMATICS, mode 0 (check), on configs/scenarios/demo-sphere.toml:
 2 ; the calibration sphere R12.5 at X+50 Y-30 Z+80 on the A/C tilting table.
@@ -24,7 +24,7 @@
     Q407=+12.5     ;SPHERE RADIUS ~
     Q320=+0        ;SET-UP CLEARANCE ~
     Q408=+0        ;RETR. HEIGHT ~
-    Q253=+5000     ;F PRE-POSITIONING ~
+    Q253=+10000    ;F PRE-POSITIONING ~
     Q380=+0        ;REFERENCE ANGLE ~
     Q411=-90       ;START ANGLE A AXIS ~
     Q412=+90       ;END ANGLE A AXIS ~

@@ -1,6 +1,6 @@
 0 BEGIN PGM 451-preset-set-vcan MM
 ; configs/programs/451-preset-set.h for the vcan VM (tests/vcan/cases): the same
-; program with Q253 (pre-positioning feed) 5000 instead of 750, so that it runs in
+; program with Q253 (pre-positioning feed) 10000 (the axes' max feed) instead of 750, so that it runs in
 ; about a third of the real time. tests/vcan/check.rs makes sure the two differ in
 ; nothing else.
 1 ; Cycle 451 MEASURE KINEMATICS, mode 1 (optimise position), on
@@ -24,7 +24,7 @@
     Q407=+12.5     ;SPHERE RADIUS ~
     Q320=+0        ;SET-UP CLEARANCE ~
     Q408=+0        ;RETR. HEIGHT ~
-    Q253=+5000     ;F PRE-POSITIONING ~
+    Q253=+10000    ;F PRE-POSITIONING ~
     Q380=+0        ;REFERENCE ANGLE ~
     Q411=-90       ;START ANGLE A AXIS ~
     Q412=+90       ;END ANGLE A AXIS ~
