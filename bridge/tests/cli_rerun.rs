@@ -221,6 +221,24 @@ fn mode_0_protocol_says_the_preset_was_not_set() {
     assert!(stdout.contains("preset not set (mode 0)"), "{stdout}");
 }
 
+/// `probebridge run PROGRAM --yes` on demo-sphere with its own state and service.
+fn run_on_demo_sphere(state: &Path, program: &Path, service: &str) -> Command {
+    let mut c = probebridge(state);
+    c.args(["run", program.to_str().unwrap(), "--yes"])
+        .args([
+            "--scenario",
+            configs()
+                .join("scenarios/demo-sphere.toml")
+                .to_str()
+                .unwrap(),
+        ])
+        .args([
+            "--service",
+            &format!("pb-tilted-{}-{service}", std::process::id()),
+        ]);
+    c
+}
+
 /// A run stopped mid-451 (an abort, an E-stop) leaves the table tilted. The shipped
 /// examples on the tilting table level it at the safe height before they go over the
 /// sphere, so the next run measures as on a level table instead of probing where the
@@ -251,20 +269,8 @@ fn the_examples_on_the_tilting_table_level_it_before_going_over_the_sphere() {
             // A state directory of each run's own: the same start, tilted or not.
             let state = tmp.join(format!("xdg-{i}-{j}"));
             let out = common::run(
-                probebridge(&state)
-                    .args(["run", path.to_str().unwrap()])
-                    .args([
-                        "--scenario",
-                        configs()
-                            .join("scenarios/demo-sphere.toml")
-                            .to_str()
-                            .unwrap(),
-                    ])
-                    .args(["--json", json.to_str().unwrap(), "--yes"])
-                    .args([
-                        "--service",
-                        &format!("pb-tilted-{}-{i}-{j}", std::process::id()),
-                    ]),
+                run_on_demo_sphere(&state, path, &format!("{i}-{j}"))
+                    .args(["--json", json.to_str().unwrap()]),
             );
             assert!(
                 out.status.success(),
@@ -288,21 +294,11 @@ fn the_examples_on_the_tilting_table_level_it_before_going_over_the_sphere() {
                 .collect();
             let path = tmp.join("unlevelled.h");
             std::fs::write(&path, unlevelled).unwrap();
-            let out = common::run(
-                probebridge(&tmp.join("xdg-unlevelled"))
-                    .args(["run", path.to_str().unwrap(), "--yes"])
-                    .args([
-                        "--scenario",
-                        configs()
-                            .join("scenarios/demo-sphere.toml")
-                            .to_str()
-                            .unwrap(),
-                    ])
-                    .args([
-                        "--service",
-                        &format!("pb-tilted-{}-unlevelled", std::process::id()),
-                    ]),
-            );
+            let out = common::run(&mut run_on_demo_sphere(
+                &tmp.join("xdg-unlevelled"),
+                &path,
+                "unlevelled",
+            ));
             let err = String::from_utf8_lossy(&out.stderr);
             assert!(!out.status.success(), "{err}");
             assert!(
