@@ -479,18 +479,31 @@ fn q_parameters_as_cycle_parameter_values() {
     assert!(m.probes.is_empty());
 }
 
+/// Cycle 444 at X10 Y5, nominal Z+0.25 (the scenario's point is 0.25 off it: Q164 is
+/// -0.25), as blocks 1 and 2 of a program whose blocks 3.. act on what it measured.
+const PROBE_444: &str = "1 TOOL CALL \"TOUCH_PROBE\" Z\n2 TCH PROBE 444 PROBING 3D ~\n  Q263=+10 ~\n  Q264=+5 ~\n  Q294=+0.25 ~\n  Q581=+0 ~\n  Q582=+0 ~\n  Q583=+1 ~\n  Q320=+1 ~\n  Q260=+100\n";
+
+/// `blocks` after [`PROBE_444`]: `check` must pass them (it cannot know the measured
+/// values), then the run.
+fn checked_then_run(name: &str, blocks: &str) -> (ProgramReport, MockMachine) {
+    let body = format!("{PROBE_444}{blocks}");
+    let dir = common::temp_dir(name);
+    let cfg = cfg_in(&dir);
+    let p = program(&wrap(&body), &cfg);
+    preflight_program(&p, 0b111, &cfg, &dir.join("k.toml"))
+        .unwrap_or_else(|e| panic!("check cannot know the measured value: {e}"));
+    run_in(&dir, &body)
+}
+
 /// An error that only the measured value makes (a division by a result that is 0):
 /// `check` cannot know it and lets the program start; the run stops at its line after
 /// the cycle, and the move after it is not made.
 #[test]
 fn an_error_on_a_measured_value_stops_at_its_line_before_the_next_move() {
-    let body = "1 TOOL CALL \"TOUCH_PROBE\" Z\n2 TCH PROBE 444 PROBING 3D ~\n  Q263=+10 ~\n  Q264=+5 ~\n  Q294=+0.25 ~\n  Q581=+0 ~\n  Q582=+0 ~\n  Q583=+1 ~\n  Q320=+1 ~\n  Q260=+100\n3 Q5 = Q164 + 0.25\n4 Q6 = 1 / Q5\n5 L Z+50 R0 FMAX";
-    let dir = common::temp_dir("q-measured-error");
-    let cfg = cfg_in(&dir);
-    let p = program(&wrap(body), &cfg);
-    preflight_program(&p, 0b111, &cfg, &dir.join("k.toml"))
-        .unwrap_or_else(|e| panic!("check cannot know the measured value: {e}"));
-    let (r, m) = run_in(&dir, body);
+    let (r, m) = checked_then_run(
+        "q-measured-error",
+        "3 Q5 = Q164 + 0.25\n4 Q6 = 1 / Q5\n5 L Z+50 R0 FMAX",
+    );
     assert_eq!(r.cycles.len(), 1);
     assert!(
         (r.cycles[0].q["Q164"] + 0.25).abs() < 1e-9,
@@ -515,13 +528,10 @@ fn an_error_on_a_measured_value_stops_at_its_line_before_the_next_move() {
 /// limits once the value is known, and stops at its line before it moves.
 #[test]
 fn a_move_on_a_measured_value_is_checked_before_it_moves() {
-    let body = "1 TOOL CALL \"TOUCH_PROBE\" Z\n2 TCH PROBE 444 PROBING 3D ~\n  Q263=+10 ~\n  Q264=+5 ~\n  Q294=+0.25 ~\n  Q581=+0 ~\n  Q582=+0 ~\n  Q583=+1 ~\n  Q320=+1 ~\n  Q260=+100\n3 Q20 = Q164 * 100000\n4 L X+Q20 R0 FMAX";
-    let dir = common::temp_dir("q-measured-move");
-    let cfg = cfg_in(&dir);
-    let p = program(&wrap(body), &cfg);
-    preflight_program(&p, 0b111, &cfg, &dir.join("k.toml"))
-        .unwrap_or_else(|e| panic!("check cannot know the measured value: {e}"));
-    let (r, m) = run_in(&dir, body);
+    let (r, m) = checked_then_run(
+        "q-measured-move",
+        "3 Q20 = Q164 * 100000\n4 L X+Q20 R0 FMAX",
+    );
     assert_eq!(r.cycles.len(), 1);
     assert!((num(&r, "Q20") + 25000.0).abs() < 1e-6);
     let stopped = r.stopped.as_deref().unwrap();
