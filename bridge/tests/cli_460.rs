@@ -3,7 +3,9 @@
 //! machine's state directory (never `configs/`), prints the row with its standard
 //! uncertainties and puts the result into `--json` and the history; a second run starts
 //! from that row.
-//! The simulated bus machine has no orientable spindle: the offset is kept, and said.
+//! The stylus of `stylus-offset.toml` sits 3 µm / -2 µm off the spindle axis; table-ac's
+//! spindle drive (CiA 402 profile position on the CANopen bus) turns it to 0° and 180°,
+//! so 460 finds the offset from the command line as from the library.
 
 #[allow(
     dead_code,
@@ -34,7 +36,7 @@ fn check_then_run_460_writes_the_probe_row_into_the_state() {
     let tmp = common::tmpdir("460");
     let state = tmp.join("state");
     let program = configs().join("programs/460-calibrate.h");
-    let scenario = configs().join("scenarios/demo-sphere.toml");
+    let scenario = configs().join("scenarios/stylus-offset.toml");
     let shipped_row = configs().join("machines/table-ac.probes.toml");
     assert!(!shipped_row.exists(), "a probe table in configs/");
 
@@ -70,19 +72,19 @@ fn check_then_run_460_writes_the_probe_row_into_the_state() {
         let c = &v["cycles"][0];
         assert_eq!(c["cycle"], 460, "{v}");
         assert_eq!(c["status"], "ok", "{v}");
-        // demo-sphere's probe is the ideal one of the table: R 3, no length error.
+        // The scenario's stylus: ball R 3, no length error, centre 3 µm / -2 µm off.
         let q = |k: &str| c["q"][k].as_f64().unwrap();
         assert!((q("R") - 3.0).abs() < 1e-4, "{v}");
         assert!(q("L").abs() < 1e-4, "{v}");
-        assert_eq!((q("CAL_OF1"), q("CAL_OF2")), (0.0, 0.0), "{v}");
-        for k in ["R", "L"] {
+        assert!((q("CAL_OF1") - 0.003).abs() < 1e-4, "{v}");
+        assert!((q("CAL_OF2") + 0.002).abs() < 1e-4, "{v}");
+        for k in ["R", "L", "CAL_OF1", "CAL_OF2"] {
             assert!(c["u"][k].as_f64().is_some_and(f64::is_finite), "{k}: {v}");
         }
-        assert!(c["u"].get("CAL_OF1").is_none(), "{v}");
         let cal = &c["calibration"];
-        assert_eq!(cal["offset_measured"], false, "{cal}");
+        assert_eq!(cal["offset_measured"], true, "{cal}");
         assert_eq!(cal["file"], row.display().to_string(), "{cal}");
-        assert!(text.contains("cannot be separated"), "{text}");
+        assert!(!text.contains("cannot be separated"), "{text}");
         assert!(text.contains("R ") && text.contains(" ± "), "{text}");
         assert!(
             text.contains(&format!("written: {}", row.display())),
@@ -92,8 +94,18 @@ fn check_then_run_460_writes_the_probe_row_into_the_state() {
         texts.push(std::fs::read_to_string(&row).unwrap());
         reported.push((c["q"].clone(), c["u"].clone()));
         if pass == 2 {
-            // The second run started from the first's row.
-            assert_eq!(cal["before"]["R"], cal["after"]["R"], "{cal}");
+            // The second run started from the first's row, and measured the same stylus
+            // again (its contacts, probed with the first's offset, differ in the last
+            // bits).
+            let first = &reported[0].0;
+            for k in ["R", "CAL_OF1", "CAL_OF2", "L"] {
+                assert_eq!(cal["before"][k], first[k], "{k}: {cal}");
+                let again = cal["after"][k].as_f64().unwrap();
+                assert!(
+                    (again - first[k].as_f64().unwrap()).abs() < 1e-9,
+                    "{k}: {cal}"
+                );
+            }
         }
     }
     assert!(texts[0].contains("name = \"TOUCH_PROBE\""), "{}", texts[0]);

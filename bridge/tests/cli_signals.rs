@@ -108,9 +108,9 @@ fn sigterm_mid_451_brakes_disables_the_drives_and_reports_aborted() {
         .find(|c| c["cycle"] == 451)
         .expect("cycle 451 in the report");
     assert_eq!(c451["status"], "aborted", "{v}");
-    // table-ac: X, Y, Z, A, C on nodes 1..5, each disabled last.
+    // table-ac: X, Y, Z, A, C on nodes 1..5 and the spindle on 6, each disabled last.
     let cw = last_controlwords(&log);
-    assert_eq!(cw.len(), 5, "{cw:?}");
+    assert_eq!(cw.len(), 6, "{cw:?}");
     for (node, word) in &cw {
         assert_eq!(*word, 0x0006, "node {node}: last controlword 0x{word:04X}");
     }

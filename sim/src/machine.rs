@@ -27,9 +27,11 @@ pub const PROBE_OVERTRAVEL_MM: f64 = 5.0;
 /// EMCY code the drives send on a probe collision (manufacturer specific).
 pub const EMCY_PROBE_COLLISION: u16 = 0xFF01;
 
+/// A drive on the bus: an axis's, or (`axis` `None`) the spindle's, whose angle turns
+/// the stylus in the world. `scale`: increments per mm or degree.
 struct AxisDrive {
     drive: SimDrive,
-    axis: hal::Axis,
+    axis: Option<hal::Axis>,
     scale: f64,
 }
 
@@ -148,7 +150,7 @@ impl SimMachine {
     /// Drives start at `start` (axes not given: 0).
     pub fn with_positions(scenario: &Scenario, start: &AxisPositions) -> Self {
         let cfg: &MachineConfig = &scenario.machine;
-        let drives = cfg
+        let mut drives: Vec<AxisDrive> = cfg
             .axes
             .iter()
             .map(|a| {
@@ -158,11 +160,19 @@ impl SimMachine {
                         a.canopen_node(),
                         (pos * a.increments_per_unit).round() as i32,
                     ),
-                    axis: a.name,
+                    axis: Some(a.name),
                     scale: a.increments_per_unit,
                 }
             })
             .collect();
+        // Last on the bus: its TPDO1 ends each SYNC's answers, as every drive's does.
+        if let (Some(s), hal::config::BusConfig::CanOpen(_)) = (&cfg.spindle, &cfg.bus) {
+            drives.push(AxisDrive {
+                drive: SimDrive::spindle(s.node, 0),
+                axis: None,
+                scale: s.increments_per_degree,
+            });
+        }
         let faults = scenario
             .faults
             .iter()
@@ -279,9 +289,19 @@ impl SimMachine {
     pub fn positions(&self) -> AxisPositions {
         let mut p = AxisPositions::new();
         for d in &self.drives {
-            p.set(d.axis, d.drive.actual_inc() as f64 / d.scale);
+            if let Some(a) = d.axis {
+                p.set(a, d.drive.actual_inc() as f64 / d.scale);
+            }
         }
         p
+    }
+
+    /// The spindle drive's angle, deg (`None`: no spindle drive on the bus).
+    pub fn spindle_deg(&self) -> Option<f64> {
+        self.drives
+            .iter()
+            .find(|d| d.axis.is_none())
+            .map(|d| d.drive.actual_inc() as f64 / d.scale)
     }
 
     pub fn world(&self) -> &World {
@@ -336,8 +356,10 @@ impl SimMachine {
         let mut to = AxisPositions::new();
         for d in &mut self.drives {
             d.drive.begin_step();
-            from.set(d.axis, d.drive.actual_inc() as f64 / d.scale);
-            to.set(d.axis, d.drive.next_position_inc() as f64 / d.scale);
+            if let Some(a) = d.axis {
+                from.set(a, d.drive.actual_inc() as f64 / d.scale);
+                to.set(a, d.drive.next_position_inc() as f64 / d.scale);
+            }
         }
         let latch = self.world.step(&from, &to);
         let level = self.world.deflected(&to);
@@ -345,7 +367,13 @@ impl SimMachine {
         let mut latched = false;
         for d in &mut self.drives {
             let target = d.drive.next_position_inc();
-            latched |= d.drive.end_step(target, latch, level);
+            if d.axis.is_none() {
+                // The spindle's drive has no probe input; its angle turns the stylus.
+                d.drive.end_step(target, None, false);
+                self.world.orient_spindle(target as f64 / d.scale);
+            } else {
+                latched |= d.drive.end_step(target, latch, level);
+            }
             if collision {
                 d.drive.raise_fault(EMCY_PROBE_COLLISION);
             }

@@ -61,6 +61,8 @@ pub fn modbus_bus(scenario: &Scenario) -> ModbusBusConfig {
 pub fn with_bus(scenario: &Scenario, bus: ModbusBusConfig) -> MachineConfig {
     let mut cfg = crate::machine_config(scenario);
     cfg.bus = BusConfig::Modbus(bus);
+    // The PLC orients the spindle over Modbus (`bus.spindle_orientation`), not a drive.
+    cfg.spindle = None;
     cfg
 }
 

@@ -70,7 +70,13 @@ fn a_master_gone_without_shutdown_is_noticed_by_every_drive_which_stops() {
         consumer_ms > 0,
         "the shipped machine has a master heartbeat"
     );
-    let nodes: Vec<u8> = cfg.axes.iter().map(|a| a.canopen_node()).collect();
+    // The axes' drives and the spindle's: every drive watches the master.
+    let nodes: Vec<u8> = cfg
+        .axes
+        .iter()
+        .map(|a| a.canopen_node())
+        .chain(cfg.spindle.as_ref().map(|s| s.node))
+        .collect();
 
     let bus = InprocBus::new();
     let mut drives = SimMachine::new(&sc);

@@ -4,7 +4,7 @@
 //! of program and scenario are those of the vcan cases (tests/vcan/cases).
 
 use probebridge_tests::conformance::{Backend, CanInproc};
-use probebridge_tests::conformance_modbus::ModbusTcp;
+use probebridge_tests::conformance_modbus::{open_tcp, ModbusTcp};
 use probebridge_tests::{configs_dir, run_shipped_program};
 
 fn same_results(program: &str, scenario: &str) {
@@ -77,19 +77,24 @@ fn cycle_451_optimise() {
     same_results("451-optimise.h", "demo-sphere.toml");
 }
 
-/// Cycle 460's probe-table row is compared (R and L measured; the offset kept, the same
-/// on both: the CANopen machine has no spindle drive, and this Modbus mailbox is the
-/// default one, without command 5; `probe_calibration` runs 460 with it).
+/// Cycle 460's probe-table row is compared, every column measured on a stylus off the
+/// spindle axis (stylus-offset.toml, as the vcan case): over CANopen table-ac's spindle
+/// drive orients the spindle (profile position), over Modbus the PLC's command 5.
 #[test]
 fn cycle_460_calibrate() {
     let sc = sim::Scenario::load(
-        &configs_dir().join("scenarios").join("demo-sphere.toml"),
+        &configs_dir().join("scenarios").join("stylus-offset.toml"),
         Some(&configs_dir().join("machines")),
     )
     .unwrap();
     let program = "460-calibrate.h";
     let can = run_shipped_program(&mut CanInproc::open(&sc), program, &sc, "can");
-    let modbus = run_shipped_program(&mut ModbusTcp::open(&sc), program, &sc, "modbus");
+    let modbus = run_shipped_program(
+        &mut open_tcp(&sc, |b| b.spindle_orientation = true),
+        program,
+        &sc,
+        "modbus",
+    );
     let row = |r: &cycles::results::ProgramReport, bus: &str| {
         assert!(r.completed(), "{program} on {bus}: {}", r.to_json());
         let c = r
@@ -97,7 +102,11 @@ fn cycle_460_calibrate() {
             .iter()
             .find_map(|c| c.calibration.as_ref())
             .unwrap_or_else(|| panic!("{program} on {bus}: no calibration: {}", r.to_json()));
-        assert!(c.length_measured && !c.offset_measured, "{bus}: {c:?}");
+        assert!(c.length_measured && c.offset_measured, "{bus}: {c:?}");
+        assert!(
+            (c.after.cal_of1 - 0.003).abs() < 1e-4 && (c.after.cal_of2 + 0.002).abs() < 1e-4,
+            "{bus}: {c:?}"
+        );
         let a = &c.after;
         [a.r, a.cal_of1, a.cal_of2, a.cal_ang, a.l]
     };

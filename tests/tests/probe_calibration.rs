@@ -408,6 +408,45 @@ fn over_modbus_command_5_orients_the_spindle_and_460_finds_the_offset() {
     assert_eq!(m.plc.with_program(|p| p.spindle_deg()), 0.0);
 }
 
+/// Over CANopen, the spindle's own drive (`[spindle]` of table-ac: CiA 402 profile
+/// position on node 6) turns the stylus: 460 separates the offset as on the world's
+/// machine, through the master's oriented stops (new set-point, acknowledge, target
+/// reached) and the simulated spindle drive.
+#[test]
+fn over_canopen_the_spindle_drive_orients_and_460_finds_the_offset() {
+    let sc = sphere_scenario(&REAL, REAL.ball);
+    assert!(sc.machine.spindle.is_some(), "table-ac has a spindle drive");
+    let cfg = cycles_config(&sc);
+    let mut m = CanInproc::open(&sc);
+    let report = run_on(
+        &program(&[block_460(SPHERE_CENTRE, SPHERE_RADIUS, 0)]),
+        &cfg,
+        &mut m,
+        "460-canopen",
+    );
+    assert!(report.completed(), "{}", report.to_json());
+    let c = &report.cycles[0];
+    let cal = c.calibration.as_ref().expect("460's report");
+    assert!(cal.offset_measured && cal.length_measured, "{cal:?}");
+    for (name, want) in truth_460(&REAL) {
+        let got = c.q[name];
+        println!("460 over CANopen {name} {got:+.7} mm, the stylus {want:+.7} mm");
+        assert!(
+            (got - want).abs() <= 2e-4,
+            "{name} = {got}, the stylus has {want}"
+        );
+    }
+    assert!(
+        c.u.contains_key("CAL_OF1") && c.u.contains_key("CAL_OF2"),
+        "{:?}",
+        c.u
+    );
+    // The spindle drive stands at 0° again, where the cycle started.
+    drop(m.machine);
+    let sim = m.keep.stop().expect("the simulation ran");
+    assert_eq!(sim.spindle_deg(), Some(0.0));
+}
+
 /// A bridge configured for command 5 against a PLC whose program lacks it: the PLC
 /// rejects the first orientation, which comes before any move; the cycle fails naming
 /// the command and the key, nothing moved and no probe row is written.

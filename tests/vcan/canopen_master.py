@@ -24,9 +24,11 @@ import canopen
 from canopen.profiles.p402 import BaseNode402
 from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
-NODES = (1, 2, 3, 4, 5)
+NODES = (1, 2, 3, 4, 5, 6)
 NODE = 1  # the drive for NMT, SDO, heartbeat, PDO and the state machine
 FAULTY = 5  # the drive-fault scenario's EMCY node
+SPINDLE = 6  # table-ac's spindle drive: profile position (CiA 402 mode 1)
+SPINDLE_NAME = "probebridge simulated CiA 402 spindle drive"
 HEARTBEAT_MS = 100
 SYNC_S = 0.01
 DEVICE_NAME = "probebridge simulated CiA 402 drive"
@@ -326,6 +328,68 @@ def check_fault_reset(node, mon):
           f"{'seen' if reset else 'missing'}, 0x603F = 0x{err:04X}")
 
 
+def wait_statusword(node, mask, want, timeout):
+    """Polls 0x6041 by SDO until `sw & mask == want`; the last statusword read."""
+    end = time.monotonic() + timeout
+    sw = u32(node, 0x6041)
+    while sw & mask != want and time.monotonic() < end:
+        time.sleep(0.02)
+        sw = u32(node, 0x6041)
+    return sw
+
+
+def check_spindle(node):
+    """The spindle drive as a foreign master drives it in profile position: python-
+    canopen's op-mode switch (which reads 0x6502 first), its state machine, then a
+    set-point by the CiA 402 handshake (controlword bit 4 up, statusword bit 12, bit 4
+    down, bit 10 target reached), all by SDO while the SYNCs step the drive."""
+    slow_402(node)
+    modes = u32(node, 0x6502)
+    name = node.sdo.upload(0x1008, 0).decode("ascii", "replace")
+    check("spindle_supported_drive_modes_pp", modes == 0x1 and name == SPINDLE_NAME,
+          f"node {SPINDLE}: 0x6502 = 0x{modes:08X} (bit 0: profile position), 0x1008 = {name!r}")
+    csp = abort_code(lambda: node.sdo.download(0x6060, 0, b"\x08"))
+    check("spindle_refuses_csp", csp == 0x06090030, f"0x6060 = 8: abort 0x{csp or 0:08X}")
+    node.setup_402_state_machine(read_pdos=True)
+    node.op_mode = "PROFILE POSITION"
+    check("spindle_mode_pp", node.op_mode == "PROFILE POSITION", f"0x6061 = {node.op_mode}")
+    for state in ["READY TO SWITCH ON", "SWITCHED ON", "OPERATION ENABLED"]:
+        node.state = state
+    check("spindle_operation_enabled", node.state == "OPERATION ENABLED",
+          f"{node.state} (statusword 0x{node.statusword:04X})")
+    # 1000 increments per degree (table-ac's [spindle]): 1 800 000 increments/s is
+    # 300 rpm; the target is 90°.
+    node.sdo.download(0x6081, 0, (1_800_000).to_bytes(4, "little"))
+    node.sdo.download(0x6083, 0, (36_000_000).to_bytes(4, "little"))
+    node.sdo.download(0x6084, 0, (36_000_000).to_bytes(4, "little"))
+    velocity = u32(node, 0x6081)
+    target = 90_000
+    node.sdo.download(0x607A, 0, target.to_bytes(4, "little", signed=True))
+    node.sdo.download(0x6040, 0, (0x001F).to_bytes(2, "little"))
+    acked = wait_statusword(node, 0x1000, 0x1000, 5.0)
+    node.sdo.download(0x6040, 0, (0x000F).to_bytes(2, "little"))
+    reached = wait_statusword(node, 0x1400, 0x0400, 10.0)
+    actual = int.from_bytes(node.sdo.upload(0x6064, 0), "little", signed=True)
+    check("spindle_pp_set_point_acknowledge", acked & 0x1000 != 0 and velocity == 1_800_000,
+          f"0x6081 = {velocity}; after controlword 0x001F with 0x607A = {target}: statusword 0x{acked:04X} (bit 12)")
+    check("spindle_pp_target_reached", reached & 0x1400 == 0x0400 and actual == target,
+          f"after controlword 0x000F: statusword 0x{reached:04X} (bit 10 set, bit 12 clear), 0x6064 = {actual}")
+    # Halt (bit 8) stops a move under way short of its target (back to 0° at 9°/s:
+    # 10 s of the drive's time, 50 s of SYNCs: the halt comes long before).
+    node.sdo.download(0x6081, 0, (9_000).to_bytes(4, "little"))
+    node.sdo.download(0x607A, 0, (0).to_bytes(4, "little", signed=True))
+    node.sdo.download(0x6040, 0, (0x001F).to_bytes(2, "little"))
+    wait_statusword(node, 0x1000, 0x1000, 5.0)
+    node.sdo.download(0x6040, 0, (0x010F).to_bytes(2, "little"))
+    halted = wait_statusword(node, 0x0400, 0x0400, 5.0)
+    p1 = int.from_bytes(node.sdo.upload(0x6064, 0), "little", signed=True)
+    time.sleep(0.3)
+    p2 = int.from_bytes(node.sdo.upload(0x6064, 0), "little", signed=True)
+    check("spindle_pp_halt", halted & 0x0400 != 0 and p1 == p2 and 0 < p1 < target,
+          f"controlword 0x010F: statusword 0x{halted:04X}, 0x6064 {p1} then {p2} 0.3 s later")
+    node.state = "SWITCH ON DISABLED"
+
+
 def check_heartbeat_consumer(node, network, mon):
     """0x1016 as a master configures it: this script as node 126 with a 1 s consumer
     time. Nothing is watched before the first heartbeat; after the last one the drive
@@ -367,7 +431,7 @@ def main():
     network.connect(interface="socketcan", channel=args.iface)
     mon = Monitor(args.iface)
     nodes = {}
-    for n in (NODE, FAULTY):
+    for n in (NODE, FAULTY, SPINDLE):
         nodes[n] = BaseNode402(n, args.eds)
         nodes[n].sdo.RESPONSE_TIMEOUT = 3.0
         network.add_node(nodes[n])
@@ -388,6 +452,7 @@ def main():
         sync.start()
         check_state_machine(node)
         check_fault_reset(nodes[FAULTY], mon)
+        check_spindle(nodes[SPINDLE])
         check_heartbeat_consumer(node, network, mon)
     except Exception as e:  # a check that could not even run fails
         check("python_canopen_session", False, f"{type(e).__name__}: {e}")

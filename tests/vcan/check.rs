@@ -89,6 +89,13 @@ const CHECKED_PROGRAMS: [(&str, &[&str]); 3] = [
             "cia402_fault_state",
             "cia402_fault_reset_to_operation_enabled",
             "heartbeat_consumer_0x1016",
+            "spindle_supported_drive_modes_pp",
+            "spindle_refuses_csp",
+            "spindle_mode_pp",
+            "spindle_operation_enabled",
+            "spindle_pp_set_point_acknowledge",
+            "spindle_pp_target_reached",
+            "spindle_pp_halt",
         ],
     ),
     (
@@ -977,7 +984,14 @@ fn check_signals(results: &Path, configs: &Path, r: &mut Report) {
     let Some(bus) = sc.machine.canopen_bus() else {
         return r.fail("signals: demo-sphere's machine is not on CANopen".into());
     };
-    let nodes: Vec<u8> = sc.machine.axes.iter().map(|a| a.canopen_node()).collect();
+    // The axes' drives and the spindle's: each watches the master and is shut down.
+    let nodes: Vec<u8> = sc
+        .machine
+        .axes
+        .iter()
+        .map(|a| a.canopen_node())
+        .chain(sc.machine.spindle.as_ref().map(|s| s.node))
+        .collect();
     let log = match read(&results.join("candump.log"))
         .and_then(|t| parse_log(&t).map_err(|e| format!("candump: {e}")))
     {

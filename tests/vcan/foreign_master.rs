@@ -163,7 +163,9 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    // One drive: the foreign device is node 1 (no spindle drive on this bus).
     cfg.axes.truncate(1);
+    cfg.spindle = None;
     let inner = match SocketCanTransport::open(&iface) {
         Ok(t) => t,
         Err(e) => {

@@ -97,13 +97,14 @@ signal_mid_451() {
 echo "== a killed master (SIGKILL mid-451): the drives notice its heartbeat is gone"
 signal_mid_451 kill KILL FC FB FA
 # The drives log the loss (EMCY 8130 on the bus); wait for every drive's line (the
-# consumer time is a few seconds in the VM), then ask each its statusword over SDO.
+# consumer time is a few seconds in the VM), then ask each its statusword over SDO:
+# the five axes' drives and the spindle's (node 6).
 for _ in $(seq 300); do
-    [ "$(grep -c 'heartbeat of node .* lost' "$RESULTS/kill.sim.log")" -ge 5 ] && break
+    [ "$(grep -c 'heartbeat of node .* lost' "$RESULTS/kill.sim.log")" -ge 6 ] && break
     sleep 0.1
 done
 sleep 0.5
-for n in 1 2 3 4 5; do
+for n in 1 2 3 4 5 6; do
     cansend vcan0 "60$n#4041600000000000"
     sleep 0.1
 done

@@ -85,6 +85,9 @@ pub fn open(
         }
     ));
     config.bus = BusConfig::Modbus(bus);
+    // A `[spindle]` drive is on the CANopen bus the PLC replaces: over Modbus the PLC
+    // orients the spindle, as `bus.spindle_orientation` says.
+    config.spindle = None;
     let options = ModbusOptions {
         run_id,
         abort: opts.abort,

@@ -35,6 +35,12 @@ const TOML_TOKENS: &[&str] = &[
     "1001 = \"dispersion too large\"",
     "mStrobeRotAxPos = 203",
     "max_jumps = 0",
+    // The spindle drive (issue 22); table-ac sets it, the others do not.
+    "[spindle]",
+    "node = 127",
+    "increments_per_degree = 0",
+    "orient_rpm = 1e9",
+    "spindle_orientation = true",
     "kind = \"canopen\"",
     "kind = \"modbus\"",
     " = ",

@@ -43,6 +43,11 @@ pub const POSITION_DEMAND_VALUE: u16 = 0x6062;
 pub const POSITION_ACTUAL_VALUE: u16 = 0x6064;
 pub const FOLLOWING_ERROR_WINDOW: u16 = 0x6065;
 pub const TARGET_POSITION: u16 = 0x607A;
+/// Profile position: the velocity (increments/s) and the acceleration and deceleration
+/// (increments/s²) of a move to a new set-point.
+pub const PROFILE_VELOCITY: u16 = 0x6081;
+pub const PROFILE_ACCELERATION: u16 = 0x6083;
+pub const PROFILE_DECELERATION: u16 = 0x6084;
 pub const TOUCH_PROBE_FUNCTION: u16 = 0x60B8;
 pub const TOUCH_PROBE_STATUS: u16 = 0x60B9;
 pub const TOUCH_PROBE_1_POSITIVE_EDGE: u16 = 0x60BA;

@@ -11,6 +11,13 @@ impl Controlword {
     /// Active low: 0 requests a quick stop.
     pub const QUICK_STOP: u16 = 1 << 2;
     pub const ENABLE_OPERATION: u16 = 1 << 3;
+    /// Profile position: the target position is a new set-point, taken on the rising
+    /// edge (the drive answers with statusword bit 12).
+    pub const NEW_SET_POINT: u16 = 1 << 4;
+    /// Profile position: a new set-point replaces the one under way at once.
+    pub const CHANGE_SET_IMMEDIATELY: u16 = 1 << 5;
+    /// Profile position: the target position is relative to the last set-point.
+    pub const RELATIVE: u16 = 1 << 6;
     /// Acts on its rising edge only.
     pub const FAULT_RESET: u16 = 1 << 7;
     pub const HALT: u16 = 1 << 8;

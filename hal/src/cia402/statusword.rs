@@ -23,6 +23,9 @@ impl Statusword {
     pub const OP_MODE_SPECIFIC: u16 = 1 << 12;
     /// [`Self::OP_MODE_SPECIFIC`] as cyclic synchronous position names it.
     pub const TARGET_POSITION_FOLLOWED: u16 = Self::OP_MODE_SPECIFIC;
+    /// [`Self::OP_MODE_SPECIFIC`] as profile position names it: the drive took the new
+    /// set-point (controlword bit 4); cleared after bit 4 is.
+    pub const SET_POINT_ACKNOWLEDGE: u16 = Self::OP_MODE_SPECIFIC;
     pub const FOLLOWING_ERROR: u16 = 1 << 13;
 
     pub const fn bits(self) -> u16 {

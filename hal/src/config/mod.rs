@@ -15,12 +15,14 @@ pub mod bounds;
 mod bus;
 mod file;
 mod kinematics;
+mod spindle;
 
 pub use crate::modbus::config::ModbusBusConfig;
 pub use axis::AxisConfig;
 pub use bus::{BusConfig, CanOpenBusConfig};
 pub use file::{read_config_text, ConfigError, ConfigErrorKind, MAX_CONFIG_BYTES};
 pub use kinematics::KinematicsConfig;
+pub use spindle::SpindleConfig;
 
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -34,6 +36,10 @@ pub struct MachineConfig {
     pub bus: BusConfig,
     #[serde(default)]
     pub kinematics: KinematicsConfig,
+    /// `[spindle]`: an orientable spindle's drive on the CANopen bus (a PLC on Modbus
+    /// orients its spindle itself: `bus.spindle_orientation`).
+    #[serde(default)]
+    pub spindle: Option<SpindleConfig>,
     /// `[[probe]]`: the probe table, read and validated by probebridge-cycles.
     #[serde(rename = "probe", default)]
     pub probe_table: IgnoredAny,
@@ -193,6 +199,24 @@ impl MachineConfig {
                 ),
             ));
         }
+        if let Some(s) = &self.spindle {
+            if !(1..=127).contains(&s.node) {
+                return Err(self.invalid(
+                    "spindle.node",
+                    format!("{} is not a CANopen node ID (1..127)", s.node),
+                ));
+            }
+            if seen_nodes[s.node as usize] || s.node == b.master_node {
+                return Err(self.invalid(
+                    "spindle.node",
+                    format!(
+                        "node {} is already an axis's drive or the master: the spindle drive needs its own node ID",
+                        s.node
+                    ),
+                ));
+            }
+            s.check().map_err(|(key, why)| self.invalid(key, why))?;
+        }
         let most = u16::MAX / CanOpenBusConfig::MASTER_HEARTBEAT_CONSUMER_FACTOR;
         if b.master_heartbeat_ms > most {
             return Err(self.invalid(
@@ -281,6 +305,12 @@ impl MachineConfig {
                 m.validate()
                     .map_err(|e| self.invalid(format!("bus.{}", e.key), e.reason))?;
                 self.validate_modbus_reach(m)?;
+                if self.spindle.is_some() {
+                    return Err(self.invalid(
+                        "spindle",
+                        "a [spindle] drive is on a CANopen bus; over Modbus the PLC orients the spindle (command 5): set spindle_orientation = true in [bus] instead",
+                    ));
+                }
             }
         }
         self.validate_kinematics()
@@ -651,6 +681,77 @@ C = [0.0, 0.0, 0.0]
                 e.contains("m.toml") && e.contains(key) && e.contains(why),
                 "{bad}: {e}"
             );
+        }
+    }
+
+    const SPINDLE: &str = "[spindle]\nnode = 6\nincrements_per_degree = 1000.0\n";
+
+    #[test]
+    fn a_spindle_drive_has_defaults_and_is_validated() {
+        let c = MachineConfig::parse(&format!("{MINI}{SPINDLE}"), Path::new("m.toml")).unwrap();
+        let s = c.spindle.as_ref().unwrap();
+        assert_eq!(
+            (s.node, s.orient_rpm, s.orient_acceleration),
+            (6, 300.0, 36000.0)
+        );
+        // 300 rpm = 1800 deg/s; 36000 deg/s² at 1000 increments per degree.
+        assert_eq!(
+            (s.profile_velocity(), s.profile_acceleration()),
+            (1_800_000, 36_000_000)
+        );
+        for (text, key, why) in [
+            (
+                format!("{MINI}{}", SPINDLE.replace("node = 6", "node = 2")),
+                "spindle.node",
+                "node 2 is already an axis's drive or the master",
+            ),
+            (
+                format!("{MINI}{}", SPINDLE.replace("node = 6", "node = 127")),
+                "spindle.node",
+                "node 127 is already an axis's drive or the master",
+            ),
+            (
+                format!("{MINI}{}", SPINDLE.replace("node = 6", "node = 0")),
+                "spindle.node",
+                "0 is not a CANopen node ID",
+            ),
+            (
+                format!("{MINI}{}", SPINDLE.replace("1000.0", "0.0")),
+                "spindle.increments_per_degree",
+                "must be > 0",
+            ),
+            (
+                format!("{MINI}{}", SPINDLE.replace("1000.0", "1e7")),
+                "spindle.increments_per_degree",
+                "overflows the drive's 32-bit position",
+            ),
+            (
+                format!("{MINI}{SPINDLE}orient_rpm = nan\n"),
+                "spindle.orient_rpm",
+                "outside (0, 10000] rpm",
+            ),
+            (
+                format!("{MINI}{SPINDLE}orient_acceleration = -1.0\n"),
+                "spindle.orient_acceleration",
+                "is not a profile acceleration",
+            ),
+            (
+                // The shipped Modbus machine: its PLC orients the spindle.
+                format!(
+                    "{}\n{SPINDLE}",
+                    std::fs::read_to_string(
+                        Path::new(env!("CARGO_MANIFEST_DIR"))
+                            .join("../configs/machines/table-ac-modbus.toml")
+                    )
+                    .unwrap()
+                ),
+                "spindle",
+                "set spindle_orientation = true in [bus] instead",
+            ),
+        ] {
+            let (k, m) = refused(&text);
+            assert_eq!(k, key, "{m}");
+            assert!(m.contains(why), "{key}: {m}");
         }
     }
 }

@@ -20,6 +20,8 @@ pub enum Command {
         max_distance: f64,
         run_id: u64,
     },
+    /// An oriented spindle stop at `angle_deg` (modulo 360°); the axes hold.
+    OrientSpindle { angle_deg: f64 },
     /// Current actual positions.
     Positions,
     /// Brake the motion under way (if any) and fail its command as aborted; the drives
@@ -92,6 +94,19 @@ pub enum Detail {
     /// The probe signal stopped the axes, but this moving axis's latch frame never
     /// came (lost on the bus): no contact is measured from the others alone.
     LatchLost,
+    /// An oriented stop on a machine configured without a spindle drive.
+    NoSpindle,
+    /// An oriented stop at an angle that is not a number.
+    InvalidAngle,
+    /// An oriented stop with the stylus in contact.
+    SpindleDeflected,
+    /// The spindle did not stand at `to_deg` in time (it stood at `at_deg`);
+    /// `acknowledged`: the drive had taken the set-point.
+    NotOriented {
+        to_deg: f64,
+        at_deg: f64,
+        acknowledged: bool,
+    },
 }
 
 impl RtError {
@@ -144,6 +159,24 @@ impl From<RtError> for MachineError {
                 "node {} restarted (boot-up received): its configuration is lost; all axes stopped",
                 e.node.unwrap_or(0)
             ),
+            Detail::NoSpindle => {
+                "this machine has no spindle drive ([spindle] in the machine configuration)".into()
+            }
+            Detail::InvalidAngle => "the spindle angle is not a number; nothing moved".into(),
+            Detail::SpindleDeflected => {
+                "the stylus is in contact: the spindle is not turned with it deflected; retract first".into()
+            }
+            Detail::NotOriented {
+                to_deg,
+                at_deg,
+                acknowledged,
+            } => {
+                if acknowledged {
+                    format!("the spindle did not reach {to_deg:.3}° in time (it stands at {at_deg:.3}°); it was halted")
+                } else {
+                    format!("the spindle drive did not acknowledge the set-point {to_deg:.3}° (statusword bit 12; profile position mode 0x6060 = 1?); it was halted at {at_deg:.3}°")
+                }
+            }
             Detail::LatchLost => format!(
                 "the probe signal stopped the axes, but the latch frame of node {} did not arrive (lost on the bus); no contact measured",
                 e.node.unwrap_or(0)

@@ -446,6 +446,24 @@ impl Machine for CanMachine {
         }
     }
 
+    /// An oriented stop by the spindle's drive (`[spindle]`, profile position);
+    /// `Ok(false)` without one, nothing moved.
+    fn orient_spindle(&mut self, angle_deg: f64) -> Result<bool, MachineError> {
+        if self.config.spindle.is_none() {
+            return Ok(false);
+        }
+        if !angle_deg.is_finite() {
+            return Err(RtError::new(ErrorKind::InvalidRequest, Detail::InvalidAngle).into());
+        }
+        match self.command(Command::OrientSpindle { angle_deg })? {
+            Reply::Done { .. } => Ok(true),
+            other => Err(MachineError::new(
+                ErrorKind::Other,
+                format!("unexpected answer {other:?}"),
+            )),
+        }
+    }
+
     fn probe(&mut self, mv: &ProbeMove) -> Result<Contact, MachineError> {
         // The request first: a bad one is refused without asking the loop anything.
         self.guard.check_probe_request(mv)?;

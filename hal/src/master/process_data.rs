@@ -224,6 +224,23 @@ pub const LAYOUT: [PdoLayout; 4] = [
     PdoLayout::of::<Tpdo2>(),
 ];
 
+/// The PDOs of a spindle drive: controlword and target, statusword and actual
+/// position (it has no probe input to arm). Its RPDO1 is asynchronous (255: taken on
+/// arrival), sent when it changes and every [`SPINDLE_REFRESH_CYCLES`]: a spindle in
+/// profile position needs no setpoint per SYNC, and the bus of five axes has no room
+/// for one. Its TPDO1 answers every SYNC, as the axes' do.
+pub const SPINDLE_LAYOUT: [PdoLayout; 2] = [
+    PdoLayout {
+        transmission_type: 255,
+        ..PdoLayout::of::<Rpdo1>()
+    },
+    PdoLayout::of::<Tpdo1>(),
+];
+
+/// The spindle drive's unchanged RPDO1 goes out again after this many SYNC periods
+/// (a lost frame is repaired; the drive needs nothing more often).
+pub const SPINDLE_REFRESH_CYCLES: u32 = 50;
+
 /// Bus load of the cyclic traffic, worst-case bit stuffing.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BusLoad {
@@ -242,7 +259,7 @@ pub struct BusLoad {
 impl BusLoad {
     /// The load of `cfg`'s CANopen bus (default timing on another bus).
     pub fn of(cfg: &MachineConfig) -> Self {
-        let n = cfg.axes.len();
+        let n = cfg.axes.len() + usize::from(cfg.spindle.is_some());
         let b = cfg.canopen_bus().unwrap_or(&CanOpenBusConfig::DEFAULT);
         let period_bits = b.bitrate as f64 * b.sync_period_us as f64 * 1e-6;
         let sync = CanFrame::wire_bits_worst_case(0) as f64;
@@ -251,8 +268,18 @@ impl BusLoad {
             as f64;
         let heartbeat = CanFrame::wire_bits_worst_case(1) as f64 * b.sync_period_us as f64
             / (b.heartbeat_producer_ms as f64 * 1000.0);
-        let cyclic_bits = sync + n as f64 * (per_drive + heartbeat);
-        let latch_burst_bits = n as f64
+        // The spindle's drive answers every SYNC (TPDO1); its RPDO1 is sent on change
+        // and as a refresh (`SPINDLE_REFRESH_CYCLES`).
+        let spindle = if cfg.spindle.is_some() {
+            (CanFrame::wire_bits_worst_case(pdo::byte_len(Tpdo1::MAPPING))
+                + CanFrame::wire_bits_worst_case(pdo::byte_len(Rpdo1::MAPPING))
+                    / SPINDLE_REFRESH_CYCLES) as f64
+                + heartbeat
+        } else {
+            0.0
+        };
+        let cyclic_bits = sync + cfg.axes.len() as f64 * (per_drive + heartbeat) + spindle;
+        let latch_burst_bits = cfg.axes.len() as f64
             * (CanFrame::wire_bits_worst_case(pdo::byte_len(Rpdo2::MAPPING))
                 + CanFrame::wire_bits_worst_case(pdo::byte_len(Tpdo2::MAPPING)))
                 as f64;
@@ -301,7 +328,7 @@ impl core::fmt::Display for BusLoad {
         write!(
             f,
             "{} drives, SYNC every {} us at {} kbit/s: {:.0} bits per cycle = {:.1} % bus load \
-             ({:.1} % in the cycle where all drives latch)",
+             ({:.1} % in the cycle where every axis latches)",
             self.drives,
             self.period_us,
             self.bitrate / 1000,
@@ -413,9 +440,18 @@ mod tests {
     #[test]
     fn five_drives_at_2ms_fit_1mbit() {
         let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/machines/table-ac.toml");
-        let cfg = MachineConfig::load(&p).unwrap();
+        let mut cfg = MachineConfig::load(&p).unwrap();
+        assert!(cfg.spindle.is_some());
+        // With its spindle drive: one TPDO1 per SYNC, its RPDO1 every 50th, a heartbeat:
+        // 1218 + 115 + 115 / 50 (2, whole bits) + 2.6 = 1337.6 bits.
         let load = BusLoad::of(&cfg);
-        // SYNC 55 + 5 * (2 * 115 + 65 * 2000/50000) = 1218 bits per 2000.
+        assert!((load.cyclic_bits - 1337.6).abs() < 1e-9, "{load}");
+        assert!((load.percent - 66.88).abs() < 1e-9, "{load}");
+        assert_eq!(load.drives, 6);
+        // The five axes alone: SYNC 55 + 5 * (2 * 115 + 65 * 2000/50000) = 1218 bits
+        // per 2000.
+        cfg.spindle = None;
+        let load = BusLoad::of(&cfg);
         assert!((load.cyclic_bits - 1218.0).abs() < 1e-9, "{load}");
         assert!((load.percent - 60.9).abs() < 1e-9, "{load}");
     }
@@ -423,7 +459,9 @@ mod tests {
     #[test]
     fn the_shortest_period_within_70_percent_for_five_drives_is_1738_us() {
         let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/machines/table-ac.toml");
-        let cfg = MachineConfig::load(&p).unwrap();
+        let mut cfg = MachineConfig::load(&p).unwrap();
+        // The five axes' drives (the spindle's is counted in the test above).
+        cfg.spindle = None;
         // 55 + 5 * (230 + 65 * P / 50000) = 1205 + 0.0065 P bits per P us <= 70 %:
         // P >= 1205 / 0.6935 = 1737.6, so 1738 us (69.98 %; 1737 us gives 70.02 %).
         assert_eq!(BusLoad::shortest_period_us(&cfg, 70.0), Some(1738));

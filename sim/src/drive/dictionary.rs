@@ -4,19 +4,20 @@
 
 use super::{
     abort_connection, Application, Communication, Objects, CYCLIC_SYNCHRONOUS_POSITION,
-    DEVICE_TYPE, EMCY_QUEUE, PRODUCT_CODE, REVISION, SUPPORTED_DRIVE_MODES, VENDOR_ID,
+    DEVICE_NAME, DEVICE_TYPE, EMCY_QUEUE, PRODUCT_CODE, PROFILE_POSITION, REVISION,
+    SUPPORTED_DRIVE_MODES, VENDOR_ID,
 };
 use hal::canopen::emcy::{error_register, Emcy};
 use hal::canopen::object as obj;
 use hal::canopen::pdo::{COB_ID_EXTENDED, COB_ID_INVALID};
 use hal::canopen::sdo::{ObjectDictionary, SdoAbortCode};
 
-const DEVICE_NAME: &[u8] = b"probebridge simulated CiA 402 drive";
-
 impl Objects {
     pub(super) fn new(node: u8, position_inc: i32) -> Self {
         Self {
             node,
+            supported_modes: SUPPORTED_DRIVE_MODES,
+            device_name: DEVICE_NAME,
             comm: Communication::new(node),
             app: Application::new(position_inc),
             actual: position_inc,
@@ -179,10 +180,11 @@ impl ObjectDictionary for Objects {
             obj::COMMUNICATION_CYCLE_PERIOD => var(sub, self.comm.cycle_period_us as u64, 4)?,
             obj::MANUFACTURER_DEVICE_NAME => {
                 var(sub, 0, 0)?;
-                buf.get_mut(..DEVICE_NAME.len())
+                let name = self.device_name;
+                buf.get_mut(..name.len())
                     .ok_or(SdoAbortCode::OUT_OF_MEMORY)?
-                    .copy_from_slice(DEVICE_NAME);
-                return Ok(DEVICE_NAME.len());
+                    .copy_from_slice(name);
+                return Ok(name.len());
             }
             obj::COB_ID_EMCY => var(sub, self.comm.emcy_cob_id as u64, 4)?,
             obj::PRODUCER_HEARTBEAT_TIME => var(sub, self.comm.heartbeat_ms as u64, 2)?,
@@ -202,7 +204,17 @@ impl ObjectDictionary for Objects {
                 4 => (self.node as u64, 4),
                 _ => return Err(SdoAbortCode::SUB_INDEX_DOES_NOT_EXIST),
             },
-            obj::SUPPORTED_DRIVE_MODES => var(sub, SUPPORTED_DRIVE_MODES as u64, 4)?,
+            obj::SUPPORTED_DRIVE_MODES => var(sub, self.supported_modes as u64, 4)?,
+            // An axis drive has no profile modes, so none of their objects.
+            obj::PROFILE_VELOCITY if self.has_profile_position() => {
+                var(sub, self.app.profile_velocity as u64, 4)?
+            }
+            obj::PROFILE_ACCELERATION if self.has_profile_position() => {
+                var(sub, self.app.profile_acceleration as u64, 4)?
+            }
+            obj::PROFILE_DECELERATION if self.has_profile_position() => {
+                var(sub, self.app.profile_deceleration as u64, 4)?
+            }
             _ => match (self.mapped_value(index, 0), Self::object_bits(index, 0)) {
                 (Some(v), Some(bits)) => var(sub, v, bits as usize / 8)?,
                 _ => return Err(SdoAbortCode::OBJECT_DOES_NOT_EXIST),
@@ -281,11 +293,30 @@ impl ObjectDictionary for Objects {
             obj::MODES_OF_OPERATION => {
                 var(sub, 0, 0)?;
                 let m = le(data, 1)? as u8 as i8;
-                // This drive implements cyclic synchronous position only (0x6502).
-                if m != CYCLIC_SYNCHRONOUS_POSITION {
+                // Only the modes 0x6502 names: an axis drive cyclic synchronous
+                // position, a spindle drive profile position.
+                let bit = match m {
+                    CYCLIC_SYNCHRONOUS_POSITION => 1 << 7,
+                    PROFILE_POSITION => 1 << 0,
+                    _ => 0,
+                };
+                if self.supported_modes & bit == 0 {
                     return Err(SdoAbortCode::VALUE_RANGE_EXCEEDED);
                 }
                 self.app.mode = m;
+                Ok(())
+            }
+            obj::PROFILE_VELOCITY | obj::PROFILE_ACCELERATION | obj::PROFILE_DECELERATION => {
+                var(sub, 0, 0)?;
+                if !self.has_profile_position() {
+                    return Err(SdoAbortCode::OBJECT_DOES_NOT_EXIST);
+                }
+                let v = le(data, 4)? as u32;
+                match index {
+                    obj::PROFILE_VELOCITY => self.app.profile_velocity = v,
+                    obj::PROFILE_ACCELERATION => self.app.profile_acceleration = v,
+                    _ => self.app.profile_deceleration = v,
+                }
                 Ok(())
             }
             obj::CONTROLWORD | obj::TARGET_POSITION | obj::TOUCH_PROBE_FUNCTION => {

@@ -5,7 +5,8 @@
 //! stops the drive per 0x6007 when the master falls silent, EMCY, the drive state
 //! machine (driven by the controlword however it arrives), cyclic synchronous position with one cycle
 //! of servo lag, and touch probe 1 latching the exact position at the instant the probe
-//! signal rises.
+//! signal rises. A spindle drive ([`SimDrive::spindle`]) is the same device in profile
+//! position mode instead: it moves to a set-point on its own, at its profile velocity.
 //!
 //! Per SYNC a drive answers in a fixed order: heartbeat (when due), EMCY (when new),
 //! event-driven TPDOs whose data changed, then the synchronous TPDOs. The master under
@@ -18,6 +19,7 @@
 mod dictionary;
 mod heartbeat;
 mod pdo;
+mod profile_position;
 mod state;
 mod touch_probe;
 
@@ -40,14 +42,21 @@ pub const PRODUCT_CODE: u32 = 0x0000_0402;
 /// 0x1018:3: major revision 1 (upper 16 bits), minor 0.
 pub const REVISION: u32 = 0x0001_0000;
 /// 0x1018:4 is the node-ID: every simulated drive of a machine has its own serial.
-/// 0x6502: cyclic synchronous position (bit 7) only.
+/// 0x6502 of an axis drive: cyclic synchronous position (bit 7) only.
 pub const SUPPORTED_DRIVE_MODES: u32 = 1 << 7;
+/// 0x6502 of a spindle drive: profile position (bit 0) only.
+pub const SPINDLE_DRIVE_MODES: u32 = 1 << 0;
+/// 0x1008 of an axis drive.
+pub const DEVICE_NAME: &[u8] = b"probebridge simulated CiA 402 drive";
+/// 0x1008 of a spindle drive.
+pub const SPINDLE_DEVICE_NAME: &[u8] = b"probebridge simulated CiA 402 spindle drive";
 /// 0x1006 at power-on and after a reset of communication.
 pub const DEFAULT_CYCLE_PERIOD_US: u32 = 2000;
 /// 0x1005 at power-on: SYNC on 0x080, consumed (bit 30 clear: this drive never
 /// produces SYNC).
 pub const DEFAULT_SYNC_COB_ID: u32 = 0x80;
 const CYCLIC_SYNCHRONOUS_POSITION: i8 = 8;
+const PROFILE_POSITION: i8 = 1;
 /// EMCYs held while the drive may not send them (NMT stopped).
 const EMCY_QUEUE: usize = 4;
 
@@ -95,6 +104,18 @@ struct Application {
     fault: Option<u16>,
     /// 0x6007, see [`abort_connection`].
     abort_connection: i16,
+    /// Profile position: 0x6081 (increments/s), 0x6083 and 0x6084 (increments/s²).
+    profile_velocity: u32,
+    profile_acceleration: u32,
+    profile_deceleration: u32,
+    /// Profile position: the set-point being moved to, taken on the rising edge of
+    /// controlword bit 4.
+    pp_set_point: Option<i32>,
+    /// Profile position: statusword bit 12 (set-point acknowledge).
+    pp_acknowledged: bool,
+    /// Controlword bit 4 as the last step saw it (the edge is judged once per SYNC,
+    /// after the whole RPDO took effect: target and controlword together).
+    pp_bit4_seen: bool,
 }
 
 /// The drive's objects. Plain fields, `Copy` data only: SYNC processing allocates
@@ -102,6 +123,10 @@ struct Application {
 #[derive(Clone, Debug)]
 struct Objects {
     node: u8,
+    /// 0x6502: the modes of operation this drive has.
+    supported_modes: u32,
+    /// 0x1008.
+    device_name: &'static [u8],
     comm: Communication,
     app: Application,
     /// Encoder position: physical, no reset changes it.
@@ -227,22 +252,32 @@ impl SimDrive {
         self.nmt
     }
 
+    /// A spindle drive at encoder position `position_inc`: profile position only
+    /// (0x6502 bit 0), for oriented spindle stops.
+    pub fn spindle(node: u8, position_inc: i32) -> Self {
+        let mut d = Self::new(node, position_inc);
+        d.od.supported_modes = SPINDLE_DRIVE_MODES;
+        d.od.device_name = SPINDLE_DEVICE_NAME;
+        d
+    }
+
     /// Encoder position, increments.
     pub fn actual_inc(&self) -> i32 {
         self.od.actual
     }
 
     /// Where the drive will be at the end of the next step: the CSP target when it is
-    /// enabled (one cycle of servo lag), else where it is.
+    /// enabled (one cycle of servo lag), in profile position one cycle's travel towards
+    /// the set-point, else where it is.
     pub fn next_position_inc(&self) -> i32 {
         let a = &self.od.app;
-        if a.state == State::OperationEnabled
-            && a.mode == CYCLIC_SYNCHRONOUS_POSITION
-            && a.fault.is_none()
-        {
-            a.target
-        } else {
-            self.od.actual
+        if a.state != State::OperationEnabled || a.fault.is_some() {
+            return self.od.actual;
+        }
+        match a.mode {
+            CYCLIC_SYNCHRONOUS_POSITION => a.target,
+            PROFILE_POSITION => self.profile_position_next(),
+            _ => self.od.actual,
         }
     }
 

@@ -18,6 +18,12 @@ impl Application {
             state: State::SwitchOnDisabled,
             fault: None,
             abort_connection: abort_connection::QUICK_STOP,
+            profile_velocity: 0,
+            profile_acceleration: 0,
+            profile_deceleration: 0,
+            pp_set_point: None,
+            pp_acknowledged: false,
+            pp_bit4_seen: false,
         }
     }
 }
@@ -25,7 +31,8 @@ impl Application {
 impl Objects {
     /// 0x6041: the state bits, remote (the controlword is obeyed), voltage enabled
     /// while the power stage is switched on, and in cyclic synchronous position with
-    /// operation enabled bit 12: the drive follows the target position.
+    /// operation enabled bit 12: the drive follows the target position (profile
+    /// position: bits 10 and 12 of [`Objects::profile_position_status`]).
     pub(super) fn statusword(&self) -> u16 {
         let s = self.app.state;
         Statusword(s.statusword_bits() | Statusword::REMOTE)
@@ -44,6 +51,7 @@ impl Objects {
                 s == State::OperationEnabled && self.app.mode == CYCLIC_SYNCHRONOUS_POSITION,
             )
             .bits()
+            | self.profile_position_status()
     }
 
     /// The state machine takes `cw`. A fault reset (bit 7 rising) in Fault clears the

@@ -23,6 +23,7 @@ impl SimDrive {
     /// Starts a simulation step: remembers where the axis starts from.
     pub fn begin_step(&mut self) {
         self.step_from = self.od.actual;
+        self.od.take_set_point();
     }
 
     /// Ends a step at `to_inc`. `latch_fraction`: the probe signal rose at this

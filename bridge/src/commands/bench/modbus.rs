@@ -100,6 +100,7 @@ pub fn run(args: &ModbusBenchArgs) -> Result<(), String> {
     bus.address = plc.local_addr().map(|a| a.to_string());
     let mut cfg = crate::session::machine_config(&scenario);
     cfg.bus = BusConfig::Modbus(bus.clone());
+    cfg.spindle = None;
     let sink = ContactPublisher::new(&ws.prefix).map_err(|e| e.to_string())?;
     sink.update_connections().map_err(|e| e.to_string())?;
     let options = ModbusOptions {

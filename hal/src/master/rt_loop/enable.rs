@@ -22,20 +22,21 @@ impl<S: SampleSink> RtLoop<S> {
             }
             // Hold where the drive is: enabling must not move anything.
             d.target_inc = d.actual_inc;
-            let state = State::from_statusword(d.statusword);
-            match state.and_then(|s| s.command_towards_operation_enabled()) {
-                Some(cw) => {
-                    all = false;
-                    d.controlword = cw;
-                }
-                None if state == Some(State::OperationEnabled) => {
-                    d.controlword = Controlword::ENABLE_OPERATION_CMD
-                }
-                None => all = false,
+            all &= step_towards_enabled(d.statusword, &mut d.controlword);
+        }
+        if let Some(s) = self.spindle.as_mut() {
+            if s.seen_tpdo1 {
+                // Its set-point is where it stands (profile position moves only on a
+                // new set-point, which enabling never sends).
+                s.target_inc = s.actual_inc;
+                all &= step_towards_enabled(s.statusword, &mut s.controlword);
+            } else {
+                all = false;
             }
         }
+        let spindle_missing = self.spindle.is_some_and(|s| !s.seen_tpdo1);
         if !all
-            && self.drives.iter().any(|d| !d.seen_tpdo1)
+            && (self.drives.iter().any(|d| !d.seen_tpdo1) || spindle_missing)
             && now.saturating_sub(self.nmt_start_at_ns) >= NMT_START_REPEAT_NS
         {
             self.nmt_start_at_ns = now;
@@ -48,12 +49,15 @@ impl<S: SampleSink> RtLoop<S> {
                 positions: self.actual_positions(),
             });
         } else if now - since_ns > self.cfg.enable_timeout_ns {
+            let not_enabled = |sw: u16| State::from_statusword(sw) != Some(State::OperationEnabled);
             let (node, sw) = self
                 .drives
                 .iter()
-                .find(|d| State::from_statusword(d.statusword) != Some(State::OperationEnabled))
-                .map_or((0, 0), |d| (d.node, d.statusword));
-            let kind = if self.drives.iter().any(|d| !d.seen_tpdo1) {
+                .map(|d| (d.node, d.statusword))
+                .chain(self.spindle.map(|s| (s.node, s.statusword)))
+                .find(|&(_, sw)| not_enabled(sw))
+                .unwrap_or((0, 0));
+            let kind = if self.drives.iter().any(|d| !d.seen_tpdo1) || spindle_missing {
                 ErrorKind::NodeLost
             } else {
                 ErrorKind::DriveFault
@@ -70,5 +74,22 @@ impl<S: SampleSink> RtLoop<S> {
             self.reply = Some(Reply::Error(err));
             self.activity = Activity::Idle;
         }
+    }
+}
+
+/// One step of a drive towards Operation enabled: the controlword for its state;
+/// whether it is there.
+fn step_towards_enabled(statusword: u16, controlword: &mut u16) -> bool {
+    let state = State::from_statusword(statusword);
+    match state.and_then(|s| s.command_towards_operation_enabled()) {
+        Some(cw) => {
+            *controlword = cw;
+            false
+        }
+        None if state == Some(State::OperationEnabled) => {
+            *controlword = Controlword::ENABLE_OPERATION_CMD;
+            true
+        }
+        None => false,
     }
 }

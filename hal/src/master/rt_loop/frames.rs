@@ -47,6 +47,9 @@ impl<S: SampleSink> RtLoop<S> {
         for d in &self.drives {
             let _ = out.push(nmt::encode(NmtCommand::ResetCommunication, d.node));
         }
+        if let Some(s) = &self.spindle {
+            let _ = out.push(nmt::encode(NmtCommand::ResetCommunication, s.node));
+        }
     }
 
     /// The master's heartbeat (state operational) into `out` when it is due at the
@@ -91,6 +94,10 @@ impl<S: SampleSink> RtLoop<S> {
         self.drives.iter().position(|d| d.node == node)
     }
 
+    fn is_spindle(&self, node: u8) -> bool {
+        self.spindle.is_some_and(|s| s.node == node)
+    }
+
     /// A frame from the bus, received at `now_ns`.
     pub fn on_frame(&mut self, f: &CanFrame, now_ns: u64) {
         match cob_id::classify(f.cob_id()) {
@@ -98,6 +105,16 @@ impl<S: SampleSink> RtLoop<S> {
                 num: Tpdo1::NUMBER,
                 node,
             } => {
+                if let (Some(s), Ok(pd)) = (self.spindle.as_mut(), Tpdo1::decode(f)) {
+                    if s.node == node {
+                        s.statusword = pd.statusword;
+                        s.actual_inc = pd.position_actual;
+                        s.seen_tpdo1 = true;
+                        s.answered = true;
+                        s.silent = false;
+                        return;
+                    }
+                }
                 if let (Some(i), Ok(pd)) = (self.drive_index(node), Tpdo1::decode(f)) {
                     let d = &mut self.drives[i];
                     d.statusword = pd.statusword;
@@ -113,6 +130,18 @@ impl<S: SampleSink> RtLoop<S> {
             } => {
                 if let (Some(i), Ok(pd)) = (self.drive_index(node), Tpdo2::decode(f)) {
                     self.on_latch(i, pd, now_ns);
+                }
+            }
+            CobKind::Emcy { node } if self.is_spindle(node) => {
+                if let Ok(e) = Emcy::decode(f) {
+                    if e.error_code != 0 {
+                        if let Some(s) = self.spindle.as_mut() {
+                            s.last_emcy = Some(e.error_code);
+                        }
+                        let mut err = RtError::new(ErrorKind::DriveFault, Detail::Emcy).node(node);
+                        err.code = Some(e.error_code);
+                        self.set_fault(err);
+                    }
                 }
             }
             CobKind::Emcy { node } => {
@@ -132,7 +161,7 @@ impl<S: SampleSink> RtLoop<S> {
                     // A drive of ours booted again: its PDO mapping and cycle settings
                     // are back to defaults and it is no longer operational. Nothing it
                     // reports from now on can be trusted.
-                    if self.drive_index(node).is_some() {
+                    if self.drive_index(node).is_some() || self.is_spindle(node) {
                         self.set_fault(
                             RtError::new(ErrorKind::NodeLost, Detail::Restarted).node(node),
                         );
@@ -170,6 +199,22 @@ impl<S: SampleSink> RtLoop<S> {
                     touch_probe_function: d.tp_function,
                 };
                 let _ = out.push(rpdo2.encode(d.node));
+            }
+        }
+        let busy = matches!(
+            self.activity,
+            Activity::Enabling { .. } | Activity::Orienting { .. } | Activity::Shutdown
+        );
+        if let Some(s) = self.spindle.as_mut() {
+            // Its controlword is the oriented stop's (see `spindle`); its target is
+            // the set-point of the last one, or where enabling found it.
+            s.answered = false;
+            if s.rpdo1_due(busy) {
+                let rpdo1 = Rpdo1 {
+                    controlword: s.controlword,
+                    target_position: s.target_inc,
+                };
+                let _ = out.push(rpdo1.encode(s.node));
             }
         }
         if core::mem::take(&mut self.nmt_start_due) {

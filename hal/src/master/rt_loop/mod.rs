@@ -17,14 +17,17 @@
 //! The files: this one (the loop's state and the commands), `probing` (a probing
 //! move's request, arming stage and pending contact), `latch` (probe arming and
 //! latch collection), `motion` (interpolation, stop and settling), `enable` (the CiA 402
-//! enable sequence), `supervision` (heartbeat, EMCY, faults) and `frames` (frames in,
-//! and the frames of each tick).
+//! enable sequence), `supervision` (heartbeat, EMCY, faults), `frames` (frames in,
+//! and the frames of each tick), `spindle` (the spindle drive's link) and `orient` (an
+//! oriented spindle stop).
 
 mod enable;
 mod frames;
 mod latch;
 mod motion;
+mod orient;
 mod probing;
+mod spindle;
 mod supervision;
 
 use super::command::{Command, Detail, Reply, RtError};
@@ -38,6 +41,7 @@ use crate::machine::ErrorKind;
 use crate::motion::{AxisLimits, Profile};
 use crate::motion_guard::{may_start_deflected, ProbeInput};
 use probing::{ArmStage, PendingContact, ProbeRequest};
+use spindle::{OrientStage, SpindleLink};
 
 /// How the loop is paced: on CLOCK_MONOTONIC at the SYNC period, or in lockstep with a
 /// simulator on a virtual clock (driven by `master::pacing`).
@@ -51,9 +55,10 @@ pub enum Pacing {
     },
 }
 
-/// Most frames one tick sends: RPDO1 and RPDO2 of every drive, a repeated NMT start
-/// while enabling, the master's heartbeat, then SYNC.
-pub const MAX_TICK_FRAMES: usize = 2 * MAX_AXES + 3;
+/// Most frames one tick sends: RPDO1 and RPDO2 of every axis's drive, the spindle
+/// drive's RPDO1, a repeated NMT start while enabling, the master's heartbeat, then
+/// SYNC.
+pub const MAX_TICK_FRAMES: usize = 2 * MAX_AXES + 4;
 
 /// Ticks after a shutdown that still send the Shutdown controlword (and SYNC, so
 /// synchronous RPDOs take effect) before the goodbye.
@@ -212,6 +217,11 @@ enum Activity {
         t: f64,
         then: Reply,
     },
+    /// An oriented spindle stop; the axes hold.
+    Orienting {
+        stage: OrientStage,
+        since_ns: u64,
+    },
     /// Waiting for the actual positions to reach the setpoint.
     Settling {
         since_ns: u64,
@@ -224,6 +234,8 @@ pub struct RtLoop<S: SampleSink> {
     sink: S,
     cfg: LoopConfig,
     drives: heapless::Vec<DriveLink, MAX_AXES>,
+    /// The spindle's drive (profile position), when the machine has one.
+    spindle: Option<SpindleLink>,
     limits: AxisLimits,
     mask: u8,
     heartbeat: HeartbeatConsumer,
@@ -286,10 +298,15 @@ impl<S: SampleSink> RtLoop<S> {
             // Node IDs were validated (1..=127) with the configuration.
             let _ = heartbeat.watch(node, cfg.heartbeat_timeout_ns);
         }
+        let spindle = machine.spindle.as_ref().map(|s| {
+            let _ = heartbeat.watch(s.node, cfg.heartbeat_timeout_ns);
+            SpindleLink::new(s, cfg.settle_timeout_ns)
+        });
         Self {
             sink,
             cfg,
             drives,
+            spindle,
             limits,
             mask: machine.axis_mask(),
             heartbeat,
@@ -356,6 +373,7 @@ impl<S: SampleSink> RtLoop<S> {
     /// last SYNC?
     pub fn answers_pending(&self) -> bool {
         self.drives.iter().any(|d| !d.answered && !d.silent)
+            || self.spindle.is_some_and(|s| !s.answered && !s.silent)
     }
 
     /// The driver stops waiting for this SYNC's answers: drives that did not answer
@@ -372,6 +390,11 @@ impl<S: SampleSink> RtLoop<S> {
                 d.silent = true;
             }
         }
+        if let Some(s) = self.spindle.as_mut() {
+            if !s.answered {
+                s.silent = true;
+            }
+        }
     }
 
     pub fn sink_mut(&mut self) -> &mut S {
@@ -385,6 +408,9 @@ impl<S: SampleSink> RtLoop<S> {
             for d in self.drives.iter_mut() {
                 d.controlword = Controlword::SHUTDOWN;
                 d.tp_function = 0;
+            }
+            if let Some(s) = self.spindle.as_mut() {
+                s.controlword = Controlword::SHUTDOWN;
             }
             self.activity = Activity::Shutdown;
             return;
@@ -444,6 +470,7 @@ impl<S: SampleSink> RtLoop<S> {
                     },
                 };
             }
+            Command::OrientSpindle { angle_deg } => self.begin_orient(angle_deg),
             Command::Positions | Command::Stop | Command::Shutdown => {}
         }
     }
@@ -493,6 +520,11 @@ impl<S: SampleSink> RtLoop<S> {
             Activity::Arming { .. } | Activity::Settling { .. } => {
                 self.disarm_all();
                 self.hold_all();
+                self.reply = Some(Reply::Error(err));
+                self.activity = Activity::Idle;
+            }
+            Activity::Orienting { .. } => {
+                self.halt_spindle();
                 self.reply = Some(Reply::Error(err));
                 self.activity = Activity::Idle;
             }

@@ -91,6 +91,7 @@ impl<S: SampleSink> RtLoop<S> {
                 };
             }
             Activity::Settling { since_ns, then } => self.settle(since_ns, then, now),
+            Activity::Orienting { stage, since_ns } => self.orient(stage, since_ns, now),
         }
     }
 

@@ -18,6 +18,7 @@ impl<S: SampleSink> RtLoop<S> {
         self.fault = Some(err);
         self.contact = None;
         self.disarm_all();
+        self.halt_spindle();
         match self.activity {
             Activity::Moving { profile, t } | Activity::Probing { profile, t, .. } => {
                 self.begin_stop(profile, t, Reply::Error(err));
@@ -29,7 +30,10 @@ impl<S: SampleSink> RtLoop<S> {
                     then: Reply::Error(err),
                 };
             }
-            Activity::Arming { .. } | Activity::Settling { .. } | Activity::Enabling { .. } => {
+            Activity::Arming { .. }
+            | Activity::Settling { .. }
+            | Activity::Enabling { .. }
+            | Activity::Orienting { .. } => {
                 self.reply = Some(Reply::Error(err));
                 self.activity = Activity::Idle;
             }
@@ -72,6 +76,13 @@ impl<S: SampleSink> RtLoop<S> {
                 err.code = d.last_emcy;
                 self.set_fault(err);
                 return;
+            }
+        }
+        if let Some(s) = self.spindle {
+            if s.seen_tpdo1 && s.statusword & Statusword::FAULT != 0 {
+                let mut err = RtError::new(ErrorKind::DriveFault, Detail::FaultBit).node(s.node);
+                err.code = s.last_emcy;
+                self.set_fault(err);
             }
         }
     }
