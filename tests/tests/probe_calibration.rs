@@ -373,19 +373,19 @@ fn without_an_orientable_spindle_the_offset_is_kept_and_said() {
     }
 }
 
-/// Over Modbus, a PLC with command 5 (orient spindle, `[bus] spindle_orientation`)
-/// turns the stylus with the spindle: 460 separates the offset as on the world's
-/// machine, through the mailbox and the simulated PLC's oriented stop.
-#[test]
-fn over_modbus_command_5_orients_the_spindle_and_460_finds_the_offset() {
-    let sc = sphere_scenario(&REAL, REAL.ball);
-    let cfg = cycles_config(&sc);
-    let mut m = open_tcp(&sc, |b| b.spindle_orientation = true);
+/// 460 on a machine whose spindle orients (`bus`: how), on the scenario's stylus: it
+/// completes, measures the offset and the length, finds each column to 0.2 µm, and
+/// reports the offset's uncertainty.
+fn run_460_with_an_orientable_spindle<M: Machine<Error = hal::MachineError>>(
+    m: &mut M,
+    cfg: &cycles::CyclesConfig,
+    bus: &str,
+) {
     let report = run_on(
         &program(&[block_460(SPHERE_CENTRE, SPHERE_RADIUS, 0)]),
-        &cfg,
-        &mut m,
-        "460-modbus",
+        cfg,
+        m,
+        &format!("460-{bus}"),
     );
     assert!(report.completed(), "{}", report.to_json());
     let c = &report.cycles[0];
@@ -393,7 +393,7 @@ fn over_modbus_command_5_orients_the_spindle_and_460_finds_the_offset() {
     assert!(cal.offset_measured && cal.length_measured, "{cal:?}");
     for (name, want) in truth_460(&REAL) {
         let got = c.q[name];
-        println!("460 over Modbus {name} {got:+.7} mm, the stylus {want:+.7} mm");
+        println!("460 over {bus} {name} {got:+.7} mm, the stylus {want:+.7} mm");
         assert!(
             (got - want).abs() <= 2e-4,
             "{name} = {got}, the stylus has {want}"
@@ -404,6 +404,16 @@ fn over_modbus_command_5_orients_the_spindle_and_460_finds_the_offset() {
         "{:?}",
         c.u
     );
+}
+
+/// Over Modbus, a PLC with command 5 (orient spindle, `[bus] spindle_orientation`)
+/// turns the stylus with the spindle: 460 separates the offset as on the world's
+/// machine, through the mailbox and the simulated PLC's oriented stop.
+#[test]
+fn over_modbus_command_5_orients_the_spindle_and_460_finds_the_offset() {
+    let sc = sphere_scenario(&REAL, REAL.ball);
+    let mut m = open_tcp(&sc, |b| b.spindle_orientation = true);
+    run_460_with_an_orientable_spindle(&mut m, &cycles_config(&sc), "Modbus");
     // The PLC left the spindle at 0°, where the cycle started.
     assert_eq!(m.plc.with_program(|p| p.spindle_deg()), 0.0);
 }
@@ -416,31 +426,8 @@ fn over_modbus_command_5_orients_the_spindle_and_460_finds_the_offset() {
 fn over_canopen_the_spindle_drive_orients_and_460_finds_the_offset() {
     let sc = sphere_scenario(&REAL, REAL.ball);
     assert!(sc.machine.spindle.is_some(), "table-ac has a spindle drive");
-    let cfg = cycles_config(&sc);
     let mut m = CanInproc::open(&sc);
-    let report = run_on(
-        &program(&[block_460(SPHERE_CENTRE, SPHERE_RADIUS, 0)]),
-        &cfg,
-        &mut m,
-        "460-canopen",
-    );
-    assert!(report.completed(), "{}", report.to_json());
-    let c = &report.cycles[0];
-    let cal = c.calibration.as_ref().expect("460's report");
-    assert!(cal.offset_measured && cal.length_measured, "{cal:?}");
-    for (name, want) in truth_460(&REAL) {
-        let got = c.q[name];
-        println!("460 over CANopen {name} {got:+.7} mm, the stylus {want:+.7} mm");
-        assert!(
-            (got - want).abs() <= 2e-4,
-            "{name} = {got}, the stylus has {want}"
-        );
-    }
-    assert!(
-        c.u.contains_key("CAL_OF1") && c.u.contains_key("CAL_OF2"),
-        "{:?}",
-        c.u
-    );
+    run_460_with_an_orientable_spindle(&mut m, &cycles_config(&sc), "CANopen");
     // The spindle drive stands at 0° again, where the cycle started.
     drop(m.machine);
     let sim = m.keep.stop().expect("the simulation ran");

@@ -350,9 +350,10 @@ def check_spindle(node):
           f"node {SPINDLE}: 0x6502 = 0x{modes:08X} (bit 0: profile position), 0x1008 = {name!r}")
     csp = abort_code(lambda: node.sdo.download(0x6060, 0, b"\x08"))
     check("spindle_refuses_csp", csp == 0x06090030, f"0x6060 = 8: abort 0x{csp or 0:08X}")
+    node.nmt.state = "OPERATIONAL"
     node.setup_402_state_machine(read_pdos=True)
-    node.op_mode = "PROFILE POSITION"
-    check("spindle_mode_pp", node.op_mode == "PROFILE POSITION", f"0x6061 = {node.op_mode}")
+    node.op_mode = "PROFILED POSITION"
+    check("spindle_mode_pp", node.op_mode == "PROFILED POSITION", f"0x6061 = {node.op_mode}")
     for state in ["READY TO SWITCH ON", "SWITCHED ON", "OPERATION ENABLED"]:
         node.state = state
     check("spindle_operation_enabled", node.state == "OPERATION ENABLED",
@@ -387,7 +388,6 @@ def check_spindle(node):
     p2 = int.from_bytes(node.sdo.upload(0x6064, 0), "little", signed=True)
     check("spindle_pp_halt", halted & 0x0400 != 0 and p1 == p2 and 0 < p1 < target,
           f"controlword 0x010F: statusword 0x{halted:04X}, 0x6064 {p1} then {p2} 0.3 s later")
-    node.state = "SWITCH ON DISABLED"
 
 
 def check_heartbeat_consumer(node, network, mon):

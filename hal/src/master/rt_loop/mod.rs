@@ -893,6 +893,57 @@ mod tests {
         );
     }
 
+    /// A spindle drive (node 4) that never acknowledges a set-point (the fake ignores
+    /// bit 4, as a drive not in profile position would): the oriented stop fails after
+    /// a whole turn at the orienting speed plus the settle timeout, names the angle,
+    /// and the spindle is halted (bit 8).
+    #[test]
+    fn an_oriented_stop_the_drive_never_acknowledges_times_out_and_halts_it() {
+        let mut m = machine();
+        m.spindle = Some(crate::config::SpindleConfig {
+            node: 4,
+            increments_per_degree: 1000.0,
+            orient_rpm: 300.0,
+            orient_acceleration: 36_000.0,
+        });
+        let cfg = LoopConfig::from_machine(
+            &m,
+            Pacing::Lockstep {
+                answer_timeout: core::time::Duration::ZERO,
+            },
+        );
+        let mut b = Bench::new();
+        b.rt = RtLoop::new(&m, cfg, Collect::default(), 0);
+        b.drives.push(FakeDrive::new(4));
+        assert!(matches!(b.until_reply(), Reply::Ready { .. }));
+        b.rt.submit(Command::OrientSpindle { angle_deg: 180.0 });
+        let started = b.now;
+        let Reply::Error(e) = b.until_reply() else {
+            panic!("an oriented stop without acknowledge succeeded");
+        };
+        let waited = b.now - started;
+        // A turn at 300 rpm is 0.2 s.
+        let timeout = cfg.settle_timeout_ns + 200_000_000;
+        assert!(
+            waited > timeout && waited <= timeout + 2 * PERIOD,
+            "{waited} ns"
+        );
+        assert_eq!((e.kind, e.node), (ErrorKind::Timeout, Some(4)), "{e:?}");
+        let msg = crate::machine::MachineError::from(e).message;
+        assert!(
+            msg.contains("did not acknowledge the set-point 180.000°"),
+            "{msg}"
+        );
+        // The halt went out with the SYNC that ended the stop; the axes' drives stay
+        // enabled.
+        let cw = b.rpdo1(4).controlword;
+        assert_eq!(cw & Controlword::HALT, Controlword::HALT, "0x{cw:04X}");
+        assert_eq!(b.rpdo1(1).controlword, Controlword::ENABLE_OPERATION_CMD);
+        // The loop takes commands: a move goes on.
+        b.move_axis(0, 0.5);
+        assert!(matches!(b.until_reply(), Reply::Done { .. }));
+    }
+
     /// A bus whose drives may be silent for seconds (a slow or emulated host) gives
     /// each of the three enable transitions that long, and a move 3 times that to settle.
     #[test]
