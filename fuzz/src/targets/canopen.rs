@@ -369,7 +369,12 @@ fn sdo_server_ops(u: &mut Unstructured<'_>, sig: &mut Sig) -> Result<()> {
 }
 
 fn drive_ops(u: &mut Unstructured<'_>, sig: &mut Sig) -> Result<()> {
-    let mut d = SimDrive::new(NODE, u.arbitrary()?);
+    // An axis drive (cyclic synchronous position) or a spindle drive (profile position).
+    let mut d = if u.arbitrary()? {
+        SimDrive::spindle(NODE, u.arbitrary()?)
+    } else {
+        SimDrive::new(NODE, u.arbitrary()?)
+    };
     let mut sent: Vec<CanFrame> = Vec::new();
     d.power_on(&mut |f| sent.push(*f));
     let mut now: u64 = 0;
@@ -389,9 +394,14 @@ fn drive_ops(u: &mut Unstructured<'_>, sig: &mut Sig) -> Result<()> {
             2 => d.answer_sync(now, &mut |f| sent.push(*f)),
             3 => {
                 d.begin_step();
-                let to = d
-                    .actual_inc()
-                    .wrapping_add(i32::from(u.arbitrary::<i16>()?));
+                // Where the drive goes on its own (the CSP target, a profile position
+                // step), or anywhere near.
+                let to = if u.arbitrary()? {
+                    d.next_position_inc()
+                } else {
+                    d.actual_inc()
+                        .wrapping_add(i32::from(u.arbitrary::<i16>()?))
+                };
                 let latch = if u.arbitrary()? {
                     Some(f64::from(u.int_in_range(0..=1000u16)?) / 1000.0)
                 } else {
