@@ -2,8 +2,9 @@
 //! configured node, the configuration written over SDO (cycle period, heartbeat
 //! producer 0x1017, the consumer of the master's heartbeat 0x1016:1, cyclic synchronous
 //! position mode, the PDO layout of [`super::process_data`]; a spindle drive profile
-//! position mode and its orienting speed), then NMT start. Blocking, with a timeout on every answer; any refusal is an error naming
-//! the node, the object and the drive's SDO abort code.
+//! position mode and its orienting speed), then NMT start. Blocking, with a timeout
+//! on every answer; any refusal is an error naming the node, the object and the
+//! drive's SDO abort code.
 
 use super::process_data::{LAYOUT, SPINDLE_LAYOUT};
 use crate::can::{CanFrame, CanTransport};
