@@ -132,26 +132,27 @@ impl<S: SampleSink> RtLoop<S> {
                     self.on_latch(i, pd, now_ns);
                 }
             }
-            CobKind::Emcy { node } if self.is_spindle(node) => {
-                if let Ok(e) = Emcy::decode(f) {
-                    if e.error_code != 0 {
-                        if let Some(s) = self.spindle.as_mut() {
-                            s.last_emcy = Some(e.error_code);
-                        }
-                        let mut err = RtError::new(ErrorKind::DriveFault, Detail::Emcy).node(node);
-                        err.code = Some(e.error_code);
-                        self.set_fault(err);
-                    }
-                }
-            }
             CobKind::Emcy { node } => {
-                if let (Ok(e), Some(i)) = (Emcy::decode(f), self.drive_index(node)) {
-                    if e.error_code != 0 {
-                        self.drives[i].last_emcy = Some(e.error_code);
-                        let mut err = RtError::new(ErrorKind::DriveFault, Detail::Emcy).node(node);
-                        err.code = Some(e.error_code);
-                        self.set_fault(err);
-                    }
+                let Ok(e) = Emcy::decode(f) else {
+                    return;
+                };
+                if e.error_code == 0 {
+                    return;
+                }
+                // An axis's drive or the spindle's.
+                let last = match self.drive_index(node) {
+                    Some(i) => Some(&mut self.drives[i].last_emcy),
+                    None => self
+                        .spindle
+                        .as_mut()
+                        .filter(|s| s.node == node)
+                        .map(|s| &mut s.last_emcy),
+                };
+                if let Some(last) = last {
+                    *last = Some(e.error_code);
+                    let mut err = RtError::new(ErrorKind::DriveFault, Detail::Emcy).node(node);
+                    err.code = Some(e.error_code);
+                    self.set_fault(err);
                 }
             }
             CobKind::Heartbeat { .. } => {

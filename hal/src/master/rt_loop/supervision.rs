@@ -69,21 +69,20 @@ impl<S: SampleSink> RtLoop<S> {
         if matches!(self.activity, Activity::Enabling { .. }) {
             return;
         }
-        for i in 0..self.drives.len() {
-            let d = self.drives[i];
-            if d.seen_tpdo1 && d.statusword & Statusword::FAULT != 0 {
-                let mut err = RtError::new(ErrorKind::DriveFault, Detail::FaultBit).node(d.node);
-                err.code = d.last_emcy;
-                self.set_fault(err);
-                return;
-            }
-        }
-        if let Some(s) = self.spindle {
-            if s.seen_tpdo1 && s.statusword & Statusword::FAULT != 0 {
-                let mut err = RtError::new(ErrorKind::DriveFault, Detail::FaultBit).node(s.node);
-                err.code = s.last_emcy;
-                self.set_fault(err);
-            }
+        // The axes' drives, then the spindle's: (node, seen, statusword, last EMCY).
+        let faulted = self
+            .drives
+            .iter()
+            .map(|d| (d.node, d.seen_tpdo1, d.statusword, d.last_emcy))
+            .chain(
+                self.spindle
+                    .map(|s| (s.node, s.seen_tpdo1, s.statusword, s.last_emcy)),
+            )
+            .find(|&(_, seen, sw, _)| seen && sw & Statusword::FAULT != 0);
+        if let Some((node, _, _, code)) = faulted {
+            let mut err = RtError::new(ErrorKind::DriveFault, Detail::FaultBit).node(node);
+            err.code = code;
+            self.set_fault(err);
         }
     }
 }
