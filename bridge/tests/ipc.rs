@@ -657,6 +657,44 @@ fn a_killed_estimator_ends_a_pending_request_at_once_not_at_its_timeout() {
     assert!(!std::path::Path::new(&format!("/proc/{pid}")).exists());
 }
 
+/// A process that ends before it answers is said at once (a `run` then computes 451
+/// in its own process and says why), not after the start timeout.
+#[test]
+fn an_estimator_that_exits_before_answering_is_said_at_once() {
+    let prefix = unique_prefix("exits");
+    let t0 = Instant::now();
+    let Err(e) = EstimatorChild::spawn_command(Command::new("true"), &prefix, T) else {
+        panic!("nothing answers, yet the start succeeded");
+    };
+    assert!(e.to_string().contains("exited before answering"), "{e}");
+    assert!(t0.elapsed() < T, "noticed at once, not at the timeout");
+}
+
+/// A process that never answers: a timeout that names the prefix, and the process is
+/// not left behind.
+#[test]
+fn an_estimator_that_never_answers_times_out_and_is_killed() {
+    let prefix = unique_prefix("silent");
+    // A duration nobody else uses, to find the process afterwards.
+    let marker = format!("{}.{}", 600 + std::process::id() % 100, line!());
+    let mut sleeper = Command::new("sleep");
+    sleeper.arg(&marker);
+    let timeout = Duration::from_millis(300);
+    let t0 = Instant::now();
+    let Err(e) = EstimatorChild::spawn_command(sleeper, &prefix, timeout) else {
+        panic!("nothing answers, yet the start succeeded");
+    };
+    assert!(matches!(e, IpcError::Timeout { .. }), "{e:?}");
+    assert!(e.to_string().contains(&prefix), "{e}");
+    assert!(t0.elapsed() >= timeout);
+    let left: Vec<_> = std::fs::read_dir("/proc")
+        .unwrap()
+        .filter_map(|d| std::fs::read(d.ok()?.path().join("cmdline")).ok())
+        .filter(|c| c.split(|b| *b == 0).any(|a| a == marker.as_bytes()))
+        .collect();
+    assert!(left.is_empty(), "the silent process was left running");
+}
+
 /// Contacts on a sphere of radius 20 around (0, 0, 100), as a cycle holds them.
 fn sphere_contacts() -> Vec<hal::Contact> {
     let mut out = Vec::new();

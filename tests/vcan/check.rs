@@ -271,6 +271,21 @@ fn tail(path: &Path, lines: usize) -> String {
     all[all.len().saturating_sub(lines)..].join("\n    ")
 }
 
+/// The lines of a case's stderr that say what became of its estimator process (a
+/// result computed in-process instead says why).
+fn estimator_lines(path: &Path) -> String {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let lines: Vec<&str> = text
+        .lines()
+        .filter(|l| l.starts_with("estimator:"))
+        .collect();
+    if lines.is_empty() {
+        "(none)".into()
+    } else {
+        lines.join("\n    ")
+    }
+}
+
 /// The results folders of the VM and of the host reference: a text naming a file of
 /// the case (a preset table or kinematics file in RESULTS/NAME.state/) is compared
 /// relative to its folder.
@@ -468,8 +483,10 @@ fn check_case(case: &Case, results: &Path, reference: &Path, r: &mut Report) {
             compare_json("", &got, &want, &dirs, &mut diffs);
             r.check(diffs.is_empty(), || {
                 format!(
-                    "{name}: on vcan0 the result differs from the in-process bus:\n    {}",
-                    diffs.join("\n    ")
+                    "{name}: on vcan0 the result differs from the in-process bus:\n    {}\n  \
+                     its stderr on the estimator:\n    {}",
+                    diffs.join("\n    "),
+                    estimator_lines(&results.join(format!("{name}.stderr")))
                 )
             });
         }

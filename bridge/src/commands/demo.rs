@@ -28,7 +28,7 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
         opts.service = format!("probebridge-demo-{}", std::process::id());
     }
     say!("probebridge demo: starting the estimator process ...");
-    let estimator = EstimatorChild::spawn(&opts.service, Duration::from_secs(10))
+    let estimator = EstimatorChild::spawn(&opts.service, crate::ipc::START_TIMEOUT)
         .map_err(|e| format!("cannot start the estimator: {e}"))?;
     if opts.modbus.is_some() {
         say!("starting the simulated machine behind a PLC and connecting over Modbus ...");

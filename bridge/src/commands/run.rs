@@ -247,11 +247,13 @@ fn estimator_link(prefix: &str) -> Option<EstimatorLink> {
         tell!("estimator: using the estimator process serving {prefix}");
         return Some(EstimatorLink::Running(c));
     }
-    match EstimatorChild::spawn(prefix, ESTIMATOR_TIMEOUT) {
+    let t0 = std::time::Instant::now();
+    match EstimatorChild::spawn(prefix, crate::ipc::START_TIMEOUT) {
         Ok(child) => {
             tell!(
-                "estimator: started the estimator process (pid {}) on {prefix}",
-                child.id()
+                "estimator: started the estimator process (pid {}) on {prefix}, answering after {} ms",
+                child.id(),
+                t0.elapsed().as_millis()
             );
             Some(EstimatorLink::Child(child))
         }

@@ -64,6 +64,12 @@ pub type Svc = ipc_threadsafe::Service;
 /// Prefix of the production services.
 pub const DEFAULT_PREFIX: &str = "probebridge";
 
+/// Longest wait for a started estimator process's first answer. Its first start on a
+/// gateway reads its code from slow storage and creates its iceoryx2 resources; on a
+/// loaded emulated VM (the vcan step) that has taken more than 10 s. Too short a wait
+/// is not safe-side: 451 then computes in the bridge process instead.
+pub const START_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(30);
+
 /// Subscriber buffer of `<prefix>/contacts` (samples). A probing move yields one sample;
 /// cycle 451 yields a few hundred per run. 1024 holds a whole burst even if the estimator
 /// is busy fitting for a while; when it overflows, the oldest samples are overwritten

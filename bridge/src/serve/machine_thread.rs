@@ -98,7 +98,7 @@ struct Measure<'a> {
 }
 
 fn spawn_estimator(service: &str, armed: crate::estimator::ArmedReceive) -> Option<EstimatorChild> {
-    match EstimatorChild::spawn_receiving(service, armed, ESTIMATOR_TIMEOUT) {
+    match EstimatorChild::spawn_receiving(service, armed, crate::ipc::START_TIMEOUT) {
         Ok(c) => {
             tracing::info!(pid = c.id(), service, "estimator process started");
             Some(c)

@@ -51,7 +51,7 @@ fn start_estimator(
     command.args(["--record-capacity", &capacity.to_string()]);
     let log = std::fs::File::create(log).map_err(|e| format!("{}: {e}", log.display()))?;
     command.stderr(Stdio::from(log));
-    EstimatorChild::spawn_command(command, prefix, Duration::from_secs(10))
+    EstimatorChild::spawn_command(command, prefix, crate::ipc::START_TIMEOUT)
         .map_err(|e| format!("cannot start the estimator: {e}"))
 }
 

@@ -166,7 +166,7 @@ pub(super) fn spawn_estimator(
             });
         }
     }
-    let estimator = EstimatorChild::spawn_command(command, prefix, Duration::from_secs(10))
+    let estimator = EstimatorChild::spawn_command(command, prefix, crate::ipc::START_TIMEOUT)
         .map_err(|e| format!("cannot start the estimator: {e}"))?;
     let estimator_fifo = args.estimator_priority > 0 && is_fifo(estimator.id());
 
