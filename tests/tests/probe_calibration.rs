@@ -223,14 +223,20 @@ fn uncalibrated_431_heights_are_off_by_the_physics_of_the_stylus() {
 /// `centre_z` (Q434, row 0 of the preset table at the machine origin), from the probe
 /// put SET_UP above its pole in machine coordinates.
 fn block_460(centre: V, radius: f64, q455: u32) -> String {
+    block_460_from(centre, radius, q455, [0.0, 0.0], 1)
+}
+
+/// [`block_460`] with the probe put `off` (X, Y) mm off the sphere centre, and Q301
+/// (1: to the clearance height between points; 0: around at the measuring height).
+fn block_460_from(centre: V, radius: f64, q455: u32, off: [f64; 2], q301: u32) -> String {
     format!(
         "L Z+200 R0 FMAX M91\nL X{:+} Y{:+} R0 FMAX M91\nL Z{:+} R0 FMAX M91\n\
 TCH PROBE 460 CALIBRATION OF TS ON A SPHERE ~\n  Q407={radius:+} ;RADIUS OF CALIB. SPHERE ~\n\
-  Q320=+0 ;SET-UP CLEARANCE ~\n  Q301=+1 ;MOVE TO CLEARANCE ~\n  Q423=+8 ;NO. OF PROBE POINTS ~\n\
+  Q320=+0 ;SET-UP CLEARANCE ~\n  Q301={q301:+} ;MOVE TO CLEARANCE ~\n  Q423=+8 ;NO. OF PROBE POINTS ~\n\
   Q380=+0 ;REFERENCE ANGLE ~\n  Q433=+1 ;CALIBRATE LENGTH ~\n  Q434={:+} ;DATUM FOR LENGTH ~\n\
   Q455={q455:+} ;NO. OF POINTS IN 3D CAL.\nL Z+200 R0 FMAX M91\n",
-        centre[0],
-        centre[1],
+        centre[0] + off[0],
+        centre[1] + off[1],
         centre[2] + radius + REAL.ball + 2.0 + 1.0,
         centre[2]
     )
@@ -304,6 +310,45 @@ fn cycle_460_recovers_radius_offset_and_length() {
         json.contains("\"calibration\"") && json.contains("\"CAL_OF1\""),
         "{json}"
     );
+}
+
+/// The operator puts the probe over the sphere but not on its centre: 3 mm off, and
+/// nearly as far as the cycle allows (half of Q407 + R: 11.5 mm here), in five
+/// directions, with Q301 = 1 and 0. Cycle 460 touches the sphere only while probing
+/// (the world's machine brakes and fails a positioning move that touches it), and
+/// finds what it finds from a centred start.
+#[test]
+fn cycle_460_from_a_start_off_the_sphere_centre_touches_it_only_when_probing() {
+    use cycles::cycle460::measure::START_REACH;
+    let sc = sphere_scenario(&REAL, REAL.ball);
+    let cfg = cycles_config(&sc);
+    let reach = START_REACH * (SPHERE_RADIUS + REAL.ball);
+    let mut runs = 0;
+    for distance in [3.0, 0.98 * reach] {
+        for az in [0.0f64, 90.0, 120.0, 180.0, 270.0] {
+            for q301 in [1, 0] {
+                let off = [
+                    distance * az.to_radians().cos(),
+                    distance * az.to_radians().sin(),
+                ];
+                let block = block_460_from(SPHERE_CENTRE, SPHERE_RADIUS, 0, off, q301);
+                let tag = format!("460-off-{runs}");
+                let report = world_run(&program(&[block]), &cfg, &sc, &tag);
+                let case = format!("{distance:.2} mm off at {az}°, Q301={q301}");
+                assert!(report.completed(), "{case}: {}", report.to_text());
+                let c = &report.cycles[0];
+                for (name, want) in truth_460(&REAL) {
+                    assert!(
+                        (c.q[name] - want).abs() <= 2e-4,
+                        "{case}: {name} = {}, the stylus has {want}",
+                        c.q[name]
+                    );
+                }
+                runs += 1;
+            }
+        }
+    }
+    assert_eq!(runs, 20);
 }
 
 /// The world's machine without an orientable spindle (`Machine::orient_spindle`'s

@@ -1,9 +1,15 @@
 //! Cycle 460's probing: the pole from the start position (roughly over the sphere, as
-//! the operator set it up), the equator's Q423 points with the spindle at 0° (and at
+//! the operator set it up), three points that locate the centre from outside every
+//! place the sphere can be, the equator's Q423 points with the spindle at 0° (and at
 //! 180° where it can be oriented), the pole again over the centre the equator gave,
 //! and with Q455 the rings of the 3D calibration. All with the spindle at one angle
 //! at a time, so every position here is the latched (nominal) ball centre: the sphere
 //! as seen by the stylus of that angle, translated by minus its offset.
+//!
+//! Why the locating points: the pole contact does not say how far off the centre the
+//! start was. Rings about the start's axis at that contact's height would, with a
+//! start a few mm off, put the start points of one side inside the sphere, and the
+//! move there would touch it outside a probing move.
 
 use super::evaluate::{direction, fit_circle, Contact3d};
 use super::parameters::CalibrationParams;
@@ -18,8 +24,10 @@ use nalgebra::Vector3;
 
 /// The start may be this far off the sphere centre in the working plane, as a
 /// fraction of Q407 + R: the first pole contact is then lower, and is probed that much
-/// further.
+/// further; the locating points start this much further out.
 pub const START_REACH: f64 = 0.5;
+/// Points that locate the sphere centre before the rings (a circle needs three).
+pub const LOCATING_POINTS: usize = 3;
 /// The equator is probed again when the pole over the found centre puts it more than
 /// this far from where it was probed, mm.
 pub const EQUATOR_HEIGHT_TOLERANCE: f64 = 0.1;
@@ -138,8 +146,9 @@ impl<M: Machine> Probing<'_, '_, M> {
     }
 
     /// Probes the sphere about `centre` (ball centre coordinates) against the
-    /// direction `u`: from `centre + u (Q407 + R + clearance)`, coming from and going
-    /// back to the clearance height `top` when `via_top`.
+    /// direction `u`: from `centre + u (Q407 + R + clearance + margin)`, coming from
+    /// and going back to the clearance height `top` when `via_top`. `margin`: how far
+    /// the true centre may be from `centre` in the plane (0 once it is known).
     fn point(
         &mut self,
         what: &str,
@@ -147,8 +156,9 @@ impl<M: Machine> Probing<'_, '_, M> {
         u: Vector3<f64>,
         top: f64,
         via_top: bool,
+        margin: f64,
     ) -> Result<Vector3<f64>, CycleError> {
-        let start = centre + u * (self.rs + self.clear);
+        let start = centre + u * (self.rs + self.clear + margin);
         if via_top {
             let over = self.at_height(start, top);
             self.go(
@@ -158,7 +168,11 @@ impl<M: Machine> Probing<'_, '_, M> {
         }
         self.go(&format!("{what}: moving to the start"), start)?;
         let dist = self.call.tool.probe.dist;
-        let c = self.probe(&format!("{what}: probing"), -u, self.clear + dist)?;
+        let c = self.probe(
+            &format!("{what}: probing"),
+            -u,
+            self.clear + 2.0 * margin + dist,
+        )?;
         self.go(&format!("{what}: retracting"), start)?;
         if via_top {
             let over = self.at_height(start, top);
@@ -200,7 +214,16 @@ impl<M: Machine> Probing<'_, '_, M> {
             }
             let u = direction(&self.frame, az, 0.0);
             let what = format!("equator, spindle at {spindle}°, point {}", k + 1);
-            contacts.push(self.point(&what, centre, u, top, via_top)?);
+            if !via_top && last_az.is_none() {
+                // Q301 = 0 moves at the measuring height between points; the first is
+                // still reached from above (straight there would cut through the sphere).
+                let over = self.at_height(centre + u * (self.rs + self.clear), top);
+                self.go(
+                    &format!("{what}: positioning at the clearance height"),
+                    over,
+                )?;
+            }
+            contacts.push(self.point(&what, centre, u, top, via_top, 0.0)?);
             last_az = Some(az);
         }
         if !via_top {
@@ -255,12 +278,15 @@ impl<M: Machine> Probing<'_, '_, M> {
                 }
                 e => e,
             })?;
-        let mut top = n.dot(&first) + self.clear;
-        let mut centre = self.at_height(start, n.dot(&first) - self.rs);
+        // With the start up to START_REACH off the centre the pole is up to `reach`
+        // above the contact: the clearance height holds for every such sphere.
+        let above = n.dot(&first) + self.clear + reach;
         self.go(
             "cycle 460: retracting from the pole",
-            self.at_height(first, top),
+            self.at_height(first, above),
         )?;
+        let mut centre = self.locate(start, first, above)?;
+        let mut top = n.dot(&centre) + self.rs + self.clear;
         for pass in 0..2 {
             let mut equator = vec![self.equator(0.0, centre, top)?];
             if oriented {
@@ -293,6 +319,54 @@ impl<M: Machine> Probing<'_, '_, M> {
         unreachable!("the second pass returns")
     }
 
+    /// The sphere centre (ball centre coordinates) from the first pole contact
+    /// `first`, probed from `start`: [`LOCATING_POINTS`] points at the height the
+    /// contact suggests, each started START_REACH x (Q407 + R) further out than usual,
+    /// so outside every sphere the contact allows, and reached via the clearance
+    /// height `top`. Their circle gives the centre in the plane; the pole contact's
+    /// distance from it, the centre's height.
+    fn locate(
+        &mut self,
+        start: Vector3<f64>,
+        first: Vector3<f64>,
+        top: f64,
+    ) -> Result<Vector3<f64>, CycleError> {
+        let n = self.frame[2];
+        let margin = START_REACH * self.rs;
+        let guess = self.at_height(start, n.dot(&first) - self.rs);
+        let mut plane = Vec::with_capacity(LOCATING_POINTS);
+        for k in 0..LOCATING_POINTS {
+            let az = self.p.reference_angle + k as f64 * 360.0 / LOCATING_POINTS as f64;
+            let u = direction(&self.frame, az, 0.0);
+            let what = format!(
+                "cycle 460: locating the sphere, point {} of {LOCATING_POINTS}",
+                k + 1
+            );
+            let c = self.point(&what, guess, u, top, true, margin)?;
+            plane.push([self.frame[0].dot(&c), self.frame[1].dot(&c)]);
+        }
+        let (c2, _) = fit_circle(&plane)
+            .map_err(|e| CycleError::Geometry(format!("cycle 460: locating the sphere: {e}")))?;
+        let off = (self.frame[0].dot(&first) - c2[0]).hypot(self.frame[1].dot(&first) - c2[1]);
+        if off >= self.rs {
+            return Err(CycleError::Geometry(format!(
+                "cycle 460: locating the sphere: the first pole contact is {off:.3} mm off the centre the locating points give, more than Q407 + R = {:.3} mm: it was not on the sphere",
+                self.rs
+            )));
+        }
+        let height = n.dot(&first) - (self.rs * self.rs - off * off).sqrt();
+        let from_start =
+            (self.frame[0].dot(&start) - c2[0]).hypot(self.frame[1].dot(&start) - c2[1]);
+        let block = self.block();
+        (self.ctx.progress)(ProgressEvent::Note {
+            block,
+            text: format!(
+                "cycle 460: the sphere centre is {from_start:.4} mm from below the start position"
+            ),
+        });
+        Ok(self.frame[0] * c2[0] + self.frame[1] * c2[1] + n * height)
+    }
+
     /// The 3D calibration's rings about `centre`, spindle at 0°: Q455 directions each,
     /// at [`RING_ELEVATIONS`].
     fn rings(&mut self, centre: Vector3<f64>, top: f64) -> Result<Vec<Contact3d>, CycleError> {
@@ -306,7 +380,7 @@ impl<M: Machine> Probing<'_, '_, M> {
                 let az = self.p.reference_angle + k as f64 * 360.0 / per_ring as f64;
                 let u = direction(&self.frame, az, *el);
                 let what = format!("3D calibration, elevation {el}°, direction {}", k + 1);
-                let c = self.point(&what, centre, u, top, true)?;
+                let c = self.point(&what, centre, u, top, true, 0.0)?;
                 out.push(Contact3d { ring, k, centre: c });
             }
         }

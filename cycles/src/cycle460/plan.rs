@@ -4,7 +4,10 @@
 //! (the operator puts the probe there). `check` and `run` hold the moves against the
 //! motion guard ([`crate::planned_move::check_planned`]), as for 431 and 444. The
 //! spindle is taken as orientable, so the plan holds both equator rings: a machine
-//! without an orientable spindle makes a subset of these moves.
+//! without an orientable spindle makes a subset of these moves. A positioning move
+//! whose straight path would bring the ball onto the sphere is refused, as 451's plan
+//! refuses one: the sequence itself must never touch the sphere outside a probing
+//! move.
 
 use super::measure::Probing;
 use super::CalibrationParams;
@@ -17,8 +20,13 @@ use crate::planned_move::PlannedMove;
 use hal::{AxisPositions, Contact, ErrorKind, Machine, MachineError, ProbeMove};
 use nalgebra::Vector3;
 
-/// A machine that moves nothing: it records every move and answers a probing move
-/// with its exact contact on the sphere of ball-centre radius `touch` about `sphere`.
+/// A ball centre closer to the sphere centre than `touch` by more than this is a
+/// contact, mm (a probing contact leaves the ball exactly at `touch`).
+const TOUCH_TOLERANCE: f64 = 1e-3;
+
+/// A machine that moves nothing: it records every move, refuses a positioning move
+/// whose path touches the sphere of ball-centre radius `touch` about `sphere`, and
+/// answers a probing move with its exact contact on that sphere.
 struct PlanMachine {
     axes: u8,
     sphere: Vector3<f64>,
@@ -39,6 +47,27 @@ impl Machine for PlanMachine {
     }
 
     fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), MachineError> {
+        let (a, b) = (
+            Vector3::from(self.pos.xyz()),
+            Vector3::from(self.pos.merged(target).xyz()),
+        );
+        // The point of the straight path nearest the sphere centre.
+        let ab = b - a;
+        let f = if ab.norm_squared() > 0.0 {
+            ((self.sphere - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let near = a + ab * f;
+        if (near - self.sphere).norm() < self.touch - TOUCH_TOLERANCE {
+            return Err(MachineError::new(
+                ErrorKind::ProbeCollision,
+                format!(
+                    "the planned path touches the calibration sphere at X{:+.4} Y{:+.4} Z{:+.4}; nothing moved",
+                    near.x, near.y, near.z
+                ),
+            ));
+        }
         self.moves.push(PlannedMove::Position {
             step: "cycle 460".into(),
             target: *target,
@@ -133,4 +162,51 @@ pub fn planned_moves(
     .run()
     .map_err(|e| format!("cycle 460 cannot be planned: {e}"))?;
     Ok(machine.moves)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn machine() -> PlanMachine {
+        PlanMachine {
+            axes: 0b111,
+            sphere: Vector3::new(0.0, 0.0, 0.0),
+            touch: 15.5,
+            pos: AxisPositions::linear([20.0, 0.0, 0.0]),
+            moves: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn a_positioning_path_through_the_sphere_is_refused_and_not_recorded() {
+        let mut m = machine();
+        let e = m
+            .move_to(&AxisPositions::linear([-20.0, 0.0, 0.0]), 1000.0)
+            .unwrap_err();
+        assert_eq!(hal::machine::Error::kind(&e), ErrorKind::ProbeCollision);
+        assert!(e.to_string().contains("X+0.0000 Y+0.0000 Z+0.0000"), "{e}");
+        assert!(m.moves.is_empty());
+        assert_eq!(m.pos.xyz(), [20.0, 0.0, 0.0], "nothing moved");
+    }
+
+    #[test]
+    fn a_path_that_keeps_the_ball_off_the_sphere_is_planned() {
+        let mut m = machine();
+        // Around it: 16 mm from the centre at the nearest point, then up and over.
+        m.move_to(&AxisPositions::linear([20.0, 16.0, 0.0]), 1000.0)
+            .unwrap();
+        m.move_to(&AxisPositions::linear([-20.0, 16.0, 0.0]), 1000.0)
+            .unwrap();
+        m.move_to(&AxisPositions::linear([-20.0, 0.0, 16.0]), 1000.0)
+            .unwrap();
+        m.move_to(&AxisPositions::linear([20.0, 0.0, 16.0]), 1000.0)
+            .unwrap();
+        assert_eq!(m.moves.len(), 4);
+        // A path that grazes the sphere by less than the tolerance is still a contact.
+        let e = m
+            .move_to(&AxisPositions::linear([20.0, 0.0, 15.49]), 1000.0)
+            .map(|_| m.move_to(&AxisPositions::linear([-20.0, 0.0, 15.49]), 1000.0));
+        assert!(matches!(e, Ok(Err(_))), "{e:?}");
+    }
 }

@@ -7,12 +7,17 @@
 //! - R is the mean of the rings' radii: `u²(R) = Σ u²(r_k) / m²`;
 //! - the offset is half the difference of the centres at 0° and 180°:
 //!   `u²(CAL_OF1) = (u²(x_0) + u²(x_180)) / 4`, likewise CAL_OF2;
-//! - L is the pole contact less R: `u²(L) = σ² + u²(R)` (one contact, and R).
+//! - L is the pole contact less R: `u²(L) = σ_p² + u²(R)` (one contact, and R). The
+//!   pole contact has no residual of its own: `σ_p` is the rings' `s` where it has
+//!   [`MIN_DOF`] degrees of freedom, else the probe's repeatability, as for cycle
+//!   444's one point. (The floor `max(s, repeatability)` of a fit with few degrees
+//!   of freedom is biased high, about 11 % at the 6 of two 8-point rings; the fit's
+//!   own parameters carry that as the spec's floor, a single contact need not.)
 //!
 //! The sphere's own form error and Q407's tolerance are not in it: no fit sees them.
 
 use super::measure::{EquatorRing, Probed};
-use crate::uncertainty::{fit_uncertainty, Fit, ResidualSum, UncertaintyError};
+use crate::uncertainty::{fit_uncertainty, Fit, ResidualSum, UncertaintyError, MIN_DOF};
 use nalgebra::{DMatrix, DVector, Vector3};
 use std::collections::BTreeMap;
 
@@ -135,7 +140,10 @@ pub fn row_uncertainty(
         }
     }
     if length_measured {
-        let sigma = rings.first().map_or(repeatability, |r| r.sigma.value);
+        let sigma = rings
+            .first()
+            .filter(|r| r.sigma.dof >= MIN_DOF)
+            .map_or(repeatability, |r| r.sigma.value);
         u.insert("L".to_string(), (sigma * sigma + var_r).sqrt());
     }
     Ok(u)
@@ -207,6 +215,37 @@ mod tests {
         // (8 points: 3 degrees of freedom left): s = 2 µm sqrt(8/3), above the floor.
         let s = 0.002 * (8.0f64 / 3.0).sqrt();
         assert!((u["R"] - s / 8f64.sqrt()).abs() < 1e-9, "{u:?}");
+    }
+
+    /// The pole contact of L: with the rings' 6 degrees of freedom their large `s`
+    /// sets R's u, but the one pole contact takes the repeatability; with 14 (two
+    /// rings of 12 points) the rings' `s` is sound and sets it too.
+    #[test]
+    fn the_pole_contact_takes_the_rings_s_only_with_enough_degrees_of_freedom() {
+        let rep: f64 = 0.0005;
+        let few = probed(vec![
+            ring(0.0, [0.0, 0.0], 15.5, 8, 0.002),
+            ring(180.0, [0.006, 0.0], 15.5, 8, 0.002),
+        ]);
+        let u = row_uncertainty(&few, &FRAME, rep, true).unwrap();
+        let s = 0.002 * (16.0f64 / 6.0).sqrt();
+        assert!((u["R"] - s / 16f64.sqrt()).abs() < 1e-9, "{u:?}");
+        assert!(
+            (u["L"] - (rep * rep + u["R"] * u["R"]).sqrt()).abs() < 1e-12,
+            "{u:?}"
+        );
+        let many = probed(vec![
+            ring(0.0, [0.0, 0.0], 15.5, 12, 0.002),
+            ring(180.0, [0.006, 0.0], 15.5, 12, 0.002),
+        ]);
+        let u = row_uncertainty(&many, &FRAME, rep, true).unwrap();
+        // 12 points a ring, 5 parameters: 7 each, 14 pooled.
+        let s = 0.002 * (24.0f64 / 14.0).sqrt();
+        assert!((u["R"] - s / 24f64.sqrt()).abs() < 1e-9, "{u:?}");
+        assert!(
+            (u["L"] - (s * s + u["R"] * u["R"]).sqrt()).abs() < 1e-9,
+            "{u:?}"
+        );
     }
 
     /// A ring of `n` contacts from azimuth `start` whose distances from `centre` carry
