@@ -241,11 +241,12 @@ pub struct RtLoop<S: SampleSink> {
     heartbeat: HeartbeatConsumer,
     /// Time of the SYNC most recently sent (the `now_ns` of the last tick).
     sync_ns: u64,
-    /// Clock of the heartbeat supervision: advances with the loop but at most two
-    /// periods per tick, so a stall of the loop itself (no SCHED_FIFO on a loaded
-    /// machine) is not taken for silent nodes: a consumer that was not running cannot
-    /// judge what it missed. Real losses are still seen after the timeout of
-    /// supervised time.
+    /// Clock of the heartbeat supervision and of every wait for the drives (enable,
+    /// arm, settle, oriented stop): advances with the loop but at most two periods per
+    /// tick, so a stall of the loop itself (no SCHED_FIFO on a loaded machine) is not
+    /// taken for silent nodes or slow drives: a loop that was not running gave them
+    /// nothing to answer (an arm frame not yet sent). Real losses and drives that do
+    /// not answer are still seen after the timeout of supervised time.
     supervised_ns: u64,
     setpoint: [f64; MAX_AXES],
     activity: Activity,
@@ -263,7 +264,8 @@ pub struct RtLoop<S: SampleSink> {
     /// was in contact before anything moved). See [`RtLoop::deflected_move`].
     deflected_along: Option<[f64; 3]>,
     stats: LoopStats,
-    /// Enabling: when the NMT start was last repeated; due to go out with this tick.
+    /// Enabling: when the NMT start was last repeated (supervised clock); due to go
+    /// out with this tick.
     nmt_start_at_ns: u64,
     nmt_start_due: bool,
     /// Arming: cycles waited for the drives to report armed since the last enable.
@@ -313,7 +315,7 @@ impl<S: SampleSink> RtLoop<S> {
             sync_ns: now_ns,
             supervised_ns: 0,
             setpoint: [0.0; MAX_AXES],
-            activity: Activity::Enabling { since_ns: now_ns },
+            activity: Activity::Enabling { since_ns: 0 },
             reply: None,
             fault: None,
             sequence: 0,
@@ -322,7 +324,7 @@ impl<S: SampleSink> RtLoop<S> {
             probe_signal: false,
             deflected_along: None,
             stats: LoopStats::default(),
-            nmt_start_at_ns: now_ns,
+            nmt_start_at_ns: 0,
             nmt_start_due: false,
             arm_waits: 0,
             arm_retry: false,
@@ -461,7 +463,7 @@ impl<S: SampleSink> RtLoop<S> {
                 self.arm_retry = false;
                 self.activity = Activity::Arming {
                     stage: ArmStage::Disarm,
-                    since_ns: self.sync_ns,
+                    since_ns: self.supervised_ns,
                     request: ProbeRequest {
                         direction,
                         feed,
@@ -996,6 +998,64 @@ mod tests {
             Reply::Done { positions } => assert!((positions[0] - 10.0).abs() < 1e-9),
             other => panic!("{other:?}"),
         }
+    }
+
+    /// The loop itself stalls for 15 s between the arm request and the touch probe
+    /// function going out (an emulated VM on a loaded host did): the drives had
+    /// nothing to answer yet, so that is no arm timeout. The function goes out after
+    /// the stall, the drives report armed, and the probing move starts.
+    #[test]
+    fn a_stall_of_the_loop_while_arming_is_not_an_arm_timeout() {
+        let mut b = Bench::enabled();
+        assert!(b.rt.config().arm_timeout_ns < 15_000_000_000);
+        b.rt.submit(Command::Probe {
+            direction: [0.0, 0.0, -1.0],
+            feed: 600.0,
+            max_distance: 5.0,
+            run_id: 9,
+        });
+        b.tick(); // Disarm: nothing changes on the bus yet
+        assert!(!b.sent.iter().any(|f| f.cob_id() == Rpdo2::cob_id(3)));
+        b.now += 15_000_000_000;
+        let mut moved = false;
+        for _ in 0..50 {
+            b.tick();
+            assert!(b.rt.take_reply().is_none(), "no timeout after the stall");
+            if b.rpdo1(3).target_position != 0 {
+                moved = true;
+                break;
+            }
+        }
+        assert!(moved, "armed after the stall, the probing move started");
+    }
+
+    /// Nothing answers the arm at all: the timeout still comes, after the arm
+    /// timeout of loop time, and names the first drive.
+    #[test]
+    fn drives_that_never_report_armed_time_out_after_the_arm_timeout() {
+        let mut b = Bench::enabled();
+        b.hold_latches_of = vec![1, 2, 3];
+        b.rt.submit(Command::Probe {
+            direction: [0.0, 0.0, -1.0],
+            feed: 600.0,
+            max_distance: 5.0,
+            run_id: 9,
+        });
+        let timeout = b.rt.config().arm_timeout_ns;
+        let t0 = b.now;
+        let reply = b.until_reply();
+        match reply {
+            Reply::Error(e) => {
+                assert_eq!(e.kind, ErrorKind::Timeout, "{e:?}");
+                assert_eq!(e.node, Some(1));
+            }
+            other => panic!("{other:?}"),
+        }
+        let waited = b.now - t0;
+        assert!(
+            waited > timeout && waited <= timeout + 4 * PERIOD,
+            "{waited}"
+        );
     }
 
     /// Probes down Z, touching after `periods` of the probing move.

@@ -49,7 +49,8 @@ impl<S: SampleSink> RtLoop<S> {
     /// this SYNC, or the next step of enabling, arming or settling).
     pub fn interpolate(&mut self) {
         let dt = self.cfg.period_ns as f64 * 1e-9;
-        let now = self.sync_ns;
+        // Waits are timed on the supervised clock (see `RtLoop::supervised_ns`).
+        let now = self.supervised_ns;
         match self.activity {
             Activity::Enabling { since_ns } => self.enable(now, since_ns),
             Activity::Idle | Activity::Shutdown => {}

@@ -48,7 +48,7 @@ impl<S: SampleSink> RtLoop<S> {
         sp.controlword = Controlword::ENABLE_OPERATION_CMD | Controlword::NEW_SET_POINT;
         self.activity = Activity::Orienting {
             stage: OrientStage::SetPoint,
-            since_ns: self.sync_ns,
+            since_ns: self.supervised_ns,
         };
     }
 
