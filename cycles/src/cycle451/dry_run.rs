@@ -25,8 +25,9 @@ use std::path::Path;
 /// Largest step, mm or deg, at which a positioning path is checked against the sphere.
 const PATH_STEP: f64 = 0.2;
 /// A ball centre closer to the sphere centre than Q407 + R by more than this is a
-/// contact, mm (a probing contact leaves the ball exactly at Q407 + R).
-const TOUCH_TOLERANCE: f64 = 1e-3;
+/// contact, mm (a probing contact leaves the ball exactly at Q407 + R). Cycle 460's
+/// plan uses it too.
+pub(crate) const TOUCH_TOLERANCE: f64 = 1e-3;
 
 /// A machine that moves nothing: it holds every move against the machine's motion
 /// guard (the checks every backend makes first, with their messages), follows the

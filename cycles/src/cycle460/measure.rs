@@ -234,21 +234,33 @@ impl<M: Machine> Probing<'_, '_, M> {
             );
             self.go("equator: to the clearance height", over)?;
         }
-        let plane: Vec<[f64; 2]> = contacts
-            .iter()
-            .map(|c| [self.frame[0].dot(c), self.frame[1].dot(c)])
-            .collect();
-        let (c2, radius) = fit_circle(&plane).map_err(|e| {
-            CycleError::Geometry(format!("cycle 460: equator at spindle {spindle}°: {e}"))
-        })?;
-        let t = self.frame[2].dot(&centre);
-        let centre = self.frame[0] * c2[0] + self.frame[1] * c2[1] + self.frame[2] * t;
+        let (centre, radius) = self
+            .circle(&contacts, self.frame[2].dot(&centre))
+            .map_err(|e| {
+                CycleError::Geometry(format!("cycle 460: equator at spindle {spindle}°: {e}"))
+            })?;
         Ok(EquatorRing {
             spindle,
             contacts,
             centre,
             radius,
         })
+    }
+
+    /// The least-squares circle of `contacts` in the working plane: its centre at
+    /// tool-axis coordinate `height`, and its radius.
+    fn circle(
+        &self,
+        contacts: &[Vector3<f64>],
+        height: f64,
+    ) -> Result<(Vector3<f64>, f64), String> {
+        let plane: Vec<[f64; 2]> = contacts
+            .iter()
+            .map(|c| [self.frame[0].dot(c), self.frame[1].dot(c)])
+            .collect();
+        let (c2, radius) = fit_circle(&plane)?;
+        let centre = self.frame[0] * c2[0] + self.frame[1] * c2[1] + self.frame[2] * height;
+        Ok((centre, radius))
     }
 
     /// The whole probing sequence; see the module doc.
@@ -334,7 +346,7 @@ impl<M: Machine> Probing<'_, '_, M> {
         let n = self.frame[2];
         let margin = START_REACH * self.rs;
         let guess = self.at_height(start, n.dot(&first) - self.rs);
-        let mut plane = Vec::with_capacity(LOCATING_POINTS);
+        let mut contacts = Vec::with_capacity(LOCATING_POINTS);
         for k in 0..LOCATING_POINTS {
             let az = self.p.reference_angle + k as f64 * 360.0 / LOCATING_POINTS as f64;
             let u = direction(&self.frame, az, 0.0);
@@ -342,12 +354,14 @@ impl<M: Machine> Probing<'_, '_, M> {
                 "cycle 460: locating the sphere, point {} of {LOCATING_POINTS}",
                 k + 1
             );
-            let c = self.point(&what, guess, u, top, true, margin)?;
-            plane.push([self.frame[0].dot(&c), self.frame[1].dot(&c)]);
+            contacts.push(self.point(&what, guess, u, top, true, margin)?);
         }
-        let (c2, _) = fit_circle(&plane)
+        let (axis, _) = self
+            .circle(&contacts, 0.0)
             .map_err(|e| CycleError::Geometry(format!("cycle 460: locating the sphere: {e}")))?;
-        let off = (self.frame[0].dot(&first) - c2[0]).hypot(self.frame[1].dot(&first) - c2[1]);
+        // Distance from the centre's axis (along the tool axis) in the plane.
+        let off_axis = |p: Vector3<f64>| (p - axis - n * n.dot(&(p - axis))).norm();
+        let off = off_axis(first);
         if off >= self.rs {
             return Err(CycleError::Geometry(format!(
                 "cycle 460: locating the sphere: the first pole contact is {off:.3} mm off the centre the locating points give, more than Q407 + R = {:.3} mm: it was not on the sphere",
@@ -355,8 +369,7 @@ impl<M: Machine> Probing<'_, '_, M> {
             )));
         }
         let height = n.dot(&first) - (self.rs * self.rs - off * off).sqrt();
-        let from_start =
-            (self.frame[0].dot(&start) - c2[0]).hypot(self.frame[1].dot(&start) - c2[1]);
+        let from_start = off_axis(start);
         let block = self.block();
         (self.ctx.progress)(ProgressEvent::Note {
             block,
@@ -364,7 +377,7 @@ impl<M: Machine> Probing<'_, '_, M> {
                 "cycle 460: the sphere centre is {from_start:.4} mm from below the start position"
             ),
         });
-        Ok(self.frame[0] * c2[0] + self.frame[1] * c2[1] + n * height)
+        Ok(axis + n * height)
     }
 
     /// The 3D calibration's rings about `centre`, spindle at 0°: Q455 directions each,

@@ -12,6 +12,7 @@
 use super::measure::Probing;
 use super::CalibrationParams;
 use crate::cycle::CycleContext;
+use crate::cycle451::dry_run::TOUCH_TOLERANCE;
 use crate::cycle_block::CycleBlock;
 use crate::cycles_config::CyclesConfig;
 use crate::datum::Datum;
@@ -19,10 +20,6 @@ use crate::kinematics::LocalEstimator;
 use crate::planned_move::PlannedMove;
 use hal::{AxisPositions, Contact, ErrorKind, Machine, MachineError, ProbeMove};
 use nalgebra::Vector3;
-
-/// A ball centre closer to the sphere centre than `touch` by more than this is a
-/// contact, mm (a probing contact leaves the ball exactly at `touch`).
-const TOUCH_TOLERANCE: f64 = 1e-3;
 
 /// A machine that moves nothing: it records every move, refuses a positioning move
 /// whose path touches the sphere of ball-centre radius `touch` about `sphere`, and
