@@ -1,7 +1,7 @@
 //! The blocks of Q-parameter programming as written: assignments (`Q1 = ...`,
 //! `FN 0..5`, string formulas), labels (`LBL 5`, `LBL "NAME"`, `LBL 0`), jumps
-//! (`FN 9..12`), `CALL LBL n REP k` and `FN 14: ERROR = n`. [`crate::program_flow`]
-//! runs them.
+//! (`FN 9..12`), `CALL LBL n` (a subprogram), `CALL LBL n REP k` (a section repeat) and
+//! `FN 14: ERROR = n`. [`crate::program_flow`] runs them.
 
 use crate::formula::{parse_formula, BinOp, Expr, Formula, Func};
 use crate::q_params::QName;
@@ -75,13 +75,24 @@ pub struct Jump {
     pub target: Label,
 }
 
-/// `CALL LBL 5 REP 3`: a label before the call repeats the section from it to the
-/// call `rep` more times; a label after it is a subprogram (up to its `LBL 0`), called
-/// `1 + rep` times.
+/// `CALL LBL 5` / `CALL LBL 5 REP 3`, as the TNC runs them: without REP a subprogram
+/// call (the blocks from `LBL 5` to its `LBL 0`, wherever the label stands, then back
+/// after the call); with REP and the label before the call a program-section repeat
+/// (the blocks from the label to the call `rep` more times); with REP and the label
+/// after the call the subprogram, called `1 + rep` times.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CallLabel {
     pub target: Label,
-    pub rep: u32,
+    /// `REP k` as written; `None` without REP.
+    pub rep: Option<u32>,
+}
+
+impl CallLabel {
+    /// A program-section repeat: REP given and the label (at block `target`) before
+    /// the call (at block `call`); anything else calls a subprogram.
+    pub fn is_section_repeat(&self, target: usize, call: usize) -> bool {
+        self.rep.is_some() && target < call
+    }
 }
 
 /// `Q10 = Q141 * 1000`, `FN 0: Q1 = +5`, `QS0 = SUBSTR ( ... )`.
@@ -196,9 +207,9 @@ fn parse_call(rest: &str) -> Result<FlowBlock, String> {
                 .ok_or_else(|| {
                     format!("CALL LBL: REP {r}: expected a number of repeats 0..65534")
                 })?;
-            (rest[..i].trim(), rep)
+            (rest[..i].trim(), Some(rep))
         }
-        None => (rest.trim(), 0),
+        None => (rest.trim(), None),
     };
     let target = parse_label(label_part)?;
     if target == Label::Number(0) {

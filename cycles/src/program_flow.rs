@@ -33,7 +33,7 @@ pub fn check_labels(blocks: &[Block]) -> Vec<crate::diagnostic::Diagnostic> {
             }
         }
     }
-    for b in blocks {
+    for (index, b) in blocks.iter().enumerate() {
         let target = match &b.statement {
             Statement::Jump(j) => &j.target,
             Statement::Call(c) => &c.target,
@@ -44,9 +44,84 @@ pub fn check_labels(blocks: &[Block]) -> Vec<crate::diagnostic::Diagnostic> {
                 line: b.line,
                 message: format!("{target} is not defined in this program"),
             });
+        } else if let Statement::Call(c) = &b.statement {
+            if let Some(message) = call_runs_nothing(blocks, index, c) {
+                out.push(crate::diagnostic::Diagnostic {
+                    line: b.line,
+                    message,
+                });
+            }
         }
     }
     out
+}
+
+/// Whether a block does anything when it runs (labels and comments do not).
+fn does_something(s: &Statement) -> bool {
+    match s {
+        Statement::Label(_) => false,
+        Statement::Other(code) => {
+            let code = code.trim_start();
+            !(code.is_empty() || code.starts_with('*'))
+        }
+        _ => true,
+    }
+}
+
+/// Why the CALL at block `index` would run nothing (a section repeat of no blocks or
+/// REP 0, a subprogram without its `LBL 0` or with nothing in it); `None` when it runs
+/// something.
+fn call_runs_nothing(
+    blocks: &[Block],
+    index: usize,
+    c: &crate::flow_block::CallLabel,
+) -> Option<String> {
+    let target = label_index(blocks, &c.target)?;
+    let label_line = blocks[target].line;
+    let name = &c.target;
+    if c.is_section_repeat(target, index) {
+        if c.rep == Some(0) {
+            return Some(format!(
+                "CALL {name} REP 0 repeats the section from {name} (line {label_line}) no time: it runs nothing (give REP 1 or more, or leave the CALL out)"
+            ));
+        }
+        if !blocks[target + 1..index]
+            .iter()
+            .any(|b| does_something(&b.statement))
+        {
+            return Some(format!(
+                "CALL {name} REP {}: the section from {name} (line {label_line}) to this CALL is empty: the repeat runs nothing",
+                c.rep.unwrap_or(0)
+            ));
+        }
+        return None;
+    }
+    let Some(end) = blocks[target + 1..]
+        .iter()
+        .position(|b| b.statement == Statement::Label(Label::Number(0)))
+        .map(|i| target + 1 + i)
+    else {
+        let hint = if target < index {
+            format!(
+                "; to repeat the blocks from {name} to this CALL, write CALL {name} REP k (a program-section repeat)"
+            )
+        } else {
+            String::new()
+        };
+        return Some(format!(
+            "CALL {name} calls the subprogram {name} (line {label_line}), but no LBL 0 follows it to end it: the call would run into the end of the program (a subprogram is {name} ... LBL 0){hint}"
+        ));
+    };
+    if !blocks[target + 1..end]
+        .iter()
+        .any(|b| does_something(&b.statement))
+    {
+        return Some(format!(
+            "CALL {name}: the subprogram {name} (line {label_line}) ends at LBL 0 (line {}) with nothing in it: the call runs nothing",
+            blocks[end].line
+        ));
+    }
+    None
 }
 
 /// Reads parameters for formulas: `run`'s values, and for `check` the parameters a
@@ -297,9 +372,9 @@ impl Flow {
                 Statement::Call(c) => {
                     let target =
                         label_index(blocks, &c.target).expect("labels checked at parse time");
-                    if target < index {
+                    if c.is_section_repeat(target, index) {
                         // Program-section repeat: back to the label `rep` more times.
-                        let left = self.repeats.entry(index).or_insert(c.rep);
+                        let left = self.repeats.entry(index).or_insert(c.rep.unwrap_or(0));
                         if *left > 0 {
                             *left -= 1;
                             self.jump(line, target)?;
@@ -307,9 +382,9 @@ impl Flow {
                             self.repeats.remove(&index);
                         }
                     } else {
-                        // Subprogram, called 1 + rep times: come back to this block
-                        // while repeats are left.
-                        let left = self.repeats.entry(index).or_insert(c.rep + 1);
+                        // Subprogram, wherever its label stands, called 1 + rep times:
+                        // come back to this block while repeats are left.
+                        let left = self.repeats.entry(index).or_insert(c.rep.unwrap_or(0) + 1);
                         *left -= 1;
                         let back = if *left > 0 {
                             index

@@ -235,6 +235,88 @@ fn subprograms_and_section_repeats() {
     assert_eq!(num(&r, "Q2"), 4.0);
 }
 
+/// Issue 34: `CALL LBL n` without REP is a subprogram call wherever the label stands.
+/// Here the subprogram LBL 7 stands before the subprogram LBL 8 that calls it (both
+/// after M30); it runs (its move too) and returns after the call, each time.
+#[test]
+fn a_call_without_rep_runs_a_subprogram_standing_before_it() {
+    let dir = common::temp_dir("q-sub-before");
+    let body = "1 Q1 = 0
+2 Q3 = 0
+3 CALL LBL 8
+4 CALL LBL 8
+5 L Z+40 R0 FMAX
+6 M30
+7 LBL 7
+8 Q1 = Q1 + 2.5
+9 L X+Q1 Z+30 R0 FMAX
+10 LBL 0
+11 LBL 8
+12 Q3 = Q3 + 1
+13 CALL LBL 7
+14 Q3 = Q3 * 10
+15 LBL 0";
+    let cfg = cfg_in(&dir);
+    preflight_program(
+        &program(&wrap(body), &cfg),
+        0b111,
+        &cfg,
+        &dir.join("k.toml"),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let (r, m) = run_in(&dir, body);
+    assert!(r.completed(), "{:?}", r.stopped);
+    // LBL 8 twice, each time LBL 7 once: Q1 = 2 x 2.5, Q3 = ((0 + 1) * 10 + 1) * 10.
+    assert_eq!(num(&r, "Q1"), 5.0);
+    assert_eq!(num(&r, "Q3"), 110.0);
+    let xs: Vec<[f64; 3]> = m.moves.iter().map(|(p, _)| *p).collect();
+    assert_eq!(xs.len(), 3, "{xs:?}");
+    assert_eq!(xs[0][0], 2.5);
+    assert_eq!(xs[1][0], 5.0);
+    assert_eq!(xs[2][2], 40.0);
+    // A section repeat still needs REP and a label before the CALL.
+    let r = run("1 Q2 = 0\n2 LBL 3\n3 Q2 = Q2 + 1\n4 CALL LBL 3 REP 2");
+    assert_eq!(num(&r, "Q2"), 3.0);
+}
+
+/// A CALL that would run nothing is refused at its line by the parser, so by `check`
+/// and by `run` before anything moves: a section repeat of no blocks or with REP 0, a
+/// subprogram call to a label without LBL 0 after it, an empty subprogram.
+#[test]
+fn a_call_that_runs_nothing_is_refused_at_its_line() {
+    let cfg = common::config();
+    for (body, line, what) in [
+        (
+            "1 LBL 4\n2 * - nothing here\n3 CALL LBL 4 REP 2",
+            4,
+            "the section from LBL 4 (line 2) to this CALL is empty",
+        ),
+        (
+            "1 LBL 4\n2 Q1 = 1\n3 CALL LBL 4 REP 0",
+            4,
+            "REP 0 repeats the section",
+        ),
+        ("1 LBL 4\n2 Q1 = 1\n3 CALL LBL 4", 4, "no LBL 0 follows it"),
+        (
+            "1 CALL LBL 5\n2 M30\n3 LBL 5\n4 L Z+10 R0 FMAX",
+            2,
+            "no LBL 0 follows it",
+        ),
+        (
+            "1 CALL LBL \"S\"\n2 M30\n3 LBL \"S\"\n4 LBL 0",
+            2,
+            "with nothing in it",
+        ),
+    ] {
+        let e = Program::parse(&wrap(body), &cfg).unwrap_err();
+        let shown = e.to_string();
+        assert!(
+            shown.starts_with(&format!("line {line}: ")) && shown.contains(what),
+            "{body}: {shown}"
+        );
+    }
+}
+
 #[test]
 fn fn14_stops_the_program_with_its_number_and_text() {
     let dir = common::temp_dir("q-fn14");
