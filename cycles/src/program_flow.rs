@@ -125,15 +125,20 @@ fn call_runs_nothing(
 }
 
 /// Reads parameters for formulas: `run`'s values, and for `check` the parameters a
-/// cycle will measure ([`QParams::mark_measured`]).
+/// cycle will measure ([`QParams::mark_measured`]). A QR parameter that no run has set
+/// reads 0: the TNC's remanent parameters are a memory that starts at 0, so a counter
+/// `QR1 = QR1 + 1` works on a fresh machine; a Q or QL parameter nothing set before is
+/// still an error (a typo, or a result read before its cycle ran).
 impl Env for QParams {
     fn lookup(&self, name: QName) -> Lookup {
         if self.is_measured(name) {
             return Lookup::Measured;
         }
-        self.get(name)
-            .cloned()
-            .map_or(Lookup::Undefined, Lookup::Value)
+        match self.get(name) {
+            Some(v) => Lookup::Value(v.clone()),
+            None if name.kind == crate::q_params::QKind::QR => Lookup::Value(QValue::Number(0.0)),
+            None => Lookup::Undefined,
+        }
     }
 }
 

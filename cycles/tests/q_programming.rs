@@ -350,13 +350,12 @@ fn qr_parameters_are_kept_across_two_runs() {
 2 LBL 1
 3 QR1 = QR1 + 1
 4 QR2 = 0.5";
-    // The first run: QR1 is undefined, an error at line 1 (check says so too).
+    // The first run, on a fresh state (no QR file): QR1 reads 0, as the TNC's
+    // remanent memory starts (issue 34: the docs' own counter failed here).
+    assert!(!dir.join("mock.qr.toml").exists());
     let (r, _) = run_in(&dir, body);
-    assert!(
-        r.stopped.as_deref().unwrap().contains("QR1 is not defined"),
-        "{:?}",
-        r.stopped
-    );
+    assert!(r.completed(), "{:?}", r.stopped);
+    assert_eq!(num(&r, "QR1"), 1.0);
     let (r, _) = run_in(&dir, "1 QR1 = 10");
     assert!(r.completed());
     let (r, _) = run_in(&dir, body);
@@ -374,6 +373,24 @@ fn qr_parameters_are_kept_across_two_runs() {
     assert!(r.completed());
     let (r, _) = run_in(&dir, "1 Q6 = Q5");
     assert!(r.stopped.as_deref().unwrap().contains("Q5 is not defined"));
+    let (r, _) = run_in(&dir, "1 Q6 = QL5");
+    assert!(r.stopped.as_deref().unwrap().contains("QL5 is not defined"));
+}
+
+/// docs/q-parameters.md's QR example on a fresh state: `check` passes it and two runs
+/// count 1, 2 (a QR never set reads 0).
+#[test]
+fn the_docs_qr_counter_works_on_a_fresh_state() {
+    let dir = common::temp_dir("q-qr-fresh");
+    let cfg = cfg_in(&dir);
+    let p = program(&wrap("1 QR7 = QR7 + 1\n2 L Z+QR7 R0 FMAX"), &cfg);
+    preflight_program(&p, 0b111, &cfg, &dir.join("k.toml")).unwrap_or_else(|e| panic!("{e}"));
+    for n in [1.0, 2.0] {
+        let (r, m) = run_in(&dir, "1 QR7 = QR7 + 1\n2 L Z+QR7 R0 FMAX");
+        assert!(r.completed(), "{:?}", r.stopped);
+        assert_eq!(num(&r, "QR7"), n);
+        assert_eq!(m.moves.last().unwrap().0[2], n);
+    }
 }
 
 /// Each error stops the program at its line, before the move after it.
