@@ -240,3 +240,47 @@ fn progress_reports_cycles_moves_and_contacts() {
         .count();
     assert_eq!((started, contacts, finished), (3, 3, 3));
 }
+
+/// Issue 34: a refusal whose message already says "nothing moved" (cycle 451's plan
+/// with a Q253 the axes cannot run) said it twice: `check`'s message and `run`'s report say
+/// it once.
+#[test]
+fn a_refusal_says_nothing_moved_once() {
+    let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let cfg = probebridge_cycles::CyclesConfig::load(&root.join("configs/machines/table-ac.toml"))
+        .unwrap();
+    let text = std::fs::read_to_string(root.join("configs/programs/451-check.h")).unwrap();
+    let dir = common::temp_dir("run-nothing-moved");
+    let kinematics = dir.join("unreadable-kinematics.toml");
+    std::fs::write(&kinematics, "not = [a kinematics file").unwrap();
+    for (from, to) in [
+        // Slower than the slowest feed the axes run (1 mm/min): the plan refuses it.
+        ("Q253=+750", "Q253=+0.25"),
+        // A valid plan; the active kinematics file cannot be read.
+        ("Q253=+750", "Q253=+750"),
+    ] {
+        let program = Program::parse(&text.replacen(from, to, 1), &cfg).unwrap();
+        let e = preflight_program(&program, cfg.machine.axis_mask(), &cfg, &kinematics)
+            .unwrap_err()
+            .to_string();
+        assert_eq!(e.matches("nothing moved").count(), 1, "{e}");
+        let mut m = MockMachine::new(flat());
+        let mut confirm = |_: &str| true;
+        let mut progress = |_| {};
+        let mut opts = probebridge_cycles::RunOptions {
+            out_dir: dir.clone(),
+            confirm: &mut confirm,
+            progress: &mut progress,
+            kinematics: Some(kinematics.clone()),
+            estimator: None,
+        };
+        let report = probebridge_cycles::run_program(&program, &mut m, &cfg, &mut opts);
+        assert_eq!(m.motion_count(), 0);
+        let stopped = report.stopped.as_deref().unwrap();
+        assert_eq!(stopped.matches("nothing moved").count(), 1, "{stopped}");
+        for c in &report.cycles {
+            let said = c.message.as_deref().unwrap_or("");
+            assert!(said.matches("nothing moved").count() <= 1, "{said}");
+        }
+    }
+}

@@ -29,8 +29,8 @@ use misplaced::{datum_note, misplaced, misplaced_note};
 use preflight::{check_cycle_moves, check_linear_move, preflight_cycle};
 
 pub use preflight::{
-    assumed_start, check_complete, preflight_program, preflight_program_from, Preflight,
-    PreflightKind,
+    assumed_start, check_complete, nothing_moved, preflight_program, preflight_program_from,
+    Preflight, PreflightKind,
 };
 
 pub struct RunOptions<'a> {
@@ -281,7 +281,7 @@ fn before_start(
             return Err(Box::new(report));
         }
         Err(e @ (Preflight::Positioning { .. } | Preflight::Program { .. })) => {
-            report.stopped = Some(format!("{e}; nothing moved"));
+            report.stopped = Some(nothing_moved(e));
             return Err(Box::new(report));
         }
     }
@@ -289,7 +289,7 @@ fn before_start(
     match load_remanent(&qr_path) {
         Ok(r) => Ok((report, start_params(&r), qr_path)),
         Err(e) => {
-            report.stopped = Some(format!("{e}; nothing moved"));
+            report.stopped = Some(nothing_moved(e));
             Err(Box::new(report))
         }
     }

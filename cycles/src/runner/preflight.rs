@@ -19,6 +19,18 @@ use hal::config::MachineConfig;
 use hal::motion_guard::MotionGuard;
 use hal::{Axis, AxisPositions};
 
+/// A refusal before the first move, saying "nothing moved" once: many machine and
+/// cycle messages say it already, and a refusal that passes one on must not say it
+/// again.
+pub fn nothing_moved(message: impl std::fmt::Display) -> String {
+    let message = message.to_string();
+    if message.contains("nothing moved") {
+        message
+    } else {
+        format!("{message}; nothing moved")
+    }
+}
+
 /// Why a program cannot start on this machine.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[non_exhaustive]
@@ -59,11 +71,11 @@ fn preflight(
         CycleKind::SaveKinematics(_) => return Ok(()),
         CycleKind::MeasureKinematics(p) => {
             cycle451::plan(p, &tool.probe, &cfg.machine)
-                .map_err(|e| (PreflightKind::Plan(e.kind()), format!("{e}; nothing moved")))?;
+                .map_err(|e| (PreflightKind::Plan(e.kind()), nothing_moved(e)))?;
             ActiveKinematics::load(kinematics, &cfg.machine).map_err(|e| {
                 (
                     PreflightKind::ActiveKinematics,
-                    format!("active kinematics: {e}; nothing moved"),
+                    nothing_moved(format!("active kinematics: {e}")),
                 )
             })?;
         }
@@ -302,13 +314,7 @@ pub(super) fn check_cycle_moves(
         CycleKind::MeasureKinematics(p) => {
             let planned =
                 cycle451::dry_run::plan_moves(p, &call.head, cfg, kinematics, datum, here)
-                    .map_err(|e| {
-                        let mut message = e.to_string();
-                        if !message.ends_with("nothing moved") {
-                            message.push_str("; nothing moved");
-                        }
-                        refused(PreflightKind::Plan(e.kind()), message)
-                    })?;
+                    .map_err(|e| refused(PreflightKind::Plan(e.kind()), nothing_moved(e)))?;
             *here = planned.end;
             // Q431 = 1/3 in modes 1..3: later blocks are relative to the preset the
             // cycle writes at the sphere centre.
