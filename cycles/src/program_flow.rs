@@ -439,6 +439,26 @@ impl Flow {
     }
 }
 
+/// How many measuring cycles a run of `program` starts, when that is known before it
+/// runs: a program without jumps and calls runs its cycle blocks (with written or
+/// Q-parameter values) up to its end (M2/M30, END PGM) or FN 14 once each. `None`
+/// with jumps or calls: a loop or a subprogram starts a cycle block as often as the
+/// program's values say.
+pub fn cycle_count(program: &Program) -> Option<usize> {
+    let mut n = 0;
+    for b in &program.blocks {
+        match &b.statement {
+            Statement::Jump(_) | Statement::Call(_) => return None,
+            Statement::Cycle(_) | Statement::Deferred(_) => n += 1,
+            Statement::EndPgm { .. } | Statement::Stop(_) => break,
+            Statement::Other(code) if ends_program(code) => break,
+            _ => {}
+        }
+    }
+    // Blocks after the end (subprograms) run only when called: there are no calls.
+    Some(n)
+}
+
 /// The remanent parameters of the machine, as `run` and `check` start with them.
 pub fn start_params(remanent: &BTreeMap<QName, f64>) -> QParams {
     let mut p = QParams::new();

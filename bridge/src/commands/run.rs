@@ -87,12 +87,18 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     for note in &session.notes {
         tell!("note: {note}");
     }
-    let total = program.cycles().count();
+    // `[2/3]` when the program runs each cycle block once; in a loop or a subprogram
+    // the count of cycles started so far (`[cycle 5]`).
+    let total = cycles::program_flow::cycle_count(&program);
     let mut done = 0usize;
     let mut progress = |ev: ProgressEvent| match ev {
         ProgressEvent::CycleStarted { block, cycle, line } => {
             done += 1;
-            tell!("[{done}/{total}] block {block} (line {line}): cycle {cycle}");
+            let count = match total {
+                Some(n) => format!("{done}/{n}"),
+                None => format!("cycle {done}"),
+            };
+            tell!("[{count}] block {block} (line {line}): cycle {cycle}");
         }
         ProgressEvent::Contact { centre, .. } => {
             tell!(
