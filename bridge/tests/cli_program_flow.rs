@@ -91,3 +91,68 @@ fn the_progress_count_makes_sense_in_a_loop() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Block numbers out of order and a length measured in mm used by an INCH program:
+/// `check` and `run` say each at its line and go on (exit 0).
+#[test]
+fn check_and_run_warn_at_the_line_and_go_on() {
+    let dir = tmpdir("flow-warnings");
+    let numbers = dir.join("numbers.h");
+    std::fs::write(
+        &numbers,
+        format!(
+            "0 BEGIN PGM NUM MM
+1 TOOL CALL \"TOUCH_PROBE\" Z
+{}6 L Z+100 R0 FMAX
+4 L Z+120 R0 FMAX
+9 END PGM NUM MM
+",
+            point444(5, "+0")
+        ),
+    )
+    .unwrap();
+    let warned = "line 15: warning: block number 4 after 6 (line 14)";
+    let out = run(bin().args(["check", numbers.to_str().unwrap()]));
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{said}");
+    assert!(said.contains(warned), "{said}");
+    let (out, v) = run_program(
+        &numbers,
+        &configs().join("scenarios/seed-444.toml"),
+        &dir,
+        &[],
+    );
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{said}");
+    assert!(said.contains(warned), "{said}");
+    assert_eq!(v.unwrap()["cycles"][0]["status"], "ok");
+
+    let inch = dir.join("inch.h");
+    std::fs::write(
+        &inch,
+        "0 BEGIN PGM IN INCH
+1 TOOL CALL \"TOUCH_PROBE\" Z
+2 TCH PROBE 444 PROBING 3D ~
+  Q263=+0 ~
+  Q264=+0 ~
+  Q294=+0 ~
+  Q581=+1 ~
+  Q582=+0 ~
+  Q583=+0 ~
+  Q320=+0 ~
+  Q260=+4
+3 Q10 = Q151 + 0.5
+4 L X+Q10 R0 FMAX
+5 END PGM IN INCH
+",
+    )
+    .unwrap();
+    let out = run(bin().args(["check", inch.to_str().unwrap()]));
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{said}");
+    assert!(
+        said.contains("line 13: warning: Q10 is in mm (the cycle reports in mm); this INCH program reads it as inches (L X+Q10)"),
+        "{said}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

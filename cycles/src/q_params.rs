@@ -135,6 +135,9 @@ pub struct QParams {
     written: BTreeSet<QName>,
     /// `check` only: set by a measuring cycle, known when the program runs.
     measured: BTreeSet<QName>,
+    /// `check` only: hold a length a cycle measured, in mm whatever the program's unit
+    /// (its result, or a value computed from one: [`crate::program_flow`]).
+    in_mm: BTreeSet<QName>,
 }
 
 impl QParams {
@@ -149,6 +152,7 @@ impl QParams {
     /// Sets `name` (this run wrote it).
     pub fn set(&mut self, name: QName, value: QValue) {
         self.measured.remove(&name);
+        self.in_mm.remove(&name);
         self.values.insert(name, value);
         self.written.insert(name);
     }
@@ -156,7 +160,18 @@ impl QParams {
     /// `check`: `name` will hold a measured result (or a value computed from one).
     pub fn mark_measured(&mut self, name: QName) {
         self.values.remove(&name);
+        self.in_mm.remove(&name);
         self.measured.insert(name);
+    }
+
+    /// `check`: `name` holds a length measured in mm (set after its value).
+    pub fn mark_mm(&mut self, name: QName) {
+        self.in_mm.insert(name);
+    }
+
+    /// Whether `name` holds a length measured in mm ([`QParams::mark_mm`]).
+    pub fn is_mm(&self, name: QName) -> bool {
+        self.in_mm.contains(&name)
     }
 
     pub fn is_measured(&self, name: QName) -> bool {
@@ -218,6 +233,20 @@ pub fn results_of(cycle: u16) -> Vec<QName> {
             .collect(),
         431 => [158, 159].into_iter().chain(170..=175).map(q).collect(),
         444 => (151..=153).chain(161..=164).chain([183]).map(q).collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// The results of a cycle that are lengths: in mm whatever the program's unit (the
+/// seeds: the control logs and reports the measuring results in mm only). 451
+/// Q147..Q149, 431 Q173..Q175, 444 Q151..Q153 and Q161..Q164; the angles, counts and
+/// statuses are not lengths.
+pub fn length_results_of(cycle: u16) -> Vec<QName> {
+    let q = |n| QName::new(QKind::Q, n);
+    match cycle {
+        451 => (147..=149).map(q).collect(),
+        431 => (173..=175).map(q).collect(),
+        444 => (151..=153).chain(161..=164).map(q).collect(),
         _ => Vec::new(),
     }
 }

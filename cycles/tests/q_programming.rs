@@ -7,7 +7,7 @@ mod common;
 use common::{MockMachine, Surface};
 use nalgebra::Vector3;
 use probebridge_cycles::q_params::QValue;
-use probebridge_cycles::runner::{preflight_program, PreflightKind};
+use probebridge_cycles::runner::{preflight_program, program_warnings, PreflightKind};
 use probebridge_cycles::{CyclesConfig, Program, ProgramReport};
 use std::path::Path;
 
@@ -808,4 +808,125 @@ fn qs_parameters_as_cycle_string_values() {
     let stopped = r.stopped.as_deref().unwrap();
     assert!(stopped.contains("QS1 is not defined"), "{stopped}");
     assert!(m.probes.is_empty());
+}
+
+/// Issue 34: block numbers out of order or repeated are a warning at their line (the
+/// TNC renumbers), from `check` and `run` alike (both ask
+/// [`program_warnings`]); the program is not refused and runs in the order written.
+#[test]
+fn block_numbers_out_of_order_or_repeated_are_warned_at_their_line() {
+    let dir = common::temp_dir("q-numbers");
+    let cfg = cfg_in(&dir);
+    let body = "10 Q1 = 1\n30 Q1 = Q1 * 3\n20 Q1 = Q1 + 4\n30 L Z+Q1 R0 FMAX";
+    let p = program(&wrap(body), &cfg);
+    let said: Vec<String> = program_warnings(&p, &cfg)
+        .iter()
+        .map(ToString::to_string)
+        .collect();
+    assert_eq!(said.len(), 2, "{said:?}");
+    assert!(
+        said[0].starts_with("line 4: warning: block number 20 after 30 (line 3)"),
+        "{said:?}"
+    );
+    assert!(
+        said[1].starts_with("line 5: warning: block number 30 again (first on line 3)"),
+        "{said:?}"
+    );
+    preflight_program(&p, 0b111, &cfg, &dir.join("k.toml")).unwrap_or_else(|e| panic!("{e}"));
+    let (r, m) = run_in(&dir, body);
+    assert!(r.completed(), "{:?}", r.stopped);
+    assert_eq!(num(&r, "Q1"), 7.0);
+    assert_eq!(m.moves.last().unwrap().0[2], 7.0);
+    // In order: nothing to say.
+    let p = program(&wrap("1 Q1 = 1\n2 Q2 = 2\n7 Q3 = 3"), &cfg);
+    assert!(program_warnings(&p, &cfg).is_empty());
+}
+
+/// A 444 in an INCH program (values in inches), then `blocks`.
+fn inch_444(blocks: &str, unit: &str) -> String {
+    format!(
+        "0 BEGIN PGM T {unit}
+1 TOOL CALL \"TOUCH_PROBE\" Z
+2 TCH PROBE 444 PROBING 3D ~
+  Q263=+0.4 ~
+  Q264=+0.2 ~
+  Q294=+0.01 ~
+  Q581=+0 ~
+  Q582=+0 ~
+  Q583=+1 ~
+  Q320=+0.04 ~
+  Q260=+4
+{blocks}
+99999 END PGM T {unit}
+"
+    )
+}
+
+/// Issue 34: the cycles report lengths in mm whatever the program's unit. An INCH
+/// program that moves to a measured length, or gives it to a cycle parameter of unit
+/// length, directly or through assignments, is warned at that line; one that converts
+/// it (/ 25.4) or uses a measured angle or count is not, nor an MM program.
+#[test]
+fn an_inch_program_using_a_length_measured_in_mm_is_warned_at_the_line() {
+    let cfg = common::config();
+    let blocks = "3 Q1 = Q151
+4 Q2 = Q1 * 2 + 0.1
+5 Q3 = Q161 / 25.4
+6 Q4 = Q183 + 1
+7 L X+Q2 Y+Q3 Z+Q4 R0 FMAX
+8 L X-Q151 R0 FMAX
+9 Q1 = 0.5
+10 L X+Q1 R0 FMAX
+11 TCH PROBE 444 PROBING 3D ~
+  Q263=+Q3 ~
+  Q264=-Q164 ~
+  Q294=+0.01 ~
+  Q581=+0 ~
+  Q582=+0 ~
+  Q583=+1 ~
+  Q320=+Q2 ~
+  Q260=+4";
+    let p = program(&inch_444(blocks, "INCH"), &cfg);
+    let said: Vec<String> = program_warnings(&p, &cfg)
+        .iter()
+        .map(ToString::to_string)
+        .collect();
+    let expected = [
+        "line 16: warning: Q2 is in mm (the cycle reports in mm); this INCH program reads it as inches (L X+Q2)",
+        "line 17: warning: Q151 is in mm (the cycle reports in mm); this INCH program reads it as inches (L X-Q151)",
+        "line 22: warning: Q164 is in mm (the cycle reports in mm); this INCH program reads it as inches (cycle 444 Q264=-Q164)",
+        "line 27: warning: Q2 is in mm (the cycle reports in mm); this INCH program reads it as inches (cycle 444 Q320=+Q2)",
+    ];
+    assert_eq!(said.len(), expected.len(), "{said:#?}");
+    for (s, e) in said.iter().zip(expected) {
+        assert!(s.starts_with(e), "{s}\nexpected {e}");
+    }
+    // The same in MM: nothing to say.
+    let p = program(&inch_444(blocks, "MM"), &cfg);
+    assert!(program_warnings(&p, &cfg).is_empty());
+}
+
+/// The taint follows the program's flow: a measured length assigned in a subprogram
+/// that stands after M30 and is called before the move.
+#[test]
+fn the_mm_warning_follows_calls_and_jumps() {
+    let cfg = common::config();
+    let blocks = "3 CALL LBL 5
+4 FN 11: IF +Q183 GT +0 GOTO LBL 6
+5 L Z+QL1 R0 FMAX
+6 LBL 6
+7 M30
+8 LBL 5
+9 QL1 = ABS Q153
+10 LBL 0";
+    let p = program(&inch_444(blocks, "INCH"), &cfg);
+    let said: Vec<String> = program_warnings(&p, &cfg)
+        .iter()
+        .map(ToString::to_string)
+        .collect();
+    assert_eq!(said.len(), 1, "{said:#?}");
+    assert!(
+        said[0].starts_with("line 14: warning: QL1 is in mm"),
+        "{said:?}"
+    );
 }

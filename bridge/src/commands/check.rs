@@ -2,13 +2,14 @@
 //! configuration (probe table, PREDEF values) and run every check `run` makes before
 //! the first move (cycle 451's plan against the machine and its active kinematics; the
 //! moves of `L` blocks and cycles 431 and 444 against the motion guard); nothing moves
-//! and no bus is opened.
+//! and no bus is opened. Warnings (block numbers out of order, a length measured in mm
+//! used by an INCH program) are said on stderr and do not refuse the program.
 
 use crate::machine_state::machine_files;
 use crate::session::options::MachineOptions;
 use crate::session::{cycles_config_with_presets, resolve_machine};
 use cycles::parser::parse_program;
-use cycles::runner::{assumed_start, check_complete, preflight_program_from};
+use cycles::runner::{assumed_start, check_complete, preflight_program_from, program_warnings};
 use cycles::CyclesConfig;
 use hal::AxisPositions;
 use std::path::Path;
@@ -40,6 +41,10 @@ pub fn run(
         Some(sc) => assumed_start(&cfg).merged(&sim::machine::SimMachine::start_positions(sc)),
         None => assumed_start(&cfg),
     };
+    // What does not stop the program, said before its errors or its "ok".
+    if let Ok(parsed) = parse_program(&text, &cycles_cfg) {
+        super::tell_errors(program, &program_warnings(&parsed, &cycles_cfg));
+    }
     let errors = check_text_from(&text, &cycles_cfg, &files.kinematics, &start);
     if errors.is_empty() {
         say!("{}: ok (machine {})", program.display(), cfg.name);

@@ -10,7 +10,9 @@ use crate::session::options::MachineOptions;
 use crate::session::{cycles_config_with_presets, resolve_machine, Session};
 use cycles::program::{Program, ProgramError};
 use cycles::progress::ProgressEvent;
-use cycles::runner::{check_complete, preflight_program, run_program, RunOptions};
+use cycles::runner::{
+    check_complete, preflight_program, program_warnings, run_program, RunOptions,
+};
 use std::io::{BufRead, IsTerminal, Write};
 use std::path::PathBuf;
 use std::time::Duration;
@@ -227,6 +229,8 @@ fn validated(
         }
         Err(e) => return Err(e.to_string()),
     };
+    // As `check` says them: they do not stop the run.
+    super::tell_errors(&args.program, &program_warnings(&program, cfg));
     if let Err(e) = check_complete(&program).and_then(|()| {
         preflight_program(&program, cfg.machine.axis_mask(), cfg, kinematics)
             .map_err(|e| e.to_string())

@@ -30,7 +30,7 @@ use preflight::{check_cycle_moves, check_linear_move, preflight_cycle};
 
 pub use preflight::{
     assumed_start, check_complete, nothing_moved, preflight_program, preflight_program_from,
-    Preflight, PreflightKind,
+    program_warnings, Preflight, PreflightKind,
 };
 
 pub struct RunOptions<'a> {

@@ -267,6 +267,39 @@ pub fn preflight_program_from(
     Ok(())
 }
 
+/// What `check` and `run` say about a program that does not stop it: block numbers out
+/// of order or repeated, and, in an INCH program, a length a cycle measured (in mm)
+/// used as a length in an `L` block or a cycle parameter, followed as the program
+/// runs (its jumps both ways where they depend on a measured value, its calls and
+/// repeats) through the assignments that compute from it. Each at its line, once,
+/// sorted by line. What the program cannot do is [`preflight_program`]'s.
+pub fn program_warnings(program: &Program, cfg: &CyclesConfig) -> Vec<crate::Diagnostic> {
+    let mut out = crate::program_flow::block_number_warnings(program);
+    if program.unit == crate::length_unit::LengthUnit::Inch {
+        // An unreadable QR file is preflight_program's error; the walk needs no values
+        // of it to follow the measured results.
+        let remanent = load_remanent(&remanent_path(&cfg.presets.path)).unwrap_or_default();
+        let mut walk = CheckWalk::new(
+            program,
+            start_params(&remanent),
+            Datum::new(cfg.presets.clone()),
+            assumed_start(&cfg.machine),
+            cfg.parameters.max_jumps,
+            crate::cycle451::rotary_m_function::written_params(cfg),
+        );
+        // A block that cannot be carried out ends the walk: preflight_program says so.
+        while let Ok(Some(block)) = walk.next_block() {
+            let (_, params, _) = walk.state();
+            out.extend(crate::program_flow::mm_in_inch_warnings(
+                program, block, params,
+            ));
+        }
+    }
+    out.sort_by(|a, b| (a.line, &a.message).cmp(&(b.line, &b.message)));
+    out.dedup();
+    out
+}
+
 /// [`preflight`] of one cycle, as a [`Preflight`] error.
 pub(super) fn preflight_cycle(
     call: &CycleCall,
