@@ -89,17 +89,12 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     for note in &session.notes {
         tell!("note: {note}");
     }
-    // `[2/3]` when the program runs each cycle block once; in a loop or a subprogram
-    // the count of cycles started so far (`[cycle 5]`).
     let total = cycles::program_flow::cycle_count(&program);
     let mut done = 0usize;
     let mut progress = |ev: ProgressEvent| match ev {
         ProgressEvent::CycleStarted { block, cycle, line } => {
             done += 1;
-            let count = match total {
-                Some(n) => format!("{done}/{n}"),
-                None => format!("cycle {done}"),
-            };
+            let count = progress_count(done, total);
             tell!("[{count}] block {block} (line {line}): cycle {cycle}");
         }
         ProgressEvent::Contact { centre, .. } => {
@@ -177,6 +172,15 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     }
     closed?;
     Ok(if report.completed() { 0 } else { 1 })
+}
+
+/// `2/3` for the second cycle of a program that runs each cycle block once
+/// (`total`); in a loop or a subprogram the count of cycles started so far, `cycle 5`.
+fn progress_count(done: usize, total: Option<usize>) -> String {
+    match total {
+        Some(n) => format!("{done}/{n}"),
+        None => format!("cycle {done}"),
+    }
 }
 
 /// The machine as the cycles see it with the preset table and the probes' calibration
