@@ -47,8 +47,8 @@ pub fn evaluate(
     old: &Calibration,
     frame: &[Vector3<f64>; 3],
     origin_t: f64,
-) -> (Calibration, Vector3<f64>, Vec<String>) {
-    let mut notes = Vec::new();
+) -> Result<(Calibration, Vector3<f64>, Vec<String>), CycleError> {
+    let mut notes = probed.notes.clone();
     let n = frame[2];
     let eq = &probed.equator;
     let plane = |v: &Vector3<f64>| [frame[0].dot(v), frame[1].dot(v)];
@@ -63,13 +63,14 @@ pub fn evaluate(
         old.offset
     };
     // The pole over the found centre fixes the equator's true height: the circle of
-    // a ring probed ε off it has radius sqrt(r² - ε²).
+    // a ring probed ε off it has radius sqrt(S² - ε²). Solved in closed form, so
+    // exact whatever R the table held (the probing re-probes the rings until ε is
+    // within EQUATOR_HEIGHT_TOLERANCE, so that the axial pre-travel's bias of the pole
+    // enters only to second order).
     let pole_t = n.dot(&probed.pole);
-    let mut r = rho - p.sphere_radius;
-    for _ in 0..3 {
-        let eps = probed.equator_height - (pole_t - p.sphere_radius - r);
-        r = (rho * rho + eps * eps).sqrt() - p.sphere_radius;
-    }
+    let (s, _) = measure::sphere_from_ring_and_pole(rho, probed.equator_height, pole_t)
+        .map_err(|e| CycleError::Geometry(format!("cycle 460: evaluating R: {e}")))?;
+    let r = s - p.sphere_radius;
     let l = if p.calibrate_length {
         pole_t - origin_t - p.length_datum - p.sphere_radius - r
     } else {
@@ -101,7 +102,7 @@ pub fn evaluate(
     };
     // The true sphere centre: the latched one plus the stylus's shift.
     let true_centre = seen + frame[0] * offset[0] + frame[1] * offset[1] - n * l;
-    (cal, true_centre, notes)
+    Ok((cal, true_centre, notes))
 }
 
 /// R, CAL_OF1/2 and L as the cycle's results, by the row's column names (the TNC's 460
@@ -140,7 +141,7 @@ impl MeasuringCycle for CalibrationParams {
             frame,
         }
         .run()?;
-        let (cal, centre, notes) = evaluate(self, &probed, &old, &frame, origin_t);
+        let (cal, centre, notes) = evaluate(self, &probed, &old, &frame, origin_t)?;
         if let Some((key, why)) = cal.invalid_field() {
             return Err(CycleError::Geometry(format!(
                 "cycle 460: the calibration is not plausible ({key}: {why}); the probe table was not changed"
