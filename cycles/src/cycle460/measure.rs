@@ -1,8 +1,10 @@
 //! Cycle 460's probing: the pole from the start position (roughly over the sphere, as
-//! the operator set it up), three points that locate the centre from outside every
-//! place the sphere can be, the equator's Q423 points with the spindle at 0° (and at
-//! 180° where it can be oriented), the pole again over the centre the equator gave,
-//! and with Q455 the rings of the 3D calibration. All with the spindle at one angle
+//! the operator set it up), three points that locate the sphere (centre and radius)
+//! from outside every place it can be for a start up to 1.5 x the reach, the checks of
+//! what was located against Q407 and the reach, the equator's Q423 points with the
+//! spindle at 0° (and at 180° where it can be oriented) and the pole again over the
+//! centre they gave, repeated at the measured equator until ring and pole agree, and
+//! with Q455 the rings of the 3D calibration (below the equator too). All with the spindle at one angle
 //! at a time, so every position here is the latched (nominal) ball centre: the sphere
 //! as seen by the stylus of that angle, translated by minus its offset.
 //!
