@@ -223,3 +223,90 @@ impl MeasuringCycle for CalibrationParams {
         Ok(out)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::measure::EquatorRing;
+    use super::*;
+
+    const FRAME: [Vector3<f64>; 3] = [
+        Vector3::new(1.0, 0.0, 0.0),
+        Vector3::new(0.0, 1.0, 0.0),
+        Vector3::new(0.0, 0.0, 1.0),
+    ];
+
+    /// A ring of 8 ball centres about `c` probed `eps` above the equator of the
+    /// ball-centre sphere of radius `s`, with the stylus offset `off` at `spindle`.
+    fn ring(c: Vector3<f64>, s: f64, eps: f64, off: [f64; 2], spindle: f64) -> EquatorRing {
+        let rho = (s * s - eps * eps).sqrt();
+        let shift = Vector3::new(off[0], off[1], 0.0);
+        let centre = c - shift + Vector3::new(0.0, 0.0, eps);
+        let contacts = (0..8)
+            .map(|k| {
+                let a = (k as f64 * 45.0f64).to_radians();
+                centre + Vector3::new(rho * a.cos(), rho * a.sin(), 0.0)
+            })
+            .collect();
+        EquatorRing {
+            spindle,
+            contacts,
+            centre,
+            radius: rho,
+        }
+    }
+
+    /// The rings probed 1.9 mm above the equator of a small sphere (Q407 = 6, R = 2:
+    /// what a table R 1.9 mm too small did) give R, the offset and L exactly. The old
+    /// height correction stopped after three fixed steps, 2.8 µm short here.
+    #[test]
+    fn r_is_exact_with_the_rings_far_off_the_equator() {
+        let (q407, r_true, eps) = (6.0, 2.0, 1.9);
+        let s = q407 + r_true;
+        let c = Vector3::new(10.0, -5.0, 30.0);
+        let off = [0.003, -0.002];
+        let probed = Probed {
+            equator: vec![
+                ring(c, s, eps, off, 0.0),
+                ring(c, s, eps, [-off[0], -off[1]], 180.0),
+            ],
+            equator_height: c.z + eps,
+            pole: c + Vector3::new(-off[0], -off[1], s),
+            contacts_3d: Vec::new(),
+            oriented: true,
+            notes: Vec::new(),
+        };
+        let p = CalibrationParams {
+            sphere_radius: q407,
+            clearance: 0.0,
+            to_clearance_height: true,
+            points: 8,
+            reference_angle: 0.0,
+            calibrate_length: true,
+            length_datum: c.z,
+            points_3d: 0,
+        };
+        let (cal, centre, _) = evaluate(
+            &p,
+            &probed,
+            &Calibration::nominal(r_true - eps),
+            &FRAME,
+            0.0,
+        )
+        .unwrap();
+        assert!((cal.r - r_true).abs() < 1e-12, "R = {}", cal.r);
+        assert!((cal.offset[0] - off[0]).abs() < 1e-12, "{:?}", cal.offset);
+        assert!((cal.offset[1] - off[1]).abs() < 1e-12, "{:?}", cal.offset);
+        assert!(cal.l.abs() < 1e-12, "L = {}", cal.l);
+        assert!((centre - c).norm() < 1e-9, "{centre:?}");
+    }
+
+    /// The closed form needs the pole above the ring; otherwise it says so.
+    #[test]
+    fn a_pole_not_above_the_ring_is_an_error() {
+        let (s, c) = measure::sphere_from_ring_and_pole(7.9, 30.3, 38.0).unwrap();
+        assert!((s - (7.9f64 * 7.9 + 7.7 * 7.7) / 15.4).abs() < 1e-12);
+        assert!((c - (38.0 - s)).abs() < 1e-12);
+        let e = measure::sphere_from_ring_and_pole(7.9, 38.0, 38.0).unwrap_err();
+        assert!(e.contains("not above the ring"), "{e}");
+    }
+}
