@@ -262,11 +262,11 @@ fn cycle_460_stops_when_the_sphere_found_contradicts_q407() {
 }
 
 /// Starts 0.9, 1.05, 1.2 and 1.5 x the reach (half of Q407 + R) off the sphere centre,
-/// at four angles and three heights above the pole, with Q301 = 1 and 0: within the
-/// reach 460 completes and finds the stylus; beyond it the cycle stops with how far
-/// off the start was and where to put the probe, or finds no pole and says where to
-/// put it. Never a positioning move that touches the sphere. The old cycle ran its
-/// locating points into the sphere from a start just beyond the reach.
+/// at four angles and four heights (from 2 mm below the pole to 8 mm above it), with
+/// Q301 = 1 and 0: within the reach 460 completes and finds the stylus; beyond it the
+/// cycle stops with how far off the start was and where to put the probe, or finds no
+/// pole and says where to put it. Never a positioning move that touches the sphere.
+/// The old cycle went on from a start just beyond the reach.
 #[test]
 fn cycle_460_beyond_its_reach_stops_and_never_touches_while_positioning() {
     let (centre, radius) = ([-15.0, 10.0, 45.0], 20.0);
@@ -277,7 +277,7 @@ fn cycle_460_beyond_its_reach_stops_and_never_touches_while_positioning() {
     let mut runs = 0;
     for factor in [0.9, 1.05, 1.2, 1.5] {
         for az in [0.0f64, 75.0, 200.0, 300.0] {
-            for above in [0.5, 2.0, 8.0] {
+            for above in [-2.0, 0.5, 2.0, 8.0] {
                 let q301 = (runs % 2) as u32;
                 let d = factor * reach;
                 let start = [
@@ -326,7 +326,7 @@ fn cycle_460_beyond_its_reach_stops_and_never_touches_while_positioning() {
             }
         }
     }
-    assert_eq!(runs, 48);
+    assert_eq!(runs, 64);
 }
 
 fn block_444(p: V, n: V, q320: f64) -> String {
