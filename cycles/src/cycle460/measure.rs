@@ -4,9 +4,10 @@
 //! what was located against Q407 and the reach, the equator's Q423 points with the
 //! spindle at 0° (and at 180° where it can be oriented) and the pole again over the
 //! centre they gave, repeated at the measured equator until ring and pole agree, and
-//! with Q455 the rings of the 3D calibration (below the equator too). All with the spindle at one angle
-//! at a time, so every position here is the latched (nominal) ball centre: the sphere
-//! as seen by the stylus of that angle, translated by minus its offset.
+//! with Q455 the rings of the 3D calibration (below the equator too). All with the
+//! spindle at one angle at a time, so every position here is the latched (nominal)
+//! ball centre: the sphere as seen by the stylus of that angle, translated by minus
+//! its offset.
 //!
 //! Why the locating points: the pole contact does not say how far off the centre the
 //! start was. Rings about the start's axis at that contact's height would, with a
