@@ -10,6 +10,7 @@ use crate::length_unit::LengthUnit;
 use crate::measuring_log::probing3d::{write_probing3d_log, Probing3dRecord, PROBING_3D_LOG};
 use crate::planned_move::PlannedMove;
 use crate::positioning::Positioner;
+use crate::probe_table::calibration::Table3d;
 use crate::progress::ProgressSink;
 use crate::results::CycleOutput;
 use crate::tolerance::{Tolerance, WorkpieceStatus};
@@ -173,6 +174,18 @@ impl Probing3dParams {
         let cal = probe.calibration();
         let axis = call.tool.axis;
         let t = axis.tool_index();
+        if let Some(t) = cal.table_3d.as_ref().filter(|t| !t.covers(self.normal)) {
+            // Below the table's lowest ring the effective radius is not known: L
+            // absorbs the axial pre-travel's excess, so a mirrored value errs by twice
+            // it times the elevation's sine.
+            return Err(CycleError::Plan(format!(
+                "Q581/Q582/Q583: the surface normal points {:.1}° below the working plane, and the 3D calibration of probe \"{}\" covers normals from {:.1}° up to the pole only; recalibrate with cycle 460 and Q455 (its table reaches {:.0}°), or probe this point from a direction it covers; nothing moved",
+                -Table3d::elevation(self.normal),
+                probe.name,
+                t.lowest_elevation(),
+                crate::probe_table::calibration::RING_ELEVATIONS[0]
+            )));
+        }
         let n = Vector3::from(axis.to_machine(self.normal));
         // Program coordinates: relative to the active preset plus shift (`origin`).
         let nominal = Vector3::from(axis.to_machine(self.nominal)) + origin;
@@ -210,7 +223,9 @@ impl Probing3dParams {
     /// (machine XYZ) and the axes at `here` (the safe height and the working plane in
     /// the order `from_above` gives): what `check` and `run` hold against the machine before the
     /// program's first move. The retraction after the contact, MB back along the
-    /// normal, lies between its ends for a contact at the start and at the path's end.
+    /// normal, lies between its ends for a contact at the start and at the path's end;
+    /// under an overhang (a normal below the working plane) the probe then goes back
+    /// along the normal to the pre-position and up the way it came.
     pub fn planned_moves(
         &self,
         call: &CycleBlock,
@@ -240,7 +255,7 @@ impl Probing3dParams {
         } else {
             [up, across]
         };
-        Ok(vec![
+        Ok([
             first,
             second,
             position(
@@ -264,8 +279,16 @@ impl Probing3dParams {
                 "retracting",
                 AxisPositions::linear((path_end + a.n * probe.mb).into()),
             ),
-            position("moving to the safe height", safe),
-        ])
+        ]
+        .into_iter()
+        .chain(under_material(a.n, axis).then(|| {
+            position(
+                "back to the pre-position",
+                AxisPositions::linear(a.start.into()),
+            )
+        }))
+        .chain([position("moving to the safe height", safe)])
+        .collect())
     }
 }
 
@@ -275,6 +298,12 @@ impl Probing3dParams {
 /// stand; one below it goes up to the safe height first, then across.
 fn from_above(here: Option<f64>, safe_height: f64) -> bool {
     here.is_some_and(|h| h > safe_height)
+}
+
+/// Whether the surface normal `n` (machine frame) points below the working plane: the
+/// material then overhangs the contact, and the probe leaves the way it came.
+fn under_material(n: Vector3<f64>, axis: crate::probe_axis::ProbeAxis) -> bool {
+    n[axis.tool_index()] < -1e-9
 }
 
 /// `v` rounded up to the 4 decimals a message shows (the lowest value shown clears).
@@ -324,6 +353,12 @@ fn measure<M: Machine>(
     let centre = Vector3::from(contact.positions.xyz());
     // Retract from the contact by MB against the probing direction, then clear.
     pos.to("retracting", (centre + n * probe.mb).into())?;
+    if under_material(n, axis) {
+        // Back the way it came: along the normal to the pre-position, which was
+        // reached straight from the safe height. Straight up from under an overhang (a
+        // point below a sphere's equator) would go through the material.
+        pos.to("back to the pre-position", start.into())?;
+    }
     pos.safe_height(safe_height)?;
 
     // The true ball centre at the contact, and the effective radius in the

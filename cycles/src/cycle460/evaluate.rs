@@ -17,8 +17,15 @@
 use crate::probe_table::calibration::Table3d;
 use nalgebra::{Matrix3, Vector2, Vector3};
 
+/// The circle fit's Gauss-Newton stops when a step moves centre and radius by less
+/// than this, mm; it must within [`CIRCLE_FIT_ITERATIONS`] or the fit is an error.
+pub const CIRCLE_FIT_TOLERANCE: f64 = 1e-10;
+/// The most Gauss-Newton steps of a circle fit (on a ring it converges in a handful).
+pub const CIRCLE_FIT_ITERATIONS: usize = 50;
+
 /// Least-squares circle (geometric distances) through points of a plane: an algebraic
-/// fit, refined by Gauss-Newton. Returns (centre, radius).
+/// fit, refined by Gauss-Newton to [`CIRCLE_FIT_TOLERANCE`]. Returns (centre, radius),
+/// or why not (a fit that did not converge says so).
 pub fn fit_circle(points: &[[f64; 2]]) -> Result<([f64; 2], f64), String> {
     if points.len() < 3 {
         return Err(format!("a circle needs 3 points, got {}", points.len()));
@@ -47,7 +54,8 @@ pub fn fit_circle(points: &[[f64; 2]]) -> Result<([f64; 2], f64), String> {
         .ok_or("the points lie on a line; they give no circle")?;
     let mut c = Vector2::new(-s.x / 2.0, -s.y / 2.0);
     let mut r = (c.norm_squared() - s.z).max(0.0).sqrt();
-    for _ in 0..50 {
+    let mut last = f64::INFINITY;
+    for _ in 0..CIRCLE_FIT_ITERATIONS {
         let mut jtj = Matrix3::zeros();
         let mut jtr = Vector3::zeros();
         for p in &q {
@@ -67,11 +75,14 @@ pub fn fit_circle(points: &[[f64; 2]]) -> Result<([f64; 2], f64), String> {
             .ok_or("the circle fit is degenerate")?;
         c += Vector2::new(step.x, step.y);
         r += step.z;
-        if step.norm() < 1e-15 * r.max(1.0) {
-            break;
+        last = step.norm();
+        if last < CIRCLE_FIT_TOLERANCE {
+            return Ok(([c.x + mean.x, c.y + mean.y], r));
         }
     }
-    Ok(([c.x + mean.x, c.y + mean.y], r))
+    Err(format!(
+        "the circle fit did not converge: its last step was {last:.3e} mm after {CIRCLE_FIT_ITERATIONS} iterations (tolerance {CIRCLE_FIT_TOLERANCE:e} mm)"
+    ))
 }
 
 /// The unit direction of azimuth `az` and elevation `el` (deg) in the working plane

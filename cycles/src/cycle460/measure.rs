@@ -1,10 +1,13 @@
 //! Cycle 460's probing: the pole from the start position (roughly over the sphere, as
-//! the operator set it up), three points that locate the centre from outside every
-//! place the sphere can be, the equator's Q423 points with the spindle at 0° (and at
-//! 180° where it can be oriented), the pole again over the centre the equator gave,
-//! and with Q455 the rings of the 3D calibration. All with the spindle at one angle
-//! at a time, so every position here is the latched (nominal) ball centre: the sphere
-//! as seen by the stylus of that angle, translated by minus its offset.
+//! the operator set it up), three points that locate the sphere (centre and radius)
+//! from outside every place it can be for a start up to 1.5 x the reach, the checks of
+//! what was located against Q407 and the reach, the equator's Q423 points with the
+//! spindle at 0° (and at 180° where it can be oriented) and the pole again over the
+//! centre they gave, repeated at the measured equator until ring and pole agree, and
+//! with Q455 the rings of the 3D calibration (below the equator too). All with the
+//! spindle at one angle at a time, so every position here is the latched (nominal)
+//! ball centre: the sphere as seen by the stylus of that angle, translated by minus
+//! its offset.
 //!
 //! Why the locating points: the pole contact does not say how far off the centre the
 //! start was. Rings about the start's axis at that contact's height would, with a
@@ -23,14 +26,50 @@ use hal::{AxisPositions, Machine, ProbeMove};
 use nalgebra::Vector3;
 
 /// The start may be this far off the sphere centre in the working plane, as a
-/// fraction of Q407 + R: the first pole contact is then lower, and is probed that much
-/// further; the locating points start this much further out.
+/// fraction of Q407 + R (the documented reach): beyond it the cycle stops after
+/// locating the sphere, before the next move.
 pub const START_REACH: f64 = 0.5;
+/// The locating points start outside every sphere whose centre is up to this fraction
+/// of Q407 + R off the start (1.5 x the reach), so that a start beyond the reach is
+/// found and refused, not run into.
+pub const LOCATE_REACH: f64 = 1.5 * START_REACH;
 /// Points that locate the sphere centre before the rings (a circle needs three).
 pub const LOCATING_POINTS: usize = 3;
-/// The equator is probed again when the pole over the found centre puts it more than
-/// this far from where it was probed, mm.
-pub const EQUATOR_HEIGHT_TOLERANCE: f64 = 0.1;
+/// How far R may differ from the probe table's before the cycle (a changed stylus),
+/// mm: the sphere found may differ from Q407 + R by this plus maxDevCalBall. Beyond
+/// it Q407 or the table's R is wrong, and the cycle stops.
+pub const MAX_STYLUS_CHANGE: f64 = 2.0;
+/// The equator rings are probed again until their height and the one the pole over
+/// their centre gives agree to this, mm.
+pub const EQUATOR_HEIGHT_TOLERANCE: f64 = 0.01;
+/// The most passes of the equator rings (the second normally agrees: the first is
+/// probed at the height locating found).
+pub const MAX_EQUATOR_PASSES: usize = 4;
+
+/// The drop below the pole of a ball-centre sphere of radius `s` at `off` mm off its
+/// axis (`s` where `off` reaches it: the flank can be anywhere down to the equator).
+pub fn flank_drop(s: f64, off: f64) -> f64 {
+    if off >= s {
+        s
+    } else {
+        s - (s * s - off * off).sqrt()
+    }
+}
+
+/// The ball-centre sphere radius (Q407 + R) and the sphere centre's tool-axis
+/// coordinate from a ring of radius `rho` probed at height `ring` and the pole contact
+/// at `pole` over its centre: `S² = rho² + (ring - (pole - S))²`, solved in closed
+/// form (no iteration): `S = -(rho² + a²) / 2a` with `a = ring - pole < 0`.
+pub fn sphere_from_ring_and_pole(rho: f64, ring: f64, pole: f64) -> Result<(f64, f64), String> {
+    let a = ring - pole;
+    if a.is_nan() || a >= 0.0 {
+        return Err(format!(
+            "the pole contact ({pole:.4}) is not above the ring ({ring:.4})"
+        ));
+    }
+    let s = -(rho * rho + a * a) / (2.0 * a);
+    Ok((s, pole - s))
+}
 
 /// One equator ring: the spindle angle, its contacts (ball centres) and the circle.
 #[derive(Clone, Debug, PartialEq)]
@@ -55,6 +94,8 @@ pub struct Probed {
     pub contacts_3d: Vec<Contact3d>,
     /// Whether the spindle could be oriented.
     pub oriented: bool,
+    /// What the probing found that the operator should know (a changed R).
+    pub notes: Vec<String>,
 }
 
 /// The machine and what the cycle knows while it probes.
@@ -65,7 +106,8 @@ pub(super) struct Probing<'a, 'c, M: Machine> {
     pub p: &'a CalibrationParams,
     /// (main, minor, tool) unit vectors, machine coordinates.
     pub frame: [Vector3<f64>; 3],
-    /// Q407 + R (R as the probe's row gives it).
+    /// Q407 + R: as the probe's row gives it until the sphere is located, then as
+    /// measured (every move after locating uses what was measured).
     pub rs: f64,
     /// SET_UP + Q320.
     pub clear: f64,
@@ -158,6 +200,22 @@ impl<M: Machine> Probing<'_, '_, M> {
         via_top: bool,
         margin: f64,
     ) -> Result<Vector3<f64>, CycleError> {
+        let travel = self.clear + 2.0 * margin + self.call.tool.probe.dist;
+        self.point_with(what, centre, u, top, via_top, margin, travel)
+    }
+
+    /// [`Self::point`] with the probing travel `travel`, mm.
+    #[allow(clippy::too_many_arguments)]
+    fn point_with(
+        &mut self,
+        what: &str,
+        centre: Vector3<f64>,
+        u: Vector3<f64>,
+        top: f64,
+        via_top: bool,
+        margin: f64,
+        travel: f64,
+    ) -> Result<Vector3<f64>, CycleError> {
         let start = centre + u * (self.rs + self.clear + margin);
         if via_top {
             let over = self.at_height(start, top);
@@ -167,12 +225,7 @@ impl<M: Machine> Probing<'_, '_, M> {
             )?;
         }
         self.go(&format!("{what}: moving to the start"), start)?;
-        let dist = self.call.tool.probe.dist;
-        let c = self.probe(
-            &format!("{what}: probing"),
-            -u,
-            self.clear + 2.0 * margin + dist,
-        )?;
+        let c = self.probe(&format!("{what}: probing"), -u, travel)?;
         self.go(&format!("{what}: retracting"), start)?;
         if via_top {
             let over = self.at_height(start, top);
@@ -263,6 +316,12 @@ impl<M: Machine> Probing<'_, '_, M> {
         Ok((centre, radius))
     }
 
+    /// How far the ball-centre sphere found may differ from Q407 + R (the table's),
+    /// mm: maxDevCalBall plus a changed stylus's R.
+    fn radius_accept(&self) -> f64 {
+        self.ctx.cfg.parameters.max_dev_cal_ball + MAX_STYLUS_CHANGE
+    }
+
     /// The whole probing sequence; see the module doc.
     pub fn run(&mut self) -> Result<Probed, CycleError> {
         let n = self.frame[2];
@@ -273,7 +332,7 @@ impl<M: Machine> Probing<'_, '_, M> {
         let start = Vector3::from(here.xyz());
         let oriented = self.orient(0.0)?;
         let dist = self.call.tool.probe.dist;
-        let reach = self.rs * (1.0 - (1.0 - START_REACH * START_REACH).sqrt());
+        let reach = flank_drop(self.rs, START_REACH * self.rs);
         let first = self
             .probe("cycle 460: probing the pole from the start position", -n, self.clear + dist + reach)
             .map_err(|e| match e {
@@ -290,16 +349,19 @@ impl<M: Machine> Probing<'_, '_, M> {
                 }
                 e => e,
             })?;
-        // With the start up to START_REACH off the centre the pole is up to `reach`
-        // above the contact: the clearance height holds for every such sphere.
-        let above = n.dot(&first) + self.clear + reach;
+        // The clearance height holds for every sphere the locating points allow: its
+        // centre up to LOCATE_REACH off the start, its radius down to what the cycle
+        // accepts (a smaller sphere's pole stands higher above a flank contact).
+        let smallest = (self.rs - self.radius_accept()).max(self.rs / 2.0);
+        let above = n.dot(&first) + self.clear + flank_drop(smallest, LOCATE_REACH * self.rs);
         self.go(
             "cycle 460: retracting from the pole",
             self.at_height(first, above),
         )?;
-        let mut centre = self.locate(start, first, above)?;
+        let (mut centre, notes) = self.locate(start, first, above)?;
         let mut top = n.dot(&centre) + self.rs + self.clear;
-        for pass in 0..2 {
+        let mut last = None;
+        for pass in 1..=MAX_EQUATOR_PASSES {
             let mut equator = vec![self.equator(0.0, centre, top)?];
             if oriented {
                 self.orient(180.0)?;
@@ -314,8 +376,12 @@ impl<M: Machine> Probing<'_, '_, M> {
                 top,
             )?;
             let height = n.dot(&centre);
-            let found = n.dot(&pole) - self.rs;
-            if pass == 1 || (height - found).abs() <= EQUATOR_HEIGHT_TOLERANCE {
+            let rho = equator.iter().map(|r| r.radius).sum::<f64>() / equator.len() as f64;
+            let (s, found) = sphere_from_ring_and_pole(rho, height, n.dot(&pole)).map_err(|e| {
+                CycleError::Geometry(format!("cycle 460: the equator, pass {pass}: {e}"))
+            })?;
+            self.rs = s;
+            if (height - found).abs() <= EQUATOR_HEIGHT_TOLERANCE {
                 let contacts_3d = self.rings(self.at_height(equator[0].centre, found), top)?;
                 return Ok(Probed {
                     equator,
@@ -323,30 +389,44 @@ impl<M: Machine> Probing<'_, '_, M> {
                     pole,
                     contacts_3d,
                     oriented,
+                    notes,
                 });
             }
+            last = Some((height, found));
             centre = self.at_height(equator[0].centre, found);
             top = n.dot(&pole) + self.clear;
         }
-        unreachable!("the second pass returns")
+        let (height, found) = last.unwrap_or_default();
+        Err(CycleError::Geometry(format!(
+            "cycle 460: the equator did not settle: after {MAX_EQUATOR_PASSES} passes the rings were probed at {height:.4} and the pole over their centre puts the equator at {found:.4} ({:.4} mm apart, more than the {EQUATOR_HEIGHT_TOLERANCE} mm the cycle accepts); check that the sphere is clamped firmly and the probe's stylus is tight; the probe table was not changed",
+            (height - found).abs()
+        )))
     }
 
     /// The sphere centre (ball centre coordinates) from the first pole contact
-    /// `first`, probed from `start`: [`LOCATING_POINTS`] points at the height the
-    /// contact suggests, each started START_REACH x (Q407 + R) further out than usual,
-    /// so outside every sphere the contact allows, and reached via the clearance
-    /// height `top`. Their circle gives the centre in the plane; the pole contact's
-    /// distance from it, the centre's height.
+    /// `first`, probed from `start`, and the notes it gives: [`LOCATING_POINTS`]
+    /// points at the height the contact suggests, each started LOCATE_REACH x
+    /// (Q407 + R) plus what the cycle accepts of a radius error further out than
+    /// usual, so outside every sphere a start up to 1.5 x the reach allows, and
+    /// reached via the clearance height `top`. Their circle and the pole contact give
+    /// the sphere (centre and radius): it must agree with Q407 within what the cycle
+    /// accepts, and the pole contact must lie no lower than a start within the reach
+    /// allows; else the cycle stops here, before the next move. From here on the
+    /// moves use the measured radius.
     fn locate(
         &mut self,
         start: Vector3<f64>,
         first: Vector3<f64>,
         top: f64,
-    ) -> Result<Vector3<f64>, CycleError> {
+    ) -> Result<(Vector3<f64>, Vec<String>), CycleError> {
         let n = self.frame[2];
-        let margin = START_REACH * self.rs;
-        let guess = self.at_height(start, n.dot(&first) - self.rs);
+        let accept = self.radius_accept();
+        let far = LOCATE_REACH * self.rs;
+        let margin = far + accept;
+        let hl = n.dot(&first) - self.rs;
+        let guess = self.at_height(start, hl);
         let mut contacts = Vec::with_capacity(LOCATING_POINTS);
+        let dist = self.call.tool.probe.dist;
         for k in 0..LOCATING_POINTS {
             let az = self.p.reference_angle + k as f64 * 360.0 / LOCATING_POINTS as f64;
             let u = direction(&self.frame, az, 0.0);
@@ -354,22 +434,50 @@ impl<M: Machine> Probing<'_, '_, M> {
                 "cycle 460: locating the sphere, point {} of {LOCATING_POINTS}",
                 k + 1
             );
-            contacts.push(self.point(&what, guess, u, top, true, margin)?);
+            // Through to `far` beyond the guess's axis: the sphere's near side lies
+            // before it wherever its centre is within `far`.
+            let travel = self.rs + self.clear + margin + far + dist;
+            contacts.push(self.point_with(&what, guess, u, top, true, margin, travel)?);
         }
-        let (axis, _) = self
+        let (axis, rho) = self
             .circle(&contacts, 0.0)
             .map_err(|e| CycleError::Geometry(format!("cycle 460: locating the sphere: {e}")))?;
         // Distance from the centre's axis (along the tool axis) in the plane.
         let off_axis = |p: Vector3<f64>| (p - axis - n * n.dot(&(p - axis))).norm();
+        let first_t = n.dot(&first);
         let off = off_axis(first);
-        if off >= self.rs {
+        // The sphere through the ring (radius rho at height hl) and the pole contact.
+        let centre_t =
+            (off * off + first_t * first_t - rho * rho - hl * hl) / (2.0 * (first_t - hl));
+        let s = rho.hypot(hl - centre_t);
+        let table_r = self.call.tool.probe.calibration().r;
+        let q407 = self.p.sphere_radius;
+        let dev = s - self.rs;
+        if dev.is_nan() || dev.abs() > accept {
             return Err(CycleError::Geometry(format!(
-                "cycle 460: locating the sphere: the first pole contact is {off:.3} mm off the centre the locating points give, more than Q407 + R = {:.3} mm: it was not on the sphere",
-                self.rs
+                "cycle 460: the sphere found has radius {:.4} mm (its ball-centre radius {s:.4} less the probe table's R = {table_r:.4}), Q407 = {q407:.4} mm: {dev:+.4} mm apart, more than the {accept:.4} mm the cycle accepts (maxDevCalBall = {} plus {MAX_STYLUS_CHANGE} mm for a changed stylus's R); check Q407 against the sphere's certificate and the probe table's R; the probe table was not changed",
+                s - table_r,
+                self.ctx.cfg.parameters.max_dev_cal_ball
             )));
         }
-        let height = n.dot(&first) - (self.rs * self.rs - off * off).sqrt();
+        let drop = centre_t + s - first_t;
+        let reach = START_REACH * s;
+        let allowed = flank_drop(s, reach);
         let from_start = off_axis(start);
+        if drop > allowed + 1e-6 {
+            return Err(CycleError::Geometry(format!(
+                "cycle 460: the first pole contact is {drop:.4} mm below the sphere's pole, more than the {allowed:.4} mm a start within the reach allows: the start was {from_start:.4} mm off the sphere centre; position the probe over the sphere centre, at most {reach:.3} mm off (half of Q407 + R); the probe table was not changed"
+            )));
+        }
+        let mut notes = Vec::new();
+        if dev.abs() > self.ctx.cfg.parameters.max_dev_cal_ball {
+            notes.push(format!(
+                "the sphere found is {dev:+.4} mm off Q407 + the probe table's R = {:.4} mm: taken as a changed stylus (R about {:.4}); if the stylus was not changed, check Q407",
+                q407 + table_r,
+                s - q407
+            ));
+        }
+        self.rs = s;
         let block = self.block();
         (self.ctx.progress)(ProgressEvent::Note {
             block,
@@ -377,11 +485,14 @@ impl<M: Machine> Probing<'_, '_, M> {
                 "cycle 460: the sphere centre is {from_start:.4} mm from below the start position"
             ),
         });
-        Ok(axis + n * height)
+        Ok((axis + n * centre_t, notes))
     }
 
     /// The 3D calibration's rings about `centre`, spindle at 0°: Q455 directions each,
-    /// at [`RING_ELEVATIONS`].
+    /// at [`RING_ELEVATIONS`]. A direction below the equator is reached from the side:
+    /// down beside the sphere to the equator's start point, then in the vertical
+    /// plane around the sphere down to its own start (straight down from above would
+    /// cut through the sphere), and back the same way.
     fn rings(&mut self, centre: Vector3<f64>, top: f64) -> Result<Vec<Contact3d>, CycleError> {
         let per_ring = self.p.points_3d;
         let mut out = Vec::with_capacity(per_ring * RING_ELEVATIONS.len());
@@ -393,10 +504,50 @@ impl<M: Machine> Probing<'_, '_, M> {
                 let az = self.p.reference_angle + k as f64 * 360.0 / per_ring as f64;
                 let u = direction(&self.frame, az, *el);
                 let what = format!("3D calibration, elevation {el}°, direction {}", k + 1);
-                let c = self.point(&what, centre, u, top, true, 0.0)?;
+                let c = if *el < 0.0 {
+                    let side = centre + direction(&self.frame, az, 0.0) * (self.rs + self.clear);
+                    self.go(
+                        &format!("{what}: positioning at the clearance height"),
+                        self.at_height(side, top),
+                    )?;
+                    self.go(&format!("{what}: down beside the sphere"), side)?;
+                    self.arc(&what, centre, az, 0.0, *el)?;
+                    let c = self.point(&what, centre, u, top, false, 0.0)?;
+                    self.arc(&what, centre, az, *el, 0.0)?;
+                    self.go(&format!("{what}: beside the sphere"), side)?;
+                    self.go(
+                        &format!("{what}: to the clearance height"),
+                        self.at_height(side, top),
+                    )?;
+                    c
+                } else {
+                    self.point(&what, centre, u, top, true, 0.0)?
+                };
                 out.push(Contact3d { ring, k, centre: c });
             }
         }
         Ok(out)
+    }
+
+    /// Moves in the vertical plane of azimuth `az` from elevation `from` to `to` (deg)
+    /// on the sphere of the start points, in chords that keep half the clearance.
+    fn arc(
+        &mut self,
+        what: &str,
+        centre: Vector3<f64>,
+        az: f64,
+        from: f64,
+        to: f64,
+    ) -> Result<(), CycleError> {
+        let d = self.rs + self.clear;
+        let keep = (self.rs + self.clear / 2.0) / d;
+        let max_step = 2.0 * keep.clamp(-1.0, 1.0).acos().to_degrees();
+        let steps = ((to - from).abs() / max_step.max(1.0)).ceil().max(1.0) as usize;
+        for i in 1..=steps {
+            let el = from + (to - from) * i as f64 / steps as f64;
+            let p = centre + direction(&self.frame, az, el) * d;
+            self.go(&format!("{what}: around the sphere"), p)?;
+        }
+        Ok(())
     }
 }

@@ -47,8 +47,8 @@ pub fn evaluate(
     old: &Calibration,
     frame: &[Vector3<f64>; 3],
     origin_t: f64,
-) -> (Calibration, Vector3<f64>, Vec<String>) {
-    let mut notes = Vec::new();
+) -> Result<(Calibration, Vector3<f64>, Vec<String>), CycleError> {
+    let mut notes = probed.notes.clone();
     let n = frame[2];
     let eq = &probed.equator;
     let plane = |v: &Vector3<f64>| [frame[0].dot(v), frame[1].dot(v)];
@@ -63,13 +63,14 @@ pub fn evaluate(
         old.offset
     };
     // The pole over the found centre fixes the equator's true height: the circle of
-    // a ring probed ε off it has radius sqrt(r² - ε²).
+    // a ring probed ε off it has radius sqrt(S² - ε²). Solved in closed form, so
+    // exact whatever R the table held (the probing re-probes the rings until ε is
+    // within EQUATOR_HEIGHT_TOLERANCE, so that the axial pre-travel's bias of the pole
+    // enters only to second order).
     let pole_t = n.dot(&probed.pole);
-    let mut r = rho - p.sphere_radius;
-    for _ in 0..3 {
-        let eps = probed.equator_height - (pole_t - p.sphere_radius - r);
-        r = (rho * rho + eps * eps).sqrt() - p.sphere_radius;
-    }
+    let (s, _) = measure::sphere_from_ring_and_pole(rho, probed.equator_height, pole_t)
+        .map_err(|e| CycleError::Geometry(format!("cycle 460: evaluating R: {e}")))?;
+    let r = s - p.sphere_radius;
     let l = if p.calibrate_length {
         pole_t - origin_t - p.length_datum - p.sphere_radius - r
     } else {
@@ -101,7 +102,7 @@ pub fn evaluate(
     };
     // The true sphere centre: the latched one plus the stylus's shift.
     let true_centre = seen + frame[0] * offset[0] + frame[1] * offset[1] - n * l;
-    (cal, true_centre, notes)
+    Ok((cal, true_centre, notes))
 }
 
 /// R, CAL_OF1/2 and L as the cycle's results, by the row's column names (the TNC's 460
@@ -140,7 +141,7 @@ impl MeasuringCycle for CalibrationParams {
             frame,
         }
         .run()?;
-        let (cal, centre, notes) = evaluate(self, &probed, &old, &frame, origin_t);
+        let (cal, centre, notes) = evaluate(self, &probed, &old, &frame, origin_t)?;
         if let Some((key, why)) = cal.invalid_field() {
             return Err(CycleError::Geometry(format!(
                 "cycle 460: the calibration is not plausible ({key}: {why}); the probe table was not changed"
@@ -220,5 +221,92 @@ impl MeasuringCycle for CalibrationParams {
         out.logs.push(log);
         out.calibration = Some(Box::new(report));
         Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::measure::EquatorRing;
+    use super::*;
+
+    const FRAME: [Vector3<f64>; 3] = [
+        Vector3::new(1.0, 0.0, 0.0),
+        Vector3::new(0.0, 1.0, 0.0),
+        Vector3::new(0.0, 0.0, 1.0),
+    ];
+
+    /// A ring of 8 ball centres about `c` probed `eps` above the equator of the
+    /// ball-centre sphere of radius `s`, with the stylus offset `off` at `spindle`.
+    fn ring(c: Vector3<f64>, s: f64, eps: f64, off: [f64; 2], spindle: f64) -> EquatorRing {
+        let rho = (s * s - eps * eps).sqrt();
+        let shift = Vector3::new(off[0], off[1], 0.0);
+        let centre = c - shift + Vector3::new(0.0, 0.0, eps);
+        let contacts = (0..8)
+            .map(|k| {
+                let a = (k as f64 * 45.0f64).to_radians();
+                centre + Vector3::new(rho * a.cos(), rho * a.sin(), 0.0)
+            })
+            .collect();
+        EquatorRing {
+            spindle,
+            contacts,
+            centre,
+            radius: rho,
+        }
+    }
+
+    /// The rings probed 1.9 mm above the equator of a small sphere (Q407 = 6, R = 2:
+    /// what a table R 1.9 mm too small did) give R, the offset and L exactly. The old
+    /// height correction stopped after three fixed steps, 2.8 µm short here.
+    #[test]
+    fn r_is_exact_with_the_rings_far_off_the_equator() {
+        let (q407, r_true, eps) = (6.0, 2.0, 1.9);
+        let s = q407 + r_true;
+        let c = Vector3::new(10.0, -5.0, 30.0);
+        let off = [0.003, -0.002];
+        let probed = Probed {
+            equator: vec![
+                ring(c, s, eps, off, 0.0),
+                ring(c, s, eps, [-off[0], -off[1]], 180.0),
+            ],
+            equator_height: c.z + eps,
+            pole: c + Vector3::new(-off[0], -off[1], s),
+            contacts_3d: Vec::new(),
+            oriented: true,
+            notes: Vec::new(),
+        };
+        let p = CalibrationParams {
+            sphere_radius: q407,
+            clearance: 0.0,
+            to_clearance_height: true,
+            points: 8,
+            reference_angle: 0.0,
+            calibrate_length: true,
+            length_datum: c.z,
+            points_3d: 0,
+        };
+        let (cal, centre, _) = evaluate(
+            &p,
+            &probed,
+            &Calibration::nominal(r_true - eps),
+            &FRAME,
+            0.0,
+        )
+        .unwrap();
+        assert!((cal.r - r_true).abs() < 1e-12, "R = {}", cal.r);
+        assert!((cal.offset[0] - off[0]).abs() < 1e-12, "{:?}", cal.offset);
+        assert!((cal.offset[1] - off[1]).abs() < 1e-12, "{:?}", cal.offset);
+        assert!(cal.l.abs() < 1e-12, "L = {}", cal.l);
+        assert!((centre - c).norm() < 1e-9, "{centre:?}");
+    }
+
+    /// The closed form needs the pole above the ring; otherwise it says so.
+    #[test]
+    fn a_pole_not_above_the_ring_is_an_error() {
+        let (s, c) = measure::sphere_from_ring_and_pole(7.9, 30.3, 38.0).unwrap();
+        assert!((s - (7.9f64 * 7.9 + 7.7 * 7.7) / 15.4).abs() < 1e-12);
+        assert!((c - (38.0 - s)).abs() < 1e-12);
+        let e = measure::sphere_from_ring_and_pole(7.9, 38.0, 38.0).unwrap_err();
+        assert!(e.contains("not above the ring"), "{e}");
     }
 }

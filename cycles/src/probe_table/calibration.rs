@@ -21,8 +21,13 @@ use nalgebra::{Matrix4, Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
 /// Elevations of the 3D calibration's rings above the working plane, deg: 15° apart
-/// from the equator; the pole (90°) is the ninth direction.
-pub const RING_ELEVATIONS: [f64; 6] = [0.0, 15.0, 30.0, 45.0, 60.0, 75.0];
+/// from 60° below the equator up to 75° above it; the pole (90°) is the last
+/// direction. Below the equator the table is measured, not mirrored: L absorbs the
+/// axial pre-travel's excess over the lateral one, which turns the effective radius's
+/// error odd in the elevation (2 (axial - lateral) sin(elevation) if mirrored).
+pub const RING_ELEVATIONS: [f64; 10] = [
+    -60.0, -45.0, -30.0, -15.0, 0.0, 15.0, 30.0, 45.0, 60.0, 75.0,
+];
 
 /// The 3D calibration (the TNC's option 92): how much the effective radius differs
 /// from R in each direction of the contact normal.
@@ -33,7 +38,8 @@ pub struct Table3d {
     /// plane, deg (cycle 460's Q380).
     pub azimuth: f64,
     /// Elevation of each ring of directions above the working plane, deg, ascending,
-    /// the first 0 (the equator), all below 90.
+    /// from the lowest measured (0, the equator, in a table of the upper half only;
+    /// -60 in one of cycle 460 now) to below 90 (the pole is `pole`).
     pub elevations: Vec<f64>,
     /// Per ring: effective radius minus R at the azimuths `azimuth` + k·360°/n
     /// (k = 0..n; n the same on every ring), mm.
@@ -52,13 +58,16 @@ impl Table3d {
             ));
         }
         let e = &self.elevations;
-        if e.is_empty() || e[0] != 0.0 {
-            return Some(("3d.elevations", "must start with 0 (the equator)".into()));
-        }
-        if e.windows(2).any(|w| w[1] <= w[0]) || e.iter().any(|x| !(0.0..90.0).contains(x)) {
+        if !e.contains(&0.0) || e[0] > 0.0 {
             return Some((
                 "3d.elevations",
-                format!("{e:?} must ascend within 0 .. 90 deg (the pole is `pole`)"),
+                "must hold 0 (the equator), and start there or below it".into(),
+            ));
+        }
+        if e.windows(2).any(|w| w[1] <= w[0]) || e.iter().any(|x| !(-90.0..90.0).contains(x)) {
+            return Some((
+                "3d.elevations",
+                format!("{e:?} must ascend within -90 .. 90 deg (the pole is `pole`)"),
             ));
         }
         if self.deviations.len() != e.len() {
@@ -91,14 +100,32 @@ impl Table3d {
         None
     }
 
+    /// The lowest elevation of a contact normal the table covers, deg: its lowest
+    /// ring.
+    pub fn lowest_elevation(&self) -> f64 {
+        self.elevations.first().copied().unwrap_or(0.0)
+    }
+
+    /// The elevation of a contact normal `u` (unit, (main, minor, tool)), deg.
+    pub fn elevation(u: [f64; 3]) -> f64 {
+        u[2].clamp(-1.0, 1.0).asin().to_degrees()
+    }
+
+    /// Whether the table knows the effective radius for the contact normal `u`: from
+    /// its lowest ring up to the pole (a normal a hair below, 1e-6°, counts as on it).
+    pub fn covers(&self, u: [f64; 3]) -> bool {
+        Self::elevation(u) >= self.lowest_elevation() - 1e-6
+    }
+
     /// Effective radius minus R for a contact normal `u` (unit, in (main, minor,
     /// tool) of the working plane; the ball pushed along it). Around a ring: the
     /// trigonometric polynomial through its n values (exact for lobes of up to
     /// (n-1)/2 per turn: a kinematic seat's three need n >= 7); between rings and up to
-    /// the pole: linear in the elevation. A contact from below the working plane reads
-    /// as its mirror image above it.
+    /// the pole: linear in the elevation. Below the lowest ring ([`Self::covers`] is
+    /// false: the caller refuses such a direction, as cycle 444 does) it reads the
+    /// lowest ring's value.
     pub fn deviation(&self, u: [f64; 3]) -> f64 {
-        let elevation = u[2].clamp(-1.0, 1.0).asin().abs().to_degrees();
+        let elevation = Self::elevation(u);
         let azimuth = u[1].atan2(u[0]) - self.azimuth.to_radians();
         let e = &self.elevations;
         let j = e.iter().rposition(|x| *x <= elevation).unwrap_or(0);

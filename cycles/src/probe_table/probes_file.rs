@@ -14,7 +14,7 @@
 //! L = 0.0021         # length correction, mm (ball centre further from the spindle)
 //! calibrated = "2026-11-25 16:20:31 UTC, cycle 460 on a sphere of radius 12.5 mm"
 //! [probe.3d]         # optional: 3D calibration
-//! elevations = [0.0, 15.0, 30.0, 45.0, 60.0, 75.0]
+//! elevations = [-60.0, -45.0, -30.0, -15.0, 0.0, 15.0, 30.0, 45.0, 60.0, 75.0]   # an older table starts at 0.0
 //! pole = 0.0
 //! deviations = [[0.0004, -0.0002, ...], ...]   # mm, per ring, k·360°/n
 //! ```
