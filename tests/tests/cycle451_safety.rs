@@ -468,19 +468,69 @@ fn starts_beyond_the_locating_reach_never_touch_the_sphere_positioning() {
     }
 }
 
-/// The seed's first example on the B head (Q423 = 4, B -90..+90 in 2, C -90..+90 in
-/// 2): no arrangement of the four points fits the software limits at B+-90. `check`
-/// refuses the block naming the B position and the block, and `run` the same.
+/// Software-limit refusals on the B head over a C table name where B stands and the
+/// block: C measured with B at its incidence angle +90 (Q417, Q431 = 0, Q423 = 4),
+/// where the four points around the horizontal stylus cannot all stay above Z-200
+/// (the step, "C reference at 0 deg", names no B); and the seed's first example (B
+/// and C -90..+90 in 2, Q423 = 4). `check` and `run` alike.
 #[test]
 fn the_b_head_limit_refusal_names_the_b_position_and_the_block() {
     let sc = load("head-b-table-c.toml");
     let mut cfg = cycles_config(&sc);
     with_preset_row(&mut cfg, [40.0, 25.0, 60.0]);
+    let cases = [
+        (
+            P451 {
+                mode: 0,
+                preset: 0,
+                b: Ax(0.0, 0.0, 90.0, 0),
+                c: Ax(90.0, 270.0, 0.0, 2),
+                ..P451::default()
+            },
+            "B+90",
+        ),
+        (
+            P451 {
+                mode: 0,
+                preset: 0,
+                b: Ax(-90.0, 90.0, 0.0, 2),
+                c: Ax(-90.0, 90.0, 0.0, 2),
+                ..P451::default()
+            },
+            "B",
+        ),
+    ];
+    for (k, (p, b)) in cases.into_iter().enumerate() {
+        let text = format!(
+            "0 BEGIN PGM K451 MM\n1 TOOL CALL \"TOUCH_PROBE\" Z\n10 CYCL DEF 247 DATUM SETTING ~\n  Q339=+1 ;DATUM NUMBER\n\
+11 L Z+60 R0 FMAX\n12 L X+70 Y+0 R0 FMAX\n{}99 END PGM K451 MM\n",
+            block451(&p)
+        );
+        let r = run(&text, &sc, &cfg, "b-limit");
+        let check = r
+            .check
+            .clone()
+            .unwrap_or_else(|| panic!("case {k}: check accepted B+-90 with four points"));
+        let stopped = r.report.stopped.clone().unwrap_or_default();
+        for m in [check.as_str(), stopped.as_str()] {
+            assert!(m.contains("software limits"), "case {k}: {m}");
+            assert!(m.contains("block 20"), "case {k}: {m}");
+            // The B position in the refusal itself (after the block), not only in a
+            // step that names the measured axis.
+            let refusal = &m[m.find("software limits").unwrap()..];
+            let named = refusal.contains(&format!("{b}+90")) || refusal.contains(&format!("{b}-90"));
+            let named = named || refusal.contains("B+90") || refusal.contains("B-90");
+            assert!(named, "case {k}: the refusal does not name B: {m}");
+        }
+    }
+    // Three points fit at B+90 once turned from Q380: Q431 = 0 locates the sphere
+    // there (its first pass's points turned too) and measures C.
     let p = P451 {
         mode: 0,
         preset: 0,
-        b: Ax(-90.0, 90.0, 0.0, 2),
-        c: Ax(-90.0, 90.0, 0.0, 2),
+        points: 3,
+        b: Ax(0.0, 0.0, 90.0, 0),
+        c: Ax(90.0, 270.0, 0.0, 2),
         ..P451::default()
     };
     let text = format!(
@@ -488,13 +538,9 @@ fn the_b_head_limit_refusal_names_the_b_position_and_the_block() {
 11 L Z+60 R0 FMAX\n12 L X+70 Y+0 R0 FMAX\n{}99 END PGM K451 MM\n",
         block451(&p)
     );
-    let r = run(&text, &sc, &cfg, "b-limit");
-    let check = r.check.clone().expect("check accepted B+-90 with four points");
-    for m in [check.as_str(), r.report.stopped.as_deref().unwrap_or("")] {
-        assert!(
-            (m.contains("B+90") || m.contains("B-90")) && m.contains("block 20"),
-            "{m}"
-        );
-        assert!(m.contains("software limits"), "{m}");
-    }
+    let r = run(&text, &sc, &cfg, "b90-3");
+    assert!(r.check.is_none(), "{:?}", r.check);
+    no_collision(&r, "B+90, Q423=3");
+    let c = &r.report.cycles[0];
+    assert_eq!(c.status, Status::Ok, "{:?}", c.message);
 }

@@ -141,12 +141,14 @@ impl<M: Machine> Measure<'_, '_, M> {
         let safe = touch + n * (rs + clearance);
         self.move_xyz(&format!("{what}: up to clear the sphere"), safe)?;
         let out = 2.0 * rs + clearance;
+        let deep = touch - n * (LOCATE_DEPTH * rs);
+        let phi0 = self.first_pass_start(a, [safe, deep], out);
         for i in 0..p.points {
-            let phi = (p.reference_angle + 360.0 * f64::from(i) / f64::from(p.points)).to_radians();
+            let phi = (phi0 + 360.0 * f64::from(i) / f64::from(p.points)).to_radians();
             let w = u * phi.cos() + v * phi.sin();
             let step = format!("{what}: point {} of {}", i + 1, p.points);
             let high = safe + w * out;
-            let low = touch - n * (LOCATE_DEPTH * rs) + w * out;
+            let low = deep + w * out;
             self.move_xyz(&step, high)?;
             self.move_xyz(&step, low)?;
             let c = self
@@ -177,10 +179,53 @@ impl<M: Machine> Measure<'_, '_, M> {
         Ok(centre)
     }
 
+    /// Where the first pass's Q423 points start, the points standing `out` from the
+    /// axis through `safe` and `deep` (their high and low ends): Q380, or, when one of
+    /// their positions or probing paths would leave the software limits (a head
+    /// tilted to B+90 puts a point under the sphere), the first arrangement turned from
+    /// Q380 in steps of 1/24 of their spacing that stays inside, as the measurement's
+    /// points do ([`Measure::sphere`]). None fits: Q380, and the move is refused.
+    fn first_pass_start(&mut self, a: &Angles, [safe, deep]: [Vector3<f64>; 2], out: f64) -> f64 {
+        let p = &self.plan.params;
+        let [_, u, v] = self.frame(a);
+        let guard = hal::motion_guard::MotionGuard::new(&self.ctx.cfg.machine);
+        let rotary = self.rotary(a);
+        let at = |x: Vector3<f64>| AxisPositions::linear(super::arr(&x)).merged(&rotary);
+        let fits = |phi0: f64| {
+            (0..p.points).all(|i| {
+                let phi = (phi0 + 360.0 * f64::from(i) / f64::from(p.points)).to_radians();
+                let w = u * phi.cos() + v * phi.sin();
+                let low = at(deep + w * out);
+                let probe = hal::ProbeMove {
+                    direction: super::arr(&-w),
+                    feed: self.probe.f,
+                    max_distance: out + self.probe.dist,
+                };
+                guard.check_target(&at(safe + w * out), "move").is_ok()
+                    && guard.check_target(&low, "move").is_ok()
+                    && guard.check_probe(&low, &probe).is_ok()
+            })
+        };
+        let spacing = 360.0 / f64::from(p.points);
+        let turned = (0..24)
+            .map(|k| p.reference_angle + spacing * f64::from(k) / 24.0)
+            .find(|phi0| fits(*phi0));
+        match turned {
+            Some(phi0) if phi0 != p.reference_angle => {
+                self.note(format!(
+                    "locating the sphere (first pass): the points start at {phi0:.1} deg instead of Q380 = {:.1} deg, to stay inside the software limits",
+                    p.reference_angle
+                ));
+                phi0
+            }
+            _ => p.reference_angle,
+        }
+    }
+
     /// Q431 = 0/2: the sphere centre is the active datum with the rotary axes at their
     /// reference (0 deg), as the preset was set. From wherever the probe is: up along
     /// the tool axis to a height that clears the sphere for every angle the rotary
-    /// axes pass on their way to the first measurement's angles (and the pole start,
+    /// axes pass on their way to 0 (and the pole start,
     /// and Q408 above the datum when higher, or where the probe already is); the
     /// rotary axes turn there; then over the sphere and down to [`DATUM_REACH`] x
     /// (Q407 + R) over the pole start, where it probes for the sphere
@@ -191,7 +236,10 @@ impl<M: Machine> Measure<'_, '_, M> {
         let zero = [0.0; 3];
         let c = self.preset - self.model.ball_offset(&zero);
         self.table_point = self.model.table_point(&zero, &c);
-        let first = self.plan.angles(self.plan.axes[0].axis, 0.0);
+        // The sphere is looked for where the datum defines it, with the rotary axes
+        // at 0 (a swivel head upright): the first measurement's angles follow as any
+        // other position's do.
+        let first = zero;
         // The pole probe starts where no sphere within DATUM_REACH of the datum (in
         // any direction) reaches: a preset that far off is met probing, not positioning.
         let rise = DATUM_REACH * (self.plan.params.sphere_radius + self.probe.radius);
@@ -221,8 +269,8 @@ impl<M: Machine> Measure<'_, '_, M> {
             for v in [above[i], pole[i]] {
                 if v < c.min || v > c.max {
                     return Err(CycleError::Plan(format!(
-                        "Q431={}: the sphere at the active datum X{:+.4} Y{:+.4} Z{:+.4} is reached over {axis}{v:+.4}, outside the software limits {:+.4} .. {:+.4}; set the preset at the sphere centre (cycle 247) or pre-position with Q431=1; nothing moved",
-                        self.plan.params.preset, self.preset.x, self.preset.y, self.preset.z, c.min, c.max
+                        "Q431={}: the sphere at the active datum X{:+.4} Y{:+.4} Z{:+.4} is reached over {axis}{v:+.4} with the rotary axes at {}, outside the software limits {:+.4} .. {:+.4}; set the preset at the sphere centre (cycle 247) or pre-position with Q431=1; nothing moved",
+                        self.plan.params.preset, self.preset.x, self.preset.y, self.preset.z, self.rotary(&first), c.min, c.max
                     )));
                 }
             }
@@ -244,7 +292,7 @@ impl<M: Machine> Measure<'_, '_, M> {
                 self.rotary(&first)
             ));
             self.turn_rotary(
-                "turning the rotary axes to the first measurement at the safe height",
+                "turning the rotary axes to 0 at the safe height",
                 &first,
             )?;
             self.now = first;

@@ -161,13 +161,15 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
                 kind,
                 message,
             } if kind == hal::ErrorKind::SoftwareLimit && !self.plan.present.is_empty() => {
+                let at = format!("the rotary axes standing at {}", self.rotary(&self.now));
+                let message = match message.strip_suffix("; nothing moved") {
+                    Some(m) => format!("{m} with {at}; nothing moved"),
+                    None => format!("{message} ({at})"),
+                };
                 CycleError::Machine {
                     step,
                     kind,
-                    message: format!(
-                        "{message} (the rotary axes standing at {})",
-                        self.rotary(&self.now)
-                    ),
+                    message,
                 }
             }
             e => e,
