@@ -184,13 +184,17 @@ fn probes(r: &Run) -> usize {
 
 /// The number after `key` in `text`.
 fn number_after(text: &str, key: &str) -> f64 {
-    let rest = &text[text.find(key).unwrap_or_else(|| panic!("no {key:?} in {text}")) + key.len()..];
+    let rest = &text[text
+        .find(key)
+        .unwrap_or_else(|| panic!("no {key:?} in {text}"))
+        + key.len()..];
     let s: String = rest
         .trim_start()
         .chars()
         .take_while(|c| c.is_ascii_digit() || *c == '.' || *c == '-' || *c == '+')
         .collect();
-    s.parse().unwrap_or_else(|_| panic!("no number after {key:?} in {text}"))
+    s.parse()
+        .unwrap_or_else(|_| panic!("no number after {key:?} in {text}"))
 }
 
 /// Q407 typed 30 % and 15 % small, 2 mm and 1.2 mm small, 1.5 mm and 20 % large
@@ -234,6 +238,34 @@ fn a_mistyped_q407_stops_after_the_first_locating_pass() {
             assert_eq!(probes(&r), 1 + p.points as usize, "{case}: {m}");
             assert!(!r.written, "{case}: something was written");
         }
+    }
+    // Q431 = 0 at the sphere's datum: the sphere located from the pole contact is
+    // measured against Q407 the same way.
+    for typed in [10.5, 12.5 * 1.2] {
+        let mut cfg = cycles_config(&sc);
+        with_preset_row(&mut cfg, centre);
+        let p = P451 {
+            radius: typed,
+            preset: 0,
+            c: Ax(90.0, 270.0, 0.0, 2),
+            ..P451::default()
+        };
+        let text = format!(
+            "0 BEGIN PGM K451 MM\n1 TOOL CALL \"TOUCH_PROBE\" Z\n10 CYCL DEF 247 DATUM SETTING ~\n  Q339=+1 ;DATUM NUMBER\n\
+11 L Z+60 R0 FMAX\n12 L X+70 Y+0 R0 FMAX\n{}99 END PGM K451 MM\n",
+            block451(&p)
+        );
+        let case = format!("Q431=0, Q407={typed}");
+        let r = run(&text, &sc, &cfg, "q407-0");
+        no_collision(&r, &case);
+        let m = stopped(&r);
+        assert!(
+            m.contains("first pass") && m.contains("Q407"),
+            "{case}: {m}"
+        );
+        let measured = number_after(&m, "the fitted sphere radius");
+        assert!((measured - 12.5).abs() < 0.01, "{case}: {m}");
+        assert!(!r.written, "{case}: something was written");
     }
 }
 
@@ -290,12 +322,12 @@ fn q431_0_and_2_stop_when_the_sphere_is_away_from_the_preset() {
             let m = stopped(&r);
             let dist = off.iter().map(|v| v * v).sum::<f64>().sqrt();
             if m.contains("mm from the preset") {
-                assert!(
-                    m.contains("set the preset, or use Q431=1"),
-                    "{case}: {m}"
-                );
+                assert!(m.contains("set the preset, or use Q431=1"), "{case}: {m}");
                 let said = number_after(&m, "the sphere centre is");
-                assert!((said - dist).abs() < 0.05, "{case}: said {said}, true {dist}: {m}");
+                assert!(
+                    (said - dist).abs() < 0.05,
+                    "{case}: said {said}, true {dist}: {m}"
+                );
             } else {
                 assert!(
                     m.contains("no sphere") && m.contains("preset"),
@@ -344,7 +376,11 @@ fn q431_0_at_the_sphere_centre_still_runs() {
     );
     let v = json(&r);
     for q in ["Q147", "Q148", "Q149"] {
-        assert!(v["q"][q].as_f64().unwrap().abs() < 1e-3, "{q}: {}", v["q"][q]);
+        assert!(
+            v["q"][q].as_f64().unwrap().abs() < 1e-3,
+            "{q}: {}",
+            v["q"][q]
+        );
     }
 }
 
@@ -406,8 +442,8 @@ fn q431_1_and_3_with_the_rotary_axes_left_turned_set_the_preset_at_0_deg() {
 }
 
 /// Starts at 1.1, 1.3 and 1.5 x the locating reach (0.6 x (Q407 + R)) off the centre,
-/// at several angles and heights over the pole (0.5 mm, Q320 + SET_UP, up to 1.5 x
-/// Q320 + SET_UP + DIST), on the A/C table and on the B head over a C table: no
+/// at several angles and heights over the pole (3 mm below it, 0.5 mm, Q320 + SET_UP,
+/// 1.5 x Q320 + SET_UP + DIST), on the A/C table and on the B head over a C table: no
 /// positioning move touches the sphere; the cycle either measures (the same preset as
 /// a centred start, 1e-3) or stops with a message naming what to check.
 #[test]
@@ -435,9 +471,12 @@ fn starts_beyond_the_locating_reach_never_touch_the_sphere_positioning() {
         let c0 = &centred.report.cycles[0];
         assert_eq!(c0.status, Status::Ok, "{name}: {:?}", c0.message);
         let p0 = json(&centred)["kinematics"]["preset_after"].clone();
+        let (mut measured, mut refused) = (0, 0);
         for f in [1.1, 1.3, 1.5] {
-            for (k, deg) in [15.0, 140.0, 255.0].into_iter().enumerate() {
-                let gap = [0.5, 2.0, 18.0][k];
+            for (deg, gap) in [15.0, 140.0, 255.0]
+                .into_iter()
+                .flat_map(|d| [-3.0, 0.5, 2.0, 18.0].map(|g| (d, g)))
+            {
                 let off = f * 0.6 * rs;
                 let phi = f64::to_radians(deg);
                 let start = [
@@ -451,12 +490,14 @@ fn starts_beyond_the_locating_reach_never_touch_the_sphere_positioning() {
                 no_collision(&r, &case);
                 let c = &r.report.cycles[0];
                 if c.status == Status::Ok {
+                    measured += 1;
                     let pr = &json(&r)["kinematics"]["preset_after"];
                     for i in 0..3 {
                         let d = pr[i].as_f64().unwrap() - p0[i].as_f64().unwrap();
                         assert!(d.abs() < 1e-3, "{case}: preset {pr} vs {p0}");
                     }
                 } else {
+                    refused += 1;
                     let m = c.message.clone().unwrap_or_default();
                     assert!(
                         m.contains("position the probe over the sphere centre"),
@@ -465,6 +506,7 @@ fn starts_beyond_the_locating_reach_never_touch_the_sphere_positioning() {
                 }
             }
         }
+        eprintln!("{name}: {measured} starts measured, {refused} stopped");
     }
 }
 
@@ -518,7 +560,8 @@ fn the_b_head_limit_refusal_names_the_b_position_and_the_block() {
             // The B position in the refusal itself (after the block), not only in a
             // step that names the measured axis.
             let refusal = &m[m.find("software limits").unwrap()..];
-            let named = refusal.contains(&format!("{b}+90")) || refusal.contains(&format!("{b}-90"));
+            let named =
+                refusal.contains(&format!("{b}+90")) || refusal.contains(&format!("{b}-90"));
             let named = named || refusal.contains("B+90") || refusal.contains("B-90");
             assert!(named, "case {k}: the refusal does not name B: {m}");
         }

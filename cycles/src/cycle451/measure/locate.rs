@@ -170,7 +170,7 @@ impl<M: Machine> Measure<'_, '_, M> {
         let radius = ball_sphere - self.probe.calibration().r;
         let dev = radius - p.sphere_radius;
         let max_dev = self.ctx.cfg.parameters.max_dev_cal_ball;
-        if !(dev.abs() <= max_dev) {
+        if dev.is_nan() || dev.abs() > max_dev {
             return Err(CycleError::Geometry(format!(
                 "{what}: the fitted sphere radius {radius:.4} mm differs from Q407 = {:.4} mm by {dev:+.4} mm, more than maxDevCalBall = {max_dev} mm: check Q407 (typed {:.4} mm, the sphere measures {radius:.4} mm) and the probe's calibration; stopped before the next move, nothing was changed",
                 p.sphere_radius, p.sphere_radius
@@ -291,10 +291,7 @@ impl<M: Machine> Measure<'_, '_, M> {
                 self.rotary(&start),
                 self.rotary(&first)
             ));
-            self.turn_rotary(
-                "turning the rotary axes to 0 at the safe height",
-                &first,
-            )?;
+            self.turn_rotary("turning the rotary axes to 0 at the safe height", &first)?;
             self.now = first;
         }
         self.move_xyz("moving over the sphere at the safe height", above)?;
