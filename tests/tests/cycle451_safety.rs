@@ -384,8 +384,9 @@ fn q431_0_at_the_sphere_centre_still_runs() {
     }
 }
 
-/// Q431 = 1 and 3 with C left at +37 deg and A at -12 deg by the program (the probe
-/// put over the sphere where the turned table holds it): the preset is the sphere
+/// Q431 = 1 and 3 with C left at +37 deg and A (the tilting table) or B (the swivel
+/// head) at -12 deg by the program (the probe put over the sphere where the turned
+/// table holds it, along the turned tool axis): the preset is the sphere
 /// centre with the rotary axes at 0, as the simulator's truth has it (Q431 = 3: the
 /// reference measurement, 1e-3; Q431 = 1: predicted through the active model before
 /// measuring, within the injected errors' effect, 0.05), and Q147..Q149 are as
@@ -393,50 +394,84 @@ fn q431_0_at_the_sphere_centre_still_runs() {
 /// of mm.
 #[test]
 fn q431_1_and_3_with_the_rotary_axes_left_turned_set_the_preset_at_0_deg() {
-    let sc = load("demo-sphere.toml");
-    let cfg = cycles_config(&sc);
-    let kin = sim::kinematics::TrueKinematics::new(&sc.machine, &sc.truth);
-    let sphere = sc.spheres[0].center;
-    let mut zero = AxisPositions::new();
-    let mut turned = AxisPositions::new();
-    for a in [Axis::A, Axis::C] {
-        zero.set(a, 0.0);
-    }
-    turned.set(Axis::A, -12.0);
-    turned.set(Axis::C, 37.0);
-    let truth0 = kin.table_to_machine(&zero, sphere);
-    let there = kin.table_to_machine(&turned, sphere);
-    for preset in [1u8, 3] {
-        let p = P451 {
-            preset,
-            a: Ax(-60.0, 60.0, 0.0, 2),
-            c: Ax(90.0, 270.0, 0.0, 2),
-            ..P451::default()
-        };
-        let start = [there.x, there.y, there.z + 15.5 + 2.0];
-        let r = run(
-            &program(&p, start, "3 L A-12 C+37 R0 FMAX\n"),
-            &sc,
-            &cfg,
-            "turned",
-        );
-        assert!(r.check.is_none(), "Q431={preset}: {:?}", r.check);
-        no_collision(&r, "turned");
-        let c = &r.report.cycles[0];
-        assert_eq!(c.status, Status::Ok, "Q431={preset}: {:?}", c.message);
-        let v = json(&r);
-        let written = &v["kinematics"]["preset_after"];
-        let tol = if preset == 3 { 1e-3 } else { 0.05 };
-        for i in 0..3 {
-            let w = written[i].as_f64().unwrap();
-            assert!(
-                (w - truth0[i]).abs() < tol,
-                "Q431={preset}: preset {written} vs the sphere centre at A0 C0 {truth0:?}"
-            );
+    // (scenario, the turned axes, params).
+    let cases = [
+        (
+            "demo-sphere.toml",
+            [(Axis::A, -12.0), (Axis::C, 37.0)],
+            P451 {
+                a: Ax(-60.0, 60.0, 0.0, 2),
+                c: Ax(90.0, 270.0, 0.0, 2),
+                ..P451::default()
+            },
+        ),
+        (
+            "head-b-table-c.toml",
+            [(Axis::B, -12.0), (Axis::C, 37.0)],
+            P451 {
+                b: Ax(-40.0, 40.0, 0.0, 2),
+                c: Ax(90.0, 270.0, 0.0, 2),
+                points: 3,
+                ..P451::default()
+            },
+        ),
+    ];
+    for (name, axes, params) in cases {
+        let sc = load(name);
+        let cfg = cycles_config(&sc);
+        let kin = sim::kinematics::TrueKinematics::new(&sc.machine, &sc.truth);
+        let sphere = sc.spheres[0].center;
+        let mut zero = AxisPositions::new();
+        let mut turned = AxisPositions::new();
+        for (a, v) in axes {
+            zero.set(a, 0.0);
+            turned.set(a, v);
         }
-        for q in ["Q147", "Q148", "Q149"] {
-            let x = v["q"][q].as_f64().unwrap();
-            assert!(x.abs() < 0.05, "Q431={preset}: {q} = {x}");
+        for a in [Axis::X, Axis::Y, Axis::Z] {
+            zero.set(a, 0.0);
+            turned.set(a, 0.0);
+        }
+        let truth0 = kin.table_to_machine(&zero, sphere);
+        let there = kin.table_to_machine(&turned, sphere);
+        // The ball Q320 + SET_UP over the pole along the (tilted) tool axis, and the
+        // X/Y/Z positions that put it there with the head turned.
+        let mut up = there;
+        up.fill(0.0);
+        up.z = 1.0;
+        let n = kin.head_transform(&turned).rotation * up;
+        let ball = there + n * (15.5 + 2.0);
+        let start = ball - kin.ball_centre_in_machine(&turned);
+        let turn: String = axes.iter().map(|(a, v)| format!(" {a}{v:+}")).collect();
+        for preset in [1u8, 3] {
+            let p = P451 {
+                preset,
+                ..params.clone()
+            };
+            let case = format!("{name} Q431={preset}{turn}");
+            let r = run(
+                &program(&p, start.into(), &format!("3 L{turn} R0 FMAX\n")),
+                &sc,
+                &cfg,
+                "turned",
+            );
+            assert!(r.check.is_none(), "{case}: {:?}", r.check);
+            no_collision(&r, &case);
+            let c = &r.report.cycles[0];
+            assert_eq!(c.status, Status::Ok, "{case}: {:?}", c.message);
+            let v = json(&r);
+            let written = &v["kinematics"]["preset_after"];
+            let tol = if preset == 3 { 1e-3 } else { 0.05 };
+            for i in 0..3 {
+                let w = written[i].as_f64().unwrap();
+                assert!(
+                    (w - truth0[i]).abs() < tol,
+                    "{case}: preset {written} vs the sphere centre at 0 {truth0:?}"
+                );
+            }
+            for q in ["Q147", "Q148", "Q149"] {
+                let x = v["q"][q].as_f64().unwrap();
+                assert!(x.abs() < 0.05, "{case}: {q} = {x}");
+            }
         }
     }
 }
