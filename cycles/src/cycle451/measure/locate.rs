@@ -1,7 +1,7 @@
 //! Where the sphere is when the cycle starts: located below the probe in two passes
 //! (Q431 = 1/3), or taken at the active datum and approached there (Q431 = 0/2).
 
-use super::{Measure, LOCATE_DEPTH, LOCATE_REACH};
+use super::{Measure, DATUM_REACH, DATUM_TOLERANCE, LOCATE_DEPTH, LOCATE_REACH};
 use crate::error::CycleError;
 use crate::kinematics::model::Angles;
 use hal::{Axis, AxisPositions, Contact, Machine};
@@ -13,9 +13,11 @@ impl<M: Machine> Measure<'_, '_, M> {
     /// radius is monitored only in the second measurement). First pass
     /// ([`Measure::first_pass`]): from the contact of the pole probe, every
     /// positioning move clears the sphere for any centre consistent with that contact;
-    /// its rough centre is not checked against Q407. Second pass: the sphere measured
-    /// around that centre, radius monitored against maxDevCalBall. Returns its centre
-    /// (ball centre in machine X/Y/Z); Q431 = 1/3 set the preset there.
+    /// its radius is checked against Q407 and maxDevCalBall before the next move. Second
+    /// pass: the sphere measured around that centre, radius monitored against
+    /// maxDevCalBall. Returns the centre with the rotary axes at 0 (ball centre in
+    /// machine X/Y/Z, through the active kinematics when they stood elsewhere); Q431 =
+    /// 1/3 set the preset there.
     pub fn locate(&mut self) -> Result<Vector3<f64>, CycleError> {
         let start = self.start;
         let p = &self.plan.params;
@@ -34,30 +36,34 @@ impl<M: Machine> Measure<'_, '_, M> {
                 -n0,
                 dist,
             )
-            .map_err(|e| match e {
-                CycleError::Machine {
-                    step,
-                    kind,
-                    message,
-                } if kind == hal::ErrorKind::NotTriggered => CycleError::Machine {
-                    step,
-                    kind,
-                    message: format!(
-                        "{message}; before cycle 451 position the probe over the sphere centre (at most {:.3} mm off it in the working plane), about Q320 + SET_UP = {:.3} mm above the sphere{}",
-                        LOCATE_REACH * rs,
-                        self.clearance(),
-                        turned_table(&self.start)
-                    ),
-                },
-                e => e,
-            })?;
+            .map_err(|e| self.not_found(e))?;
+        let touch = Vector3::from(first.positions.xyz());
         let rough = self.first_pass(&start, run, first)?;
+        let n = self.frame(&start)[0];
+        self.note(format!(
+            "locating the sphere (first pass): the sphere centre is about {:.4} mm from below the start position; measuring it again around that centre",
+            ((rough - touch) - n * n.dot(&(rough - touch))).norm()
+        ));
         let located = self.sphere(&start, rough, "locating the sphere")?;
         self.table_point = self.model.table_point(&located.angles, &located.centre);
-        let ball = self.model.ball_in_machine(&located.angles, &located.centre);
+        // The preset is the sphere centre with the rotary axes at 0 (where the
+        // reference is measured), wherever the operator left them: the located centre
+        // carried back to the table and predicted at 0 through the active kinematics.
+        let zero = [0.0; 3];
+        let ball = self
+            .model
+            .ball_in_machine(&zero, &self.model.predict(&zero, &self.table_point));
+        let turned = located.angles.iter().any(|a| a.abs() > 1e-9);
         self.located = Some(located);
         if p.preset == 1 || p.preset == 3 {
             self.preset = ball;
+            if turned {
+                self.note(format!(
+                    "Q431={}: the sphere was located with the rotary axes at {}; the preset is its centre with them at 0, through the active kinematics",
+                    p.preset,
+                    self.rotary(&start)
+                ));
+            }
             self.note(format!(
                 "Q431={}: {} X{:+.4} Y{:+.4} Z{:+.4}",
                 p.preset,
@@ -70,6 +76,44 @@ impl<M: Machine> Measure<'_, '_, M> {
         Ok(ball)
     }
 
+    /// A locating probe that found no sphere: the error with what to check (where to
+    /// pre-position, and the rotary axes when they stood off 0).
+    fn not_found(&self, e: CycleError) -> CycleError {
+        let rs = self.plan.params.sphere_radius + self.probe.radius;
+        let q431 = self.plan.params.preset;
+        match e {
+            CycleError::Machine {
+                step,
+                kind,
+                message,
+            } if kind == hal::ErrorKind::NotTriggered && (q431 == 0 || q431 == 2) => {
+                CycleError::Machine {
+                    step,
+                    kind,
+                    message: format!(
+                        "{message}: the sphere is not where the active datum X{:+.4} Y{:+.4} Z{:+.4} puts it (Q431={q431}); set the preset at the sphere centre, or use Q431=1 with the probe over it",
+                        self.preset.x, self.preset.y, self.preset.z
+                    ),
+                }
+            }
+            CycleError::Machine {
+                step,
+                kind,
+                message,
+            } if kind == hal::ErrorKind::NotTriggered => CycleError::Machine {
+                step,
+                kind,
+                message: format!(
+                    "{message}; before cycle 451 position the probe over the sphere centre (at most {:.3} mm off it in the working plane), about Q320 + SET_UP = {:.3} mm above the sphere{}",
+                    LOCATE_REACH * rs,
+                    self.clearance(),
+                    turned_table(&self.start)
+                ),
+            },
+            e => e,
+        }
+    }
+
     /// The first locating pass from the pole contact `touch` (ball centre, axes at
     /// `a`, in run `run`): the centre is somewhere on the half sphere of radius Q407 + R below
     /// `touch` (the ball came down along the tool axis without touching before). Every
@@ -77,8 +121,9 @@ impl<M: Machine> Measure<'_, '_, M> {
     /// Q407 + R + clearance over `touch`, out to 2 (Q407 + R) + clearance from its axis,
     /// down to LOCATE_DEPTH x (Q407 + R) below it, then Q423 points probed toward the
     /// axis (each from its own side, back out the way it came, up again). A sphere with
-    /// free radius through the pole contact and those points is the rough centre;
-    /// nothing is checked against Q407 here.
+    /// free radius through the pole contact and those points is the rough centre
+    /// (corrected by the probe's calibration); its radius must be Q407 within
+    /// maxDevCalBall, else the cycle stops here: every later move is planned with Q407.
     fn first_pass(
         &mut self,
         a: &Angles,
@@ -96,15 +141,20 @@ impl<M: Machine> Measure<'_, '_, M> {
         let safe = touch + n * (rs + clearance);
         self.move_xyz(&format!("{what}: up to clear the sphere"), safe)?;
         let out = 2.0 * rs + clearance;
+        let deep = touch - n * (LOCATE_DEPTH * rs);
+        let phi0 = self.first_pass_start(a, [safe, deep], out);
         for i in 0..p.points {
-            let phi = (p.reference_angle + 360.0 * f64::from(i) / f64::from(p.points)).to_radians();
+            let phi = (phi0 + 360.0 * f64::from(i) / f64::from(p.points)).to_radians();
             let w = u * phi.cos() + v * phi.sin();
             let step = format!("{what}: point {} of {}", i + 1, p.points);
             let high = safe + w * out;
-            let low = touch - n * (LOCATE_DEPTH * rs) + w * out;
+            let low = deep + w * out;
             self.move_xyz(&step, high)?;
             self.move_xyz(&step, low)?;
-            contacts.push(self.probe(&step, -w, out + self.probe.dist)?);
+            let c = self
+                .probe(&step, -w, out + self.probe.dist)
+                .map_err(|e| self.not_found(e))?;
+            contacts.push(c);
             self.move_xyz(&step, low)?;
             self.move_xyz(&step, high)?;
         }
@@ -113,27 +163,87 @@ impl<M: Machine> Measure<'_, '_, M> {
             self.ctx.estimator.fit_sphere(run, &contacts).map_err(|e| {
                 CycleError::Geometry(format!("{what}: sphere fit (run {run}): {e}"))
             })?;
-        self.note(format!(
-            "{what}: the sphere centre is about {:.4} mm from below the start position; measuring it again around that centre",
-            ((fit.centre - touch) - n * n.dot(&(fit.centre - touch))).norm()
-        ));
-        Ok(fit.centre)
+        // The seeds: the control measures the radius first and ends the measurement
+        // when it differs from the input by more than maxDevCalBall. Every later move
+        // is planned with Q407: a sphere larger than that would be met positioning.
+        let (centre, ball_sphere) = self.calibrated(a, &contacts, fit.centre, fit.radius);
+        let radius = ball_sphere - self.probe.calibration().r;
+        let dev = radius - p.sphere_radius;
+        let max_dev = self.ctx.cfg.parameters.max_dev_cal_ball;
+        if dev.is_nan() || dev.abs() > max_dev {
+            return Err(CycleError::Geometry(format!(
+                "{what}: the fitted sphere radius {radius:.4} mm differs from Q407 = {:.4} mm by {dev:+.4} mm, more than maxDevCalBall = {max_dev} mm: check Q407 (typed {:.4} mm, the sphere measures {radius:.4} mm) and the probe's calibration; stopped before the next move, nothing was changed",
+                p.sphere_radius, p.sphere_radius
+            )));
+        }
+        Ok(centre)
+    }
+
+    /// Where the first pass's Q423 points start, the points standing `out` from the
+    /// axis through `safe` and `deep` (their high and low ends): Q380, or, when one of
+    /// their positions or probing paths would leave the software limits (a head
+    /// tilted to B+90 puts a point under the sphere), the first arrangement turned from
+    /// Q380 in steps of 1/24 of their spacing that stays inside, as the measurement's
+    /// points do ([`Measure::sphere`]). None fits: Q380, and the move is refused.
+    fn first_pass_start(&mut self, a: &Angles, [safe, deep]: [Vector3<f64>; 2], out: f64) -> f64 {
+        let p = &self.plan.params;
+        let [_, u, v] = self.frame(a);
+        let guard = hal::motion_guard::MotionGuard::new(&self.ctx.cfg.machine);
+        let rotary = self.rotary(a);
+        let at = |x: Vector3<f64>| AxisPositions::linear(super::arr(&x)).merged(&rotary);
+        let fits = |phi0: f64| {
+            (0..p.points).all(|i| {
+                let phi = (phi0 + 360.0 * f64::from(i) / f64::from(p.points)).to_radians();
+                let w = u * phi.cos() + v * phi.sin();
+                let low = at(deep + w * out);
+                let probe = hal::ProbeMove {
+                    direction: super::arr(&-w),
+                    feed: self.probe.f,
+                    max_distance: out + self.probe.dist,
+                };
+                guard.check_target(&at(safe + w * out), "move").is_ok()
+                    && guard.check_target(&low, "move").is_ok()
+                    && guard.check_probe(&low, &probe).is_ok()
+            })
+        };
+        let spacing = 360.0 / f64::from(p.points);
+        let turned = (0..24)
+            .map(|k| p.reference_angle + spacing * f64::from(k) / 24.0)
+            .find(|phi0| fits(*phi0));
+        match turned {
+            Some(phi0) if phi0 != p.reference_angle => {
+                self.note(format!(
+                    "locating the sphere (first pass): the points start at {phi0:.1} deg instead of Q380 = {:.1} deg, to stay inside the software limits",
+                    p.reference_angle
+                ));
+                phi0
+            }
+            _ => p.reference_angle,
+        }
     }
 
     /// Q431 = 0/2: the sphere centre is the active datum with the rotary axes at their
     /// reference (0 deg), as the preset was set. From wherever the probe is: up along
     /// the tool axis to a height that clears the sphere for every angle the rotary
-    /// axes pass on their way to the first measurement's angles (and the pole start,
+    /// axes pass on their way to 0 (and the pole start,
     /// and Q408 above the datum when higher, or where the probe already is); the
-    /// rotary axes turn there; then over the sphere and down to the pole start. Every
-    /// point inside the software limits, else nothing moves.
+    /// rotary axes turn there; then over the sphere and down to [`DATUM_REACH`] x
+    /// (Q407 + R) over the pole start, where it probes for the sphere
+    /// ([`Measure::find_at_datum`]): heights and the pole start clear any sphere that
+    /// far from the datum. Every point inside the software limits, else nothing moves.
     pub fn approach_datum(&mut self) -> Result<(), CycleError> {
         let start = self.start;
         let zero = [0.0; 3];
         let c = self.preset - self.model.ball_offset(&zero);
         self.table_point = self.model.table_point(&zero, &c);
-        let first = self.plan.angles(self.plan.axes[0].axis, 0.0);
-        let pole = self.predicted_pole(&first);
+        // The sphere is looked for where the datum defines it, with the rotary axes
+        // at 0 (a swivel head upright): the first measurement's angles follow as any
+        // other position's do.
+        let first = zero;
+        // The pole probe starts where no sphere within DATUM_REACH of the datum (in
+        // any direction) reaches: a preset that far off is met probing, not positioning.
+        let rise = DATUM_REACH * (self.plan.params.sphere_radius + self.probe.radius);
+        let pole = self.predicted_pole(&first) + self.frame(&first)[0] * rise;
         let here = self
             .machine
             .positions()
@@ -141,7 +251,7 @@ impl<M: Machine> Measure<'_, '_, M> {
             .xyz();
         let t = self.tool.tool_index();
         let q408 = self.plan.params.retract_height;
-        let clear = self.clear_height(&[start, first], self.reach());
+        let clear = self.clear_height(&[start, first], self.reach() + rise);
         if (0..3).any(|s| (first[s] - start[s]).abs() > 1e-9) {
             self.turn_height_in_limits(&[start, first], clear)?;
         }
@@ -159,8 +269,8 @@ impl<M: Machine> Measure<'_, '_, M> {
             for v in [above[i], pole[i]] {
                 if v < c.min || v > c.max {
                     return Err(CycleError::Plan(format!(
-                        "Q431={}: the sphere at the active datum X{:+.4} Y{:+.4} Z{:+.4} is reached over {axis}{v:+.4}, outside the software limits {:+.4} .. {:+.4}; set the preset at the sphere centre (cycle 247) or pre-position with Q431=1; nothing moved",
-                        self.plan.params.preset, self.preset.x, self.preset.y, self.preset.z, c.min, c.max
+                        "Q431={}: the sphere at the active datum X{:+.4} Y{:+.4} Z{:+.4} is reached over {axis}{v:+.4} with the rotary axes at {}, outside the software limits {:+.4} .. {:+.4}; set the preset at the sphere centre (cycle 247) or pre-position with Q431=1; nothing moved",
+                        self.plan.params.preset, self.preset.x, self.preset.y, self.preset.z, self.rotary(&first), c.min, c.max
                     )));
                 }
             }
@@ -181,14 +291,67 @@ impl<M: Machine> Measure<'_, '_, M> {
                 self.rotary(&start),
                 self.rotary(&first)
             ));
-            self.turn_rotary(
-                "turning the rotary axes to the first measurement at the safe height",
-                &first,
-            )?;
+            self.turn_rotary("turning the rotary axes to 0 at the safe height", &first)?;
             self.now = first;
         }
         self.move_xyz("moving over the sphere at the safe height", above)?;
-        self.move_xyz("approaching the sphere", pole)
+        self.move_xyz("approaching the sphere", pole)?;
+        self.find_at_datum(&first, rise)
+    }
+
+    /// Q431 = 0/2, the probe `rise` over the pole start of the sphere the datum puts
+    /// at `a`: probes for the pole, locates the sphere from that contact as the first
+    /// locating pass does (every move clears any sphere the contact allows), and stops
+    /// when its centre is further from where the datum puts it than
+    /// [`DATUM_TOLERANCE`] x (Q320 + SET_UP): the measurement around the datum
+    /// clears a sphere only that far off. Leaves the probe over the pole.
+    fn find_at_datum(&mut self, a: &Angles, rise: f64) -> Result<(), CycleError> {
+        let p = &self.plan.params;
+        let q431 = p.preset;
+        let expected = self.model.predict(a, &self.table_point);
+        let n = self.frame(a)[0];
+        let dist = 2.0 * rise + self.clearance() + self.probe.dist;
+        let run = self.next_run();
+        let datum = self.preset;
+        let pole = self
+            .probe(
+                &format!("Q431={q431}: probing the pole of the sphere at the active datum"),
+                -n,
+                dist,
+            )
+            .map_err(|e| match e {
+                CycleError::Machine {
+                    step,
+                    kind,
+                    message,
+                } if kind == hal::ErrorKind::NotTriggered => CycleError::Machine {
+                    step,
+                    kind,
+                    message: format!(
+                        "{message}: no sphere at the active datum X{:+.4} Y{:+.4} Z{:+.4} (the sphere centre with the rotary axes at 0, Q431={q431}); set the preset at the sphere centre, or use Q431=1 with the probe over it",
+                        datum.x, datum.y, datum.z
+                    ),
+                },
+                e => e,
+            })?;
+        let centre = self.first_pass(a, run, pole)?;
+        let off = (centre - expected).norm();
+        let tolerance = DATUM_TOLERANCE * self.clearance();
+        if off > tolerance {
+            return Err(CycleError::Geometry(format!(
+                "Q431={q431}: the sphere centre is {off:.2} mm from the preset (found {:+.3} {:+.3} {:+.3} mm off the active datum X{:+.4} Y{:+.4} Z{:+.4} along X, Y, Z); the cycle measures it around the preset only within {tolerance:.2} mm (half of Q320 + SET_UP): set the preset, or use Q431=1; stopped before the next move, nothing was changed",
+                centre.x - expected.x,
+                centre.y - expected.y,
+                centre.z - expected.z,
+                datum.x,
+                datum.y,
+                datum.z
+            )));
+        }
+        self.note(format!(
+            "Q431={q431}: the sphere centre is {off:.4} mm from the preset (within {tolerance:.2} mm)"
+        ));
+        Ok(())
     }
 }
 

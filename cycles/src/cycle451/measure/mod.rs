@@ -30,6 +30,14 @@ pub const RE_PROBE_TOLERANCE: f64 = 0.1;
 /// How far off the sphere centre the probe may start locating it (Q431 = 1/3), as a
 /// fraction of Q407 + ball radius, in any direction of the working plane.
 pub const LOCATE_REACH: f64 = 0.6;
+/// Q431 = 0/2: how far from the active datum, in any direction, a sphere is still
+/// met by the first pole probe rather than a positioning move, as a fraction of Q407 +
+/// ball radius (1.5 x [`LOCATE_REACH`]).
+pub const DATUM_REACH: f64 = 1.5 * LOCATE_REACH;
+/// Q431 = 0/2: how far from where the datum puts it the sphere may be found for the
+/// cycle to measure it there, as a fraction of Q320 + SET_UP (its equator approaches
+/// pass Q320 + SET_UP from the expected sphere: this leaves half of it).
+pub const DATUM_TOLERANCE: f64 = 0.5;
 /// Depth of the first locating pass's points below the pole contact, as a fraction
 /// of Q407 + ball radius: a start within [`LOCATE_REACH`] puts the centre 0.8 to 1
 /// of it below the contact, so the points pass within 0.1 of the centre's height.
@@ -140,9 +148,32 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
             target,
             feed,
         });
-        self.machine
-            .move_to(&target, feed)
-            .map_err(|e| CycleError::machine(step, &e))
+        let done = self.machine.move_to(&target, feed);
+        done.map_err(|e| self.at_rotary(CycleError::machine(step, &e)))
+    }
+
+    /// A software-limit refusal names where the rotary axes stand: on a swivel head
+    /// the same X/Y/Z point is inside the limits at one angle and outside at another.
+    fn at_rotary(&self, e: CycleError) -> CycleError {
+        match e {
+            CycleError::Machine {
+                step,
+                kind,
+                message,
+            } if kind == hal::ErrorKind::SoftwareLimit && !self.plan.present.is_empty() => {
+                let at = format!("the rotary axes standing at {}", self.rotary(&self.now));
+                let message = match message.strip_suffix("; nothing moved") {
+                    Some(m) => format!("{m} with {at}; nothing moved"),
+                    None => format!("{message} ({at})"),
+                };
+                CycleError::Machine {
+                    step,
+                    kind,
+                    message,
+                }
+            }
+            e => e,
+        }
     }
 
     fn move_xyz(&mut self, step: &str, p: Vector3<f64>) -> Result<(), CycleError> {
@@ -167,8 +198,8 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
                 feed: self.probe.f,
                 max_distance: max,
             },
-        )
-        .map_err(|e| CycleError::machine(step, &e))?;
+        );
+        let c = c.map_err(|e| self.at_rotary(CycleError::machine(step, &e)))?;
         (self.ctx.progress)(ProgressEvent::Contact {
             block: self.block,
             centre: c.positions.xyz(),
