@@ -3,9 +3,9 @@
 //! machine's motion guard, the sphere followed through the rotary axes, and a path
 //! check that finds any positioning move that would touch it. The sequence runs once
 //! for every sphere the block allows ([`worlds`]): Q431 = 1/3 the start anywhere the
-//! docs allow over the sphere (from just above the pole up to Q320 + SET_UP + DIST
-//! above it, up to LOCATE_REACH x (Q407 + R) off its centre), Q431 = 0/2 at the datum;
-//! with a radius up to half of maxDevCalBall off Q407. `check` and `run` both call
+//! docs allow over the sphere (from just above the pole up to Q320 + SET_UP above
+//! it, up to LOCATE_REACH x (Q407 + R) off its centre), Q431 = 0/2 at the datum.
+//! `check` and `run` both call
 //! [`plan_moves`] before the program's first move, so `check` refuses what `run` could
 //! meet, at the same step with the same message, and `run` never starts a cycle whose
 //! moves it already knows can fail.
@@ -112,11 +112,12 @@ pub fn plan_moves(
 /// Every sphere a 451 block allows, the expected one first, and the set of all of
 /// them that a move before the first contact must keep off. Q431 = 1/3: the probe
 /// stands over the sphere as the docs allow, from just above its pole up to
-/// Q320 + SET_UP + DIST above it (expected: Q320 + SET_UP), with the centre up to
+/// Q320 + SET_UP above it (expected: Q320 + SET_UP), with the centre up to
 /// [`LOCATE_REACH`] x (Q407 + R) off below the start in the working plane. Q431 = 0/2:
-/// the centre at the active datum with the rotary axes at 0. Either way a radius up to
-/// half of maxDevCalBall off Q407 (the cycle accepts up to maxDevCalBall). Each extreme
-/// alone: a start at two limits at once is beyond what the pole probe reaches.
+/// the centre at the active datum with the rotary axes at 0. Before the first contact
+/// a move also keeps off a radius up to half of maxDevCalBall above Q407 (the cycle
+/// checks the radius only once it has probed). Each extreme alone: a start at two
+/// limits at once is beyond what the pole probe reaches.
 pub fn worlds(
     params: &KinematicsParams,
     call: &CycleBlock,
@@ -128,26 +129,14 @@ pub fn worlds(
     let probe = &call.tool.probe;
     let rs = params.sphere_radius + probe.radius;
     let dev = 0.5 * cfg.parameters.max_dev_cal_ball;
-    let radius_worlds = |centre: &dyn Fn(f64) -> Vector3<f64>| {
-        [(dev, "larger"), (-dev, "smaller")].map(|(d, how)| World {
-            truth: Sphere {
-                centre: centre(rs + d),
-                touch: rs + d,
-            },
-            what: Some(format!(
-                "the sphere's radius is {dev:.4} mm {how} than Q407 (half of maxDevCalBall)"
-            )),
-        })
-    };
     if params.preset != 1 && params.preset != 3 {
         let zero = [0.0; 3];
         let origin = Vector3::from(datum.origin()) - model.ball_offset(&zero);
         let centre = model.table_point(&zero, &origin);
-        let mut worlds = vec![World {
+        let worlds = vec![World {
             truth: Sphere { centre, touch: rs },
             what: None,
         }];
-        worlds.extend(radius_worlds(&|_| centre));
         return (
             worlds,
             SphereSet::one(Sphere {
@@ -161,29 +150,22 @@ pub fn worlds(
     let n = model.tool_vector(&a0, tool_unit(call));
     let s = Vector3::from(start.xyz());
     let table = |p: Vector3<f64>| model.table_point(&a0, &p);
-    // The sphere whose ball-centre radius is `touch`, `gap` below the start along the
-    // tool axis (ball centre over the pole), `off` across it.
-    let at = |off: Vector3<f64>, gap: f64, touch: f64| Sphere {
-        centre: table(s + off - n * (touch + gap)),
-        touch,
+    // The sphere `gap` below the start along the tool axis (ball centre over the
+    // pole), `off` across it.
+    let at = |off: Vector3<f64>, gap: f64| Sphere {
+        centre: table(s + off - n * (rs + gap)),
+        touch: rs,
     };
     let zero = Vector3::zeros();
     let mut worlds = vec![
         World {
-            truth: at(zero, clearance, rs),
+            truth: at(zero, clearance),
             what: None,
         },
         World {
-            truth: at(zero, 0.0, rs),
+            truth: at(zero, 0.0),
             what: Some(format!(
                 "the probe starts just above the sphere's pole (the sphere {clearance:.4} mm higher than Q320 + SET_UP below the start)"
-            )),
-        },
-        World {
-            truth: at(zero, clearance + probe.dist, rs),
-            what: Some(format!(
-                "the probe starts Q320 + SET_UP + DIST above the sphere's pole (the sphere {:.4} mm lower than Q320 + SET_UP below the start)",
-                probe.dist
             )),
         },
     ];
@@ -195,7 +177,7 @@ pub fn worlds(
         let w = model.tool_vector(&a0, e);
         for sign in [1.0, -1.0] {
             worlds.push(World {
-                truth: at(w * (sign * reach), clearance, rs),
+                truth: at(w * (sign * reach), clearance),
                 what: Some(format!(
                     "the sphere centre stands {reach:.4} mm off below the start toward {}",
                     toward(&(w * sign))
@@ -203,13 +185,12 @@ pub fn worlds(
             });
         }
     }
-    worlds.extend(radius_worlds(&|touch| at(zero, clearance, touch).centre));
-    let lowest = s - n * (rs + dev + clearance + probe.dist);
+    let lowest = s - n * (rs + dev + clearance);
     let base = table(lowest);
     let possible = SphereSet {
         base,
         axis: table(lowest + n) - base,
-        length: clearance + probe.dist + 2.0 * dev,
+        length: clearance + dev,
         radial: reach,
         touch: rs + dev,
     };

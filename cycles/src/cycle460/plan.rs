@@ -2,8 +2,8 @@
 //! sequence ([`super::measure`]) run on the planner's machine
 //! ([`crate::plan::PlanMachine`]: motion guard, exact contacts, a path check against
 //! every sphere still possible), once for every sphere the docs allow below the start
-//! ([`worlds`]): SET_UP + Q320 below it (expected), just below it, SET_UP + Q320 + DIST
-//! below it, and [`START_REACH`] x (Q407 + R) off in each direction of the working
+//! ([`worlds`]): SET_UP + Q320 below it (expected), just below it (the
+//! probe started just over the pole), and [`START_REACH`] x (Q407 + R) off in each direction of the working
 //! plane. `check` and `run` both plan it before the first move. The spindle is taken as
 //! orientable, so the plan holds both equator rings: a machine without an orientable
 //! spindle makes a subset of these moves. A positioning move whose straight path would
@@ -31,7 +31,6 @@ pub fn worlds(
     frame: &[Vector3<f64>; 3],
     rs: f64,
     clear: f64,
-    dist: f64,
 ) -> (Vec<World>, SphereSet) {
     let n = frame[2];
     let at = |off: Vector3<f64>, gap: f64| Sphere {
@@ -50,12 +49,6 @@ pub fn worlds(
                 "the probe starts just above the sphere's pole (the sphere {clear:.4} mm higher than SET_UP + Q320 below the start)"
             )),
         },
-        World {
-            truth: at(zero, clear + dist),
-            what: Some(format!(
-                "the probe starts SET_UP + Q320 + DIST above the sphere's pole (the sphere {dist:.4} mm lower than SET_UP + Q320 below the start)"
-            )),
-        },
     ];
     let reach = START_REACH * rs;
     for (w, name) in [(frame[0], "main"), (frame[1], "minor")] {
@@ -68,11 +61,11 @@ pub fn worlds(
             });
         }
     }
-    let base = start - n * (rs + clear + dist);
+    let base = start - n * (rs + clear);
     let possible = SphereSet {
         base,
         axis: n,
-        length: clear + dist,
+        length: clear,
         radial: reach,
         touch: rs,
     };
@@ -95,7 +88,7 @@ pub fn plan_moves(
     let frame = super::frame(call);
     let rs = p.sphere_radius + old.r;
     let clear = probe.set_up + p.clearance;
-    let (worlds, possible) = worlds(Vector3::from(start.xyz()), &frame, rs, clear, probe.dist);
+    let (worlds, possible) = worlds(Vector3::from(start.xyz()), &frame, rs, clear);
     in_every_world(
         &worlds,
         |w| {
