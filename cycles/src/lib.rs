@@ -47,6 +47,7 @@ pub mod machine_parameters;
 pub mod measuring_log;
 pub mod params;
 pub mod parser;
+pub mod plan;
 pub mod plane;
 pub mod planned_move;
 mod positioning;

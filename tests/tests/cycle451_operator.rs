@@ -460,19 +460,36 @@ fn q408_must_clear_the_sphere_at_every_angle_on_the_way() {
             .any(|e| matches!(e, ProgressEvent::Move { .. })),
         "something moved"
     );
-    let lowest: f64 = msg
-        .rsplit("the lowest Q408 that clears it is ")
-        .next()
-        .unwrap()
-        .split(|c: char| !(c.is_ascii_digit() || c == '.'))
-        .next()
-        .unwrap()
-        .parse()
-        .unwrap();
+    let lowest_in = |msg: &str| -> f64 {
+        msg.rsplit("the lowest Q408 that clears it is ")
+            .next()
+            .unwrap()
+            .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let lowest = lowest_in(msg);
     // Higher than the untilted Q407 + R + SET_UP: the sphere rises with A.
     assert!(lowest > 17.5, "{lowest}");
+    // `check` plans every start the docs allow: a sphere up to 0.6 x (Q407 + R) off
+    // below the start rises further with A, and the lowest Q408 named for it (with
+    // the start it happens from) is higher. Followed until `check` accepts, that
+    // value runs.
     p.q408 = lowest;
-    let r = run_text(&program(&p, 'Z', s, ""), &sc, &cfg, "q408-ok");
+    let mut r = run_text(&program(&p, 'Z', s, ""), &sc, &cfg, "q408-ok");
+    for _ in 0..3 {
+        let Some(check) = r.check.clone() else { break };
+        assert!(
+            check.contains("when the sphere centre stands 9.3000 mm off below the start"),
+            "{check}"
+        );
+        let higher = lowest_in(&check);
+        assert!(higher > p.q408, "{check}");
+        p.q408 = higher;
+        r = run_text(&program(&p, 'Z', s, ""), &sc, &cfg, "q408-ok");
+    }
     result(&r);
 }
 
@@ -1043,4 +1060,55 @@ fn a_turn_whose_clearing_height_is_outside_the_limits_is_refused() {
             "case {k}: something moved"
         );
     }
+}
+
+/// Q408 near the end of travel with the probe started lower over the pole than
+/// Q320 + SET_UP (which the docs allow): the sphere, and the preset Q431 = 1 sets at
+/// its centre, stand higher than `check` would assume from the start, so the
+/// retraction Q408 above it leaves the software limits. `check` plans for every start
+/// the docs allow (from just above the pole), so it refuses the block, and `run`
+/// refuses it before its first move with the same message, which names Q408, the
+/// limit, why, and the highest Q408 that stays inside; that one runs.
+#[test]
+fn q408_near_the_end_of_travel_is_refused_for_every_start_height_over_the_pole() {
+    let sc = load("demo-sphere.toml");
+    let cfg = cycles_config(&sc);
+    // Ball 0.5 mm over the pole; Z's limit is +400. From the start, SET_UP + Q320
+    // = 2 mm below it would put the centre at Z+78.5 (retracting to Z+399.0); the
+    // sphere is at Z+80 (Z+400.5), and from just over the pole at Z+80.5 (Z+401).
+    let s = start_at([50.0, -30.0, 80.0], 2, 15.5, 0.0, 0.0, 0.5);
+    let mut p = P451 {
+        mode: 0,
+        q408: 320.5,
+        c: Ax(90.0, 270.0, 0.0, 3),
+        ..P451::default()
+    };
+    let r = run_text(&program(&p, 'Z', s, ""), &sc, &cfg, "q408-travel");
+    let check = r
+        .check
+        .clone()
+        .expect("check accepted a Q408 that leaves the limits from a lower start");
+    assert!(
+        check.contains("(cycle 451): Q408=320.5: the retraction height Z+401.0000")
+            && check.contains("outside the software limits -200.0000 .. +400.0000")
+            && check.contains("when the probe starts just above the sphere's pole")
+            && check.contains(
+                "the highest Q408 that stays inside from every start the docs allow is 319.5000"
+            ),
+        "{check}"
+    );
+    let stopped = r.report.stopped.clone().unwrap_or_default();
+    let msg = &check[check.find("Q408=").unwrap()..];
+    assert!(stopped.contains(msg), "run: {stopped}\ncheck: {check}");
+    assert!(
+        !r.events
+            .iter()
+            .any(|e| matches!(e, ProgressEvent::Move { .. } | ProgressEvent::Probe { .. })),
+        "something moved"
+    );
+    // The value the message names runs from that start.
+    p.q408 = 319.5;
+    let r = run_text(&program(&p, 'Z', s, ""), &sc, &cfg, "q408-travel-ok");
+    let (_, preset) = result(&r);
+    assert!((preset[2] - 80.0).abs() < 1e-3, "{preset:?}");
 }

@@ -1,12 +1,16 @@
 //! The plan of every move of a 451 block, made by running the cycle's own sequence
-//! ([`super::measure`]) on a [`DryRunMachine`]: the sphere where the program puts it,
-//! the machine's motion guard, and a path check that finds any positioning move that
-//! would touch the sphere. `check` and `run` both call [`plan_moves`] before the
-//! program's first move, so `check` refuses what `run` would refuse, at the same step
-//! with the same message, and `run` never starts a cycle whose moves it already knows
-//! to fail.
+//! ([`super::measure`]) on the planner's machine ([`crate::plan::PlanMachine`]): the
+//! machine's motion guard, the sphere followed through the rotary axes, and a path
+//! check that finds any positioning move that would touch it. The sequence runs once
+//! for every sphere the block allows ([`worlds`]): Q431 = 1/3 the start anywhere the
+//! docs allow over the sphere (from just above the pole up to Q320 + SET_UP above
+//! it, up to LOCATE_REACH x (Q407 + R) off its centre), Q431 = 0/2 at the datum.
+//! `check` and `run` both call
+//! [`plan_moves`] before the program's first move, so `check` refuses what `run` could
+//! meet, at the same step with the same message, and `run` never starts a cycle whose
+//! moves it already knows can fail.
 
-use super::measure::Measure;
+use super::measure::{Measure, LOCATE_REACH};
 use super::plan::{plan_on, PlanError, PlanErrorKind};
 use super::KinematicsParams;
 use crate::cycle::CycleContext;
@@ -17,125 +21,10 @@ use crate::error::CycleError;
 use crate::kinematics::model::{angles_of, ErrorSet, KinematicModel};
 use crate::kinematics::LocalEstimator;
 use crate::kinematics_file::ActiveKinematics;
-use hal::motion_guard::MotionGuard;
-use hal::{AxisPositions, Contact, ErrorKind, Machine, MachineError, ProbeMove};
+use crate::plan::{in_every_world, when, PlanMachine, Sphere, SphereSet, World};
+use hal::AxisPositions;
 use nalgebra::Vector3;
 use std::path::Path;
-
-/// Largest step, mm or deg, at which a positioning path is checked against the sphere.
-const PATH_STEP: f64 = 0.2;
-/// A ball centre closer to the sphere centre than Q407 + R by more than this is a
-/// contact, mm (a probing contact leaves the ball exactly at Q407 + R). Cycle 460's
-/// plan uses it too.
-pub(crate) const TOUCH_TOLERANCE: f64 = 1e-3;
-
-/// A machine that moves nothing: it holds every move against the machine's motion
-/// guard (the checks every backend makes first, with their messages), follows the
-/// sphere through the rotary axes with the active kinematic model, answers probing
-/// moves with the exact contact on that sphere, and refuses a positioning move whose
-/// path comes within the ball radius of the sphere.
-pub struct DryRunMachine {
-    guard: MotionGuard,
-    axes: u8,
-    model: KinematicModel,
-    /// Sphere centre in table coordinates (where the ball centre would be at it).
-    sphere: Vector3<f64>,
-    /// Q407 + ball radius.
-    touch: f64,
-    pos: AxisPositions,
-    /// Every positioning target, in order (what `run` will command).
-    pub moves: Vec<AxisPositions>,
-}
-
-impl DryRunMachine {
-    /// Distance of the ball centre from the sphere centre at `p`.
-    fn gap(&self, p: &AxisPositions) -> f64 {
-        let a = angles_of(p);
-        (Vector3::from(p.xyz()) - self.model.predict(&a, &self.sphere)).norm()
-    }
-
-    pub fn positions_now(&self) -> AxisPositions {
-        self.pos
-    }
-}
-
-impl Machine for DryRunMachine {
-    type Error = MachineError;
-
-    fn axes(&self) -> u8 {
-        self.axes
-    }
-
-    fn positions(&mut self) -> Result<AxisPositions, MachineError> {
-        Ok(self.pos)
-    }
-
-    fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), MachineError> {
-        self.guard.check_move_from(&self.pos, target, feed)?;
-        let end = self.pos.merged(target);
-        let span = hal::Axis::ALL
-            .iter()
-            .filter_map(|a| Some((end.get(*a)? - self.pos.get(*a)?).abs()))
-            .fold(0.0, f64::max);
-        let steps = ((span / PATH_STEP).ceil() as usize).clamp(1, 100_000);
-        let from = self.pos;
-        for i in 1..=steps {
-            let f = i as f64 / steps as f64;
-            let mut p = from;
-            for (axis, v) in end.iter() {
-                let v0 = from.get(axis).unwrap_or(v);
-                p.set(axis, v0 + (v - v0) * f);
-            }
-            if self.gap(&p) < self.touch - TOUCH_TOLERANCE {
-                let [x, y, z] = p.xyz();
-                return Err(MachineError::new(
-                    ErrorKind::ProbeCollision,
-                    format!(
-                        "the planned path touches the calibration sphere at X{x:+.4} Y{y:+.4} Z{z:+.4}; nothing moved"
-                    ),
-                ));
-            }
-        }
-        self.pos = end;
-        self.moves.push(*target);
-        Ok(())
-    }
-
-    fn probe(&mut self, mv: &ProbeMove) -> Result<Contact, MachineError> {
-        let d = Vector3::from(self.guard.check_probe(&self.pos, mv)?.direction);
-        let a = angles_of(&self.pos);
-        let c = self.model.predict(&a, &self.sphere);
-        let p = Vector3::from(self.pos.xyz());
-        // |p + d t - c| = touch: the smaller root at or after the start.
-        let m = p - c;
-        let b = m.dot(&d);
-        let disc = b * b - (m.norm_squared() - self.touch * self.touch);
-        let t = (disc >= 0.0)
-            .then(|| -b - disc.sqrt())
-            .filter(|t| *t >= -TOUCH_TOLERANCE && *t <= mv.max_distance);
-        let Some(t) = t else {
-            let end = p + d * mv.max_distance;
-            self.pos = self.pos.merged(&AxisPositions::linear(end.into()));
-            return Err(MachineError::new(
-                ErrorKind::NotTriggered,
-                format!(
-                    "no contact within {:.3} mm; axes stopped at the end of the path",
-                    mv.max_distance
-                ),
-            ));
-        };
-        let at = p + d * t.max(0.0);
-        self.pos = self.pos.merged(&AxisPositions::linear(at.into()));
-        Ok(Contact {
-            positions: self.pos,
-            trigger_ns: 0,
-            sequence: 0,
-            direction: d.into(),
-        })
-    }
-
-    fn set_run(&mut self, _run_id: u64) {}
-}
 
 /// Where the planned 451 block leaves the machine.
 #[derive(Clone, Debug, PartialEq)]
@@ -150,11 +39,11 @@ pub struct PlannedRun {
 
 /// Plans every move of a 451 block: the plan of [`super::plan()`], then the cycle's
 /// own sequence (locating or approaching, every position, the way back) on a
-/// [`DryRunMachine`] that starts at `start` (every axis where the program leaves it)
-/// with the datum `datum`. The sphere is where the block expects it: Q431 = 1/3
-/// Q320 + SET_UP below the probe along the tool axis, Q431 = 0/2 at the datum with the
-/// rotary axes at 0. Any move the machine would refuse, or that would touch the
-/// sphere outside a probing move, is an error naming the step, as `run` would.
+/// [`PlanMachine`] that starts at `start` (every axis where the program leaves it)
+/// with the datum `datum`, once in every world of [`worlds`]. Any move the machine
+/// would refuse, or that would touch the sphere outside a probing move, in any of
+/// them, is an error naming the step (and the world, when it is not the expected
+/// one), as `run` would meet it. The result is the expected world's.
 pub fn plan_moves(
     params: &KinematicsParams,
     call: &CycleBlock,
@@ -167,61 +56,203 @@ pub fn plan_moves(
     let active = ActiveKinematics::load(kinematics, &cfg.machine)
         .map_err(|e| PlanError::new(PlanErrorKind::Moves, format!("active kinematics: {e}")))?;
     let model = KinematicModel::new(&kinematics_plan.chain, &ErrorSet::from_map(&active.errors));
-    let probe = &call.tool.probe;
-    let reach = params.sphere_radius + probe.radius + probe.set_up + params.clearance;
-    let a0 = angles_of(start);
-    let sphere = if params.preset == 1 || params.preset == 3 {
-        let n = model.tool_vector(&a0, tool_unit(call));
-        model.table_point(&a0, &(Vector3::from(start.xyz()) - n * reach))
-    } else {
-        let zero = [0.0; 3];
-        let origin = Vector3::from(datum.origin()) - model.ball_offset(&zero);
-        model.table_point(&zero, &origin)
-    };
-    let mut machine = DryRunMachine {
-        guard: MotionGuard::new(&cfg.machine),
-        axes: cfg.machine.axis_mask(),
-        model: model.clone(),
-        sphere,
-        touch: params.sphere_radius + probe.radius,
-        pos: *start,
-        moves: Vec::new(),
-    };
-    let mut estimator = LocalEstimator;
-    let mut confirm = |_: &str| true;
-    let mut progress = |_: crate::progress::ProgressEvent| {};
-    let out_dir = std::env::temp_dir();
-    let mut ctx = CycleContext {
-        cfg,
-        kinematics: kinematics.to_path_buf(),
-        estimator: &mut estimator,
-        confirm: &mut confirm,
-        progress: &mut progress,
-        out_dir: &out_dir,
-        program: None,
-        probing3d: Vec::new(),
-        datum: datum.clone(),
-    };
+    let (worlds, possible) = worlds(params, call, cfg, &model, datum, start);
+    q408_for_every_start(params, call, cfg, &model, &worlds, start)?;
     let as_plan = |e: CycleError| match e {
         CycleError::Plan(m) => PlanError::new(PlanErrorKind::Moves, m),
         e => PlanError::new(PlanErrorKind::Moves, e.to_string()),
     };
-    let preset = {
-        let mut m =
-            Measure::new(&mut machine, &mut ctx, &kinematics_plan, call, model).map_err(as_plan)?;
-        if params.preset == 1 || params.preset == 3 {
-            m.locate().map_err(as_plan)?;
-        } else {
-            m.approach_datum().map_err(as_plan)?;
-        }
-        m.measure_axes().map_err(as_plan)?;
-        m.preset
+    in_every_world(
+        &worlds,
+        |w| {
+            let mut machine =
+                PlanMachine::new(&cfg.machine, Some(model.clone()), w.truth, possible, *start);
+            let mut estimator = LocalEstimator;
+            let mut confirm = |_: &str| true;
+            let mut progress = |_: crate::progress::ProgressEvent| {};
+            let out_dir = std::env::temp_dir();
+            let mut ctx = CycleContext {
+                cfg,
+                kinematics: kinematics.to_path_buf(),
+                estimator: &mut estimator,
+                confirm: &mut confirm,
+                progress: &mut progress,
+                out_dir: &out_dir,
+                program: None,
+                probing3d: Vec::new(),
+                datum: datum.clone(),
+            };
+            let preset = {
+                let mut m = Measure::new(
+                    &mut machine,
+                    &mut ctx,
+                    &kinematics_plan,
+                    call,
+                    model.clone(),
+                )
+                .map_err(as_plan)?;
+                if params.preset == 1 || params.preset == 3 {
+                    m.locate().map_err(as_plan)?;
+                } else {
+                    m.approach_datum().map_err(as_plan)?;
+                }
+                m.measure_axes().map_err(as_plan)?;
+                m.preset
+            };
+            Ok(PlannedRun {
+                end: machine.position(),
+                preset: preset.into(),
+                moves: machine.moves().to_vec(),
+            })
+        },
+        |e: PlanError, what| PlanError::new(e.kind(), when(&e.to_string(), what)),
+    )
+}
+
+/// Every sphere a 451 block allows, the expected one first, and the set of all of
+/// them that a move before the first contact must keep off. Q431 = 1/3: the probe
+/// stands over the sphere as the docs allow, from just above its pole up to
+/// Q320 + SET_UP above it (expected: Q320 + SET_UP), with the centre up to
+/// [`LOCATE_REACH`] x (Q407 + R) off below the start in the working plane. Q431 = 0/2:
+/// the centre at the active datum with the rotary axes at 0. Before the first contact
+/// a move also keeps off a radius up to half of maxDevCalBall above Q407 (the cycle
+/// checks the radius only once it has probed). Each extreme alone: a start at two
+/// limits at once is beyond what the pole probe reaches.
+pub fn worlds(
+    params: &KinematicsParams,
+    call: &CycleBlock,
+    cfg: &CyclesConfig,
+    model: &KinematicModel,
+    datum: &Datum,
+    start: &AxisPositions,
+) -> (Vec<World>, SphereSet) {
+    let probe = &call.tool.probe;
+    let rs = params.sphere_radius + probe.radius;
+    let dev = 0.5 * cfg.parameters.max_dev_cal_ball;
+    if params.preset != 1 && params.preset != 3 {
+        let zero = [0.0; 3];
+        let origin = Vector3::from(datum.origin()) - model.ball_offset(&zero);
+        let centre = model.table_point(&zero, &origin);
+        let worlds = vec![World {
+            truth: Sphere { centre, touch: rs },
+            what: None,
+        }];
+        return (
+            worlds,
+            SphereSet::one(Sphere {
+                centre,
+                touch: rs + dev,
+            }),
+        );
+    }
+    let a0 = angles_of(start);
+    let clearance = probe.set_up + params.clearance;
+    let n = model.tool_vector(&a0, tool_unit(call));
+    let s = Vector3::from(start.xyz());
+    let table = |p: Vector3<f64>| model.table_point(&a0, &p);
+    // The sphere `gap` below the start along the tool axis (ball centre over the
+    // pole), `off` across it.
+    let at = |off: Vector3<f64>, gap: f64| Sphere {
+        centre: table(s + off - n * (rs + gap)),
+        touch: rs,
     };
-    Ok(PlannedRun {
-        end: machine.pos,
-        preset: preset.into(),
-        moves: machine.moves,
-    })
+    let zero = Vector3::zeros();
+    let mut worlds = vec![
+        World {
+            truth: at(zero, clearance),
+            what: None,
+        },
+        World {
+            truth: at(zero, 0.0),
+            what: Some(format!(
+                "the probe starts just above the sphere's pole (the sphere {clearance:.4} mm higher than Q320 + SET_UP below the start)"
+            )),
+        },
+    ];
+    let reach = LOCATE_REACH * rs;
+    let [main, minor, _] = call.tool.axis.indices();
+    for i in [main, minor] {
+        let mut e = Vector3::zeros();
+        e[i] = 1.0;
+        let w = model.tool_vector(&a0, e);
+        for sign in [1.0, -1.0] {
+            worlds.push(World {
+                truth: at(w * (sign * reach), clearance),
+                what: Some(format!(
+                    "the sphere centre stands {reach:.4} mm off below the start toward {}",
+                    toward(&(w * sign))
+                )),
+            });
+        }
+    }
+    let lowest = s - n * (rs + dev + clearance);
+    let base = table(lowest);
+    let possible = SphereSet {
+        base,
+        axis: table(lowest + n) - base,
+        length: clearance + dev,
+        radial: reach,
+        touch: rs + dev,
+    };
+    (worlds, possible)
+}
+
+/// Q408 > 0 with Q431 = 1/3: the probe retracts to Q408 above the preset the cycle
+/// sets at the sphere centre, so a start lower over the pole (which the docs allow)
+/// retracts higher. Refused unless it stays inside the software limits from every
+/// such start, with the highest Q408 that does.
+fn q408_for_every_start(
+    params: &KinematicsParams,
+    call: &CycleBlock,
+    cfg: &CyclesConfig,
+    model: &KinematicModel,
+    worlds: &[World],
+    start: &AxisPositions,
+) -> Result<(), PlanError> {
+    let h = params.retract_height;
+    if h <= 0.0 || !(params.preset == 1 || params.preset == 3) {
+        return Ok(());
+    }
+    let t = call.tool.axis.tool_index();
+    let axis = hal::Axis::LINEAR[t];
+    let Some(limits) = cfg.machine.axis(axis) else {
+        return Ok(());
+    };
+    let a0 = angles_of(start);
+    // The preset the cycle sets in each world: the ball centre at the sphere centre.
+    let preset = |w: &World| model.ball_in_machine(&a0, &model.predict(&a0, &w.truth.centre))[t];
+    let (high, highest) = worlds
+        .iter()
+        .map(|w| (w, preset(w)))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .expect("the expected world");
+    if highest + h <= limits.max {
+        return Ok(());
+    }
+    let when = match &high.what {
+        Some(what) => format!(" when {what} (a start the docs allow)"),
+        None => String::new(),
+    };
+    Err(PlanError::new(
+        PlanErrorKind::Moves,
+        format!(
+            "Q408={h}: the retraction height {axis}{:+.4} (Q408 above the preset at the sphere centre, {axis}{highest:+.4}) is outside the software limits {:+.4} .. {:+.4}{when}; the highest Q408 that stays inside from every start the docs allow is {:.4}; nothing moved",
+            highest + h,
+            limits.min,
+            limits.max,
+            ((limits.max - highest) * 1e4 + 1e-3).floor() / 1e4
+        ),
+    ))
+}
+
+/// A direction as the axis it points along ("+X"), or its components.
+fn toward(v: &Vector3<f64>) -> String {
+    for (i, name) in ["X", "Y", "Z"].iter().enumerate() {
+        if v[i].abs() > 1.0 - 1e-9 {
+            return format!("{}{name}", if v[i] > 0.0 { "+" } else { "-" });
+        }
+    }
+    format!("X{:+.3} Y{:+.3} Z{:+.3}", v.x, v.y, v.z)
 }
 
 /// The tool direction at all axes 0 (the probe's +tool axis), machine X/Y/Z.

@@ -179,8 +179,8 @@ pub fn preflight_program_from(
     // The moves themselves, in the order the program runs them (its jumps, calls and
     // repeats followed, the parameters it computes from constants known) with the
     // datum as the program changes it and every axis where the blocks before leave it:
-    // `L` targets, the probing cycles' points, and every move of cycle 451 (planned by
-    // running its sequence on a dry-run machine), in machine coordinates.
+    // `L` targets, the probing cycles' points, and every move of cycles 451 and 460 (planned
+    // by running their sequences on the planner's machine), in machine coordinates.
     let guard = MotionGuard::new(&cfg.machine);
     let params = start_params(
         &load_remanent(&remanent_path(&cfg.presets.path)).map_err(|e| Preflight::Program {
@@ -317,8 +317,9 @@ pub(super) fn preflight_cycle(
 }
 
 /// The moves a cycle plans, from the datum and the axes where the program's path
-/// leaves them, against the motion guard: the probing cycles' points, and every move of
-/// cycle 451 (its sequence run on a dry-run machine). Leaves `here` where the cycle
+/// leaves them, against the motion guard: the probing cycles' points (431, 444), and
+/// every move of cycles 451 and 460 (their sequences run on the planner's machine,
+/// [`crate::plan`], for every sphere the block allows). Leaves `here` where the cycle
 /// leaves the axes, and, for 451 with Q431 = 1/3 in modes 1..3, the active preset at
 /// the sphere centre it sets.
 pub(super) fn check_cycle_moves(
@@ -361,7 +362,9 @@ pub(super) fn check_cycle_moves(
         // Planned from where the axes stand: the probe over the sphere, as the
         // operator puts it before the block.
         CycleKind::CalibrateProbe(p) => {
-            crate::cycle460::plan::planned_moves(p, &call.head, cfg, datum, here)
+            *here = crate::cycle460::plan::plan_moves(p, &call.head, cfg, datum, here)
+                .map_err(|message| refused(PreflightKind::Moves, message))?;
+            Ok(Vec::new())
         }
     };
     let moves = moves
