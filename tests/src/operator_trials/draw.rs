@@ -10,7 +10,7 @@ macro_rules! genes {
     ($($name:ident = $nominal:expr, $doc:literal;)*) => {
         /// One generated operator: what the program says and how the machine and the
         /// probe really are.
-        #[derive(Clone, Debug, PartialEq)]
+        #[derive(Clone, Debug)]
         pub struct Case {
             $(#[doc = $doc] pub $name: f64,)*
         }
@@ -25,10 +25,12 @@ macro_rules! genes {
             /// The genes' names, in order.
             pub const NAMES: &'static [&'static str] = &[$(stringify!($name),)*];
 
+            /// Gene `i`, by its place in [`Self::NAMES`].
             pub fn get(&self, i: usize) -> f64 {
                 [$(self.$name,)*][i]
             }
 
+            /// Gene `i`, by its place in [`Self::NAMES`].
             pub fn set(&mut self, i: usize, v: f64) {
                 let mut k = 0;
                 $(if k == i { self.$name = v; return; } k += 1;)*
@@ -37,6 +39,16 @@ macro_rules! genes {
             }
         }
     };
+}
+
+/// Two cases are the same when every gene is (NaN, "not given", equals NaN).
+impl PartialEq for Case {
+    fn eq(&self, other: &Self) -> bool {
+        (0..Self::NAMES.len()).all(|i| {
+            let (a, b) = (self.get(i), other.get(i));
+            a == b || (a.is_nan() && b.is_nan())
+        })
+    }
 }
 
 genes! {
@@ -96,6 +108,9 @@ pub const MACHINES: [&str; 4] = [
 
 pub const CYCLES: [u16; 4] = [451, 460, 431, 444];
 
+/// The largest coordinate, height or feed a cycle parameter takes (params.rs).
+const COORD: f64 = 99_999.999_9;
+
 /// The bus draws: `share` of the cases in hundredths go over CANopen and as many over
 /// Modbus (each a tenth of the world machine's speed or less).
 pub struct Shares {
@@ -145,7 +160,15 @@ pub fn draw(seed: u64, index: u64, shares: &Shares) -> Case {
     c.flow = maybe(&mut rng, 0.5, 0.0, 1.0, 5.0).floor();
     c.off = round(maybe(&mut rng, 0.2, 0.0, 0.0, 1.5), 3);
     c.off_dir = round(rng.random_range(0.0..360.0), 1);
-    c.rise = round(maybe(&mut rng, 0.3, 0.0, -0.3, 1.5), 3);
+    // Lower than SET_UP + Q320 over the pole (the docs allow it) a quarter of the time.
+    c.rise = round(
+        match rng.random_range(0..20) {
+            0..=5 => 0.0,
+            6..=10 => rng.random_range(-1.0..0.0),
+            _ => rng.random_range(0.0..1.5),
+        },
+        3,
+    );
     // Within maxDevCalBall (0.1 mm of 12.5: 0.8 %) as often as up to 30 % off.
     c.q407_err = round(
         match rng.random_range(0..10) {
@@ -160,15 +183,19 @@ pub fn draw(seed: u64, index: u64, shares: &Shares) -> Case {
             0..=4 => 0.0,
             5..=7 => rng.random_range(0.0..5.0),
             8 => rng.random_range(0.0..50.0),
-            _ => rng.random_range(0.0..99_999.9999),
+            _ => rng.random_range(0.0..COORD),
         },
         3,
     );
+    // The tool axis's end of travel over the sphere centre (Q408 counts from the
+    // preset, the sphere centre after Q431 = 1/3), per machine.
+    let top = [320.0, 440.0, 360.0, 330.0][c.machine as usize];
     c.q408 = round(
         match rng.random_range(0..20) {
-            0..=11 => 0.0,
-            12..=16 => rng.random_range(0.0..500.0),
-            _ => rng.random_range(0.0..99_999.9999),
+            0..=10 => 0.0,
+            11..=14 => rng.random_range(0.0..500.0),
+            15..=17 => top - rng.random_range(0.0..25.0),
+            _ => rng.random_range(0.0..COORD),
         },
         3,
     );
@@ -176,7 +203,7 @@ pub fn draw(seed: u64, index: u64, shares: &Shares) -> Case {
         match rng.random_range(0..20) {
             0..=11 => 750.0,
             12..=13 => rng.random_range(0.0..20_000.0),
-            14 => rng.random_range(0.0..99_999.9999),
+            14 => rng.random_range(0.0..COORD),
             15 => -1.0,
             16 => -2.0,
             _ => -3.0,
@@ -186,7 +213,7 @@ pub fn draw(seed: u64, index: u64, shares: &Shares) -> Case {
     c.q260 = match rng.random_range(0..10) {
         0..=6 => f64::NAN,
         7..=8 => round(rng.random_range(-50.0..200.0), 2),
-        _ => round(rng.random_range(-99_999.9999..99_999.9999), 2),
+        _ => round(rng.random_range(-COORD..COORD), 2),
     };
     c.mode = f64::from(pick(&mut rng, &[0u8, 1, 2, 2, 2, 3]));
     c.q431 = f64::from(rng.random_range(0u8..4));

@@ -169,6 +169,13 @@ fn i2(seen: &Seen, collision: bool, msg: Option<&str>, out: &mut Vec<Violation>)
         }
     }
     for c in results.iter().filter(|c| c.status == Status::Ok) {
+        against_truth(s, c, out);
+    }
+}
+
+/// One result of the cycle under test against the truth (I2).
+fn against_truth(s: &Setup, c: &cycles::results::CycleResult, out: &mut Vec<Violation>) {
+    {
         let against = |name: &str, got: f64, want: f64, u: Option<f64>, slack: f64| {
             let Some(u) = u else {
                 return Some(v(
@@ -197,7 +204,7 @@ fn i2(seen: &Seen, collision: bool, msg: Option<&str>, out: &mut Vec<Violation>)
             } => {
                 let Some(k) = c.kinematics.as_ref() else {
                     out.push(v("I2", "451 without its kinematics report".into()));
-                    continue;
+                    return;
                 };
                 let u_pos = k
                     .errors_u

@@ -73,7 +73,7 @@ pub fn violations(case: &Case) -> Vec<Violation> {
 type Ran = (ProgramReport, Vec<Act>, Vec<Vec<(String, Vec<u8>)>>);
 
 fn run_on<M: Machine<Error = MachineError>>(m: M, s: &Setup, program: &Program) -> Ran {
-    let mut rec = Recorder::new(m);
+    let mut rec = Recorder::new(m, hal::motion_guard::MotionGuard::new(&s.cfg.machine));
     let mut starts = Vec::new();
     let state = s.state.clone();
     let mut confirm = |_: &str| true;

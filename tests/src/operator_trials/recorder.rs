@@ -1,7 +1,11 @@
 //! A [`Machine`] that passes every call on and keeps what was asked and how it ended:
 //! the detector of I1 (a positioning move that ended in a contact, and anything that
 //! moved after it) and of "refused before the first move" (I2, I3), on every backend.
+//! It holds every move against the machine's motion guard first, as every real
+//! backend does (the world machine has none), so a move outside the software limits
+//! fails here as it would on the machine.
 
+use hal::motion_guard::MotionGuard;
 use hal::{AxisPositions, Contact, ErrorKind, Machine, MachineError, ProbeMove};
 
 /// One motion request.
@@ -16,13 +20,15 @@ pub struct Act {
 pub struct Recorder<M> {
     pub inner: M,
     pub acts: Vec<Act>,
+    guard: MotionGuard,
 }
 
 impl<M> Recorder<M> {
-    pub fn new(inner: M) -> Self {
+    pub fn new(inner: M, guard: MotionGuard) -> Self {
         Self {
             inner,
             acts: Vec::new(),
+            guard,
         }
     }
 }
@@ -39,7 +45,11 @@ impl<M: Machine<Error = MachineError>> Machine for Recorder<M> {
     }
 
     fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), MachineError> {
-        let r = self.inner.move_to(target, feed);
+        let here = self.inner.positions()?;
+        let r = self
+            .guard
+            .check_move_from(&here, target, feed)
+            .and_then(|()| self.inner.move_to(target, feed));
         self.acts.push(Act {
             probing: false,
             failed: r.as_ref().err().map(hal::machine::Error::kind),
@@ -48,7 +58,11 @@ impl<M: Machine<Error = MachineError>> Machine for Recorder<M> {
     }
 
     fn probe(&mut self, mv: &ProbeMove) -> Result<Contact, MachineError> {
-        let r = self.inner.probe(mv);
+        let here = self.inner.positions()?;
+        let r = self
+            .guard
+            .check_probe(&here, mv)
+            .and_then(|_| self.inner.probe(mv));
         self.acts.push(Act {
             probing: true,
             failed: r.as_ref().err().map(hal::machine::Error::kind),

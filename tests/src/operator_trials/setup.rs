@@ -372,9 +372,9 @@ fn start_over(cc: [f64; 3], rs: f64, off: f64, dir: f64, height: f64) -> [f64; 3
 
 fn feed(v: f64, inch: bool) -> String {
     match v {
-        x if x == -1.0 => "FMAX".into(),
-        x if x == -2.0 => "FAUTO".into(),
-        x if x == -3.0 => "PREDEF".into(),
+        -1.0 => "FMAX".into(),
+        -2.0 => "FAUTO".into(),
+        -3.0 => "PREDEF".into(),
         x if inch => format!("{:+.4}", x / 2.54),
         x => format!("{x:+.1}"),
     }
