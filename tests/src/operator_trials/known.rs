@@ -15,7 +15,7 @@ pub fn classify(case: &Case, v: &Violation) -> &'static str {
         ("I2", _) if d.contains("ran to its end without a word") && case.flow == 2.0 => {
             "call-lbl-before"
         }
-        ("I1", 451) if case.q407_err < 0.0 => "451-q407-small",
+        ("I1", 451) if case.q407_err * super::setup::SPHERE < -0.1 => "451-q407-small",
         ("I1", 451)
             if (case.q431 == 0.0 || case.q431 == 2.0)
                 && (case.preset_err > 0.0 || case.preset_up != 0.0)
@@ -42,7 +42,7 @@ pub fn classify(case: &Case, v: &Violation) -> &'static str {
         ("I1", 460) if case.stale_r != 0.0 && d.contains("within the documented reach") => {
             "460-stale-r"
         }
-        ("I1", 460) if case.q407_err < 0.0 => "460-q407-small",
+        ("I1", 460) if case.q407_err * super::setup::SPHERE < -0.1 => "460-q407-small",
         ("I2", 460)
             if (case.q407_err * super::setup::SPHERE).abs() > 0.1
                 && (d.starts_with('R') || d.starts_with('L')) =>
