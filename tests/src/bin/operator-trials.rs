@@ -14,11 +14,22 @@ fn arg(args: &[String], name: &str, default: f64) -> Result<f64, String> {
     }
 }
 
+/// One case: its genes, its program, what the docs promise, its verdict.
+fn show(case: &operator_trials::Case) {
+    println!("{case:?}");
+    if let Ok(s) = operator_trials::setup::build(case) {
+        println!("{}\nbeyond: {:?}\ntruth: {:?}", s.text, s.beyond, s.truth);
+    }
+    let t = operator_trials::trial(case);
+    println!("{}: {:?}\n{:#?}", t.outcome.name(), t.message, t.violations);
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.iter().any(|a| a == "--help" || a == "-h") {
         println!(
             "operator-trials [--cases N] [--seed S] [--can F] [--modbus F] [--shrink K] [--budget B] [--verbose]\n\
+             operator-trials --seed S --case I | --genes name=value,... | --nominal\n\
              N cases (default 200) of seed S (default 1); fractions F of them over CANopen and Modbus\n\
              (default 0.03 each); K violations of each kind shrunk (default 1) with at most B trials each (default 150)."
         );
@@ -42,16 +53,35 @@ fn main() {
         }
     };
     let verbose = args.iter().any(|a| a == "--verbose");
+    if let Some(i) = args.iter().position(|a| a == "--genes") {
+        // A case written as genes: `--genes cycle=451,q408=310,rise=-1`.
+        let mut case = operator_trials::Case::nominal();
+        for pair in args.get(i + 1).map(String::as_str).unwrap_or("").split(',') {
+            let Some((name, v)) = pair.split_once('=') else {
+                continue;
+            };
+            match (
+                operator_trials::Case::NAMES.iter().position(|n| *n == name),
+                v.parse::<f64>(),
+            ) {
+                (Some(k), Ok(v)) => case.set(k, v),
+                _ => {
+                    eprintln!("operator-trials: --genes: {pair}: no such gene or not a number");
+                    std::process::exit(2);
+                }
+            }
+        }
+        show(&case);
+        return;
+    }
     if args.iter().any(|a| a == "--case") {
         // One case of the seed, with its program.
         let i = arg(&args, "--case", 0.0).unwrap_or(0.0) as u64;
-        let case = operator_trials::draw::draw(seed, i, &Shares { can, modbus });
-        println!("{case:?}");
-        if let Ok(s) = operator_trials::setup::build(&case) {
-            println!("{}\nbeyond: {:?}\ntruth: {:?}", s.text, s.beyond, s.truth);
-        }
-        let t = operator_trials::trial(&case);
-        println!("{}: {:?}\n{:#?}", t.outcome.name(), t.message, t.violations);
+        show(&operator_trials::draw::draw(
+            seed,
+            i,
+            &Shares { can, modbus },
+        ));
         return;
     }
     if args.iter().any(|a| a == "--nominal") {

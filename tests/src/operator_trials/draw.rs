@@ -194,7 +194,7 @@ pub fn draw(seed: u64, index: u64, shares: &Shares) -> Case {
         match rng.random_range(0..20) {
             0..=10 => 0.0,
             11..=14 => rng.random_range(0.0..500.0),
-            15..=17 => top - rng.random_range(0.0..25.0),
+            15..=17 => top + rng.random_range(-15.0..5.0),
             _ => rng.random_range(0.0..COORD),
         },
         3,
