@@ -258,6 +258,11 @@ pub fn build(case: &Case) -> Result<Setup, String> {
     cfg.presets.path = state.join(presets_name);
     cfg.calibrations.path = state.join(format!("{}.probes.toml", sc.machine.name));
     let kinematics = state.join("kinematics.toml");
+    // The probe table states the repeatability the drawn noise gives (2 sigma), as
+    // an operator states a probe's: u is scaled by it.
+    for p in &mut cfg.probes {
+        p.repeatability_2sigma = p.repeatability_2sigma.max(2.0 * case.noise);
+    }
     let probe = cfg.probe("TOUCH_PROBE").ok_or("no TOUCH_PROBE")?.clone();
     let cycle = case.cycle as u16;
     let mut s = Setup {

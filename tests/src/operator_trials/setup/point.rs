@@ -42,7 +42,7 @@ pub(super) fn cycle444(
             case.surf
         ));
     }
-    let horizontal = (r + BALL + clear) * ce;
+    let horizontal = (r + cycle_r(case) + clear) * ce;
     if case.el < 0.0 && horizontal < real + BALL + 0.2 {
         s.beyond
             .push("the start below the equator, under the sphere's overhang".into());
