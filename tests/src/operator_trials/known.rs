@@ -38,6 +38,9 @@ pub fn classify(case: &Case, v: &Violation) -> &'static str {
         {
             "451-preset-away"
         }
+        ("I2", 451) if case.off > 1.0 && d.contains("did not trigger") => {
+            "NEW:451-beyond-reach-stop-unnamed"
+        }
         ("I1", 460) if case.off > 1.0 => "460-beyond-reach",
         ("I1", 460) if case.stale_r != 0.0 && d.contains("within the documented reach") => {
             "460-stale-r"
