@@ -8,6 +8,7 @@ pub mod conformance;
 pub mod conformance_modbus;
 pub mod kinematic_machine;
 pub mod loopback;
+pub mod operator_trials;
 pub mod probing_loop;
 pub mod spec451;
 pub mod world_machine;

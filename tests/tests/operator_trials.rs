@@ -1,0 +1,162 @@
+//! Generated operators (issue 34, section 4): a seeded sample of what an operator can
+//! type and do around cycles 451, 460, 431 and 444 on the four shipped machines, most
+//! on the simulator's physics without a bus and a share over CANopen (lockstep) and
+//! Modbus (the simulated PLC on loopback), held against the four invariants (see
+//! `probebridge_tests::operator_trials` and docs/testing.md, "Generated operators").
+//! A violation is printed with its shrunk case, ready to paste below as a regression.
+
+use probebridge_tests::operator_trials::{
+    self, draw, invariants::names_what_to_check, shrink, Case, Outcome, ShrinkPolicy, Violation,
+};
+
+/// The seed and size of the CI sample (about a minute in the debug test profile on
+/// the 2-core CI machine; `scripts/operator-trials` runs any number).
+const SEED: u64 = 34;
+const CASES: u64 = 400;
+
+/// Every cycle on every shipped machine, each gene at its nominal value: ok, and no
+/// invariant violated (the harness's truth and the cycles agree where nothing is off).
+#[test]
+fn nominal_operators_on_every_machine_hold_every_invariant() {
+    for cycle in draw::CYCLES {
+        for machine in 0..4u8 {
+            let case = Case {
+                cycle: f64::from(cycle),
+                machine: f64::from(machine),
+                ..Case::nominal()
+            };
+            let t = operator_trials::trial(&case);
+            assert_eq!(
+                (t.outcome, t.violations.clone()),
+                (Outcome::Ok, Vec::new()),
+                "cycle {cycle} on {}: {:?}",
+                draw::MACHINES[machine as usize],
+                t.message
+            );
+        }
+    }
+}
+
+/// The seeded sample: at least 200 cases across the four cycles, some over CANopen
+/// and Modbus, with 0 violations.
+#[test]
+fn a_seeded_sample_of_generated_operators_violates_no_invariant() {
+    let shares = draw::Shares {
+        can: 0.04,
+        modbus: 0.04,
+    };
+    let policy = ShrinkPolicy {
+        per_kind: 1,
+        budget: 80,
+    };
+    let summary = operator_trials::run(SEED, CASES, &shares, &policy, |_, _, _| {});
+    println!("{}", summary.line());
+    print!("{}", summary.report());
+    assert!(summary.cases >= 200);
+    for cycle in draw::CYCLES {
+        let n: usize = summary.outcomes[&cycle].values().sum();
+        assert!(n >= 40, "only {n} cases of cycle {cycle}");
+    }
+    assert!(
+        summary.backends[1] > 0 && summary.backends[2] > 0,
+        "{}",
+        summary.line()
+    );
+    assert!(
+        summary.findings.is_empty(),
+        "{} violations (see the shrunk cases above)",
+        summary.findings.len()
+    );
+}
+
+/// Shrinking keeps only what the failure needs: a failure that depends on the start
+/// being more than 0.5 of the reach off and on Q431 ends as exactly those two genes
+/// (the cycle stays), the start halved toward nominal while it still fails; and it
+/// prints as a regression case naming only them.
+#[test]
+fn a_failing_case_shrinks_to_the_genes_it_needs() {
+    let case = Case {
+        cycle: 460.0,
+        off: 1.4,
+        q431: 3.0,
+        noise: 0.0007,
+        rot2: 120.0,
+        stale_r: -1.2,
+        flow: 4.0,
+        ..Case::nominal()
+    };
+    let fails = |c: &Case| {
+        if c.off > 0.5 && c.q431 == 3.0 {
+            vec![Violation {
+                invariant: "I1",
+                class: "NEW",
+                detail: format!("off {}", c.off),
+            }]
+        } else {
+            Vec::new()
+        }
+    };
+    let first = fails(&case).remove(0);
+    let (small, v) = shrink::shrink(&case, &first, 200, fails);
+    let want = Case {
+        cycle: 460.0,
+        off: small.off,
+        q431: 3.0,
+        ..Case::nominal()
+    };
+    assert_eq!(small, want);
+    // Halved once (0.7 still fails, 0.35 does not).
+    assert_eq!(small.off, 0.7);
+    assert_eq!(v.detail, format!("off {}", small.off));
+    let text = shrink::regression(&small, &v);
+    assert!(
+        text.contains(&format!(
+            "Case {{ cycle: 460.0, off: {:?}, q431: 3.0, ..Case::nominal() }}",
+            small.off
+        )),
+        "{text}"
+    );
+}
+
+/// What counts as a message that names what to check: a parameter, a position, the
+/// preset or where to put the probe; not the machine's bare words on a contact.
+#[test]
+fn a_message_names_what_to_check_or_it_does_not() {
+    for named in [
+        "block 9: Q408=89.134: the retraction height does not clear the sphere",
+        "L block: Z+38066.2399 is outside the software limits",
+        "probe did not trigger: position the probe over the sphere centre",
+    ] {
+        assert!(names_what_to_check(named), "{named}");
+    }
+    for bare in [
+        "block 8: cycle 451 failed: approaching the sphere: probe deflected during a positioning move: the probe touched while positioning to [52.5, 25.6, 58.9] (the program's coordinates were relative to preset row 1 of /tmp/x: X+0.0000 Y+0.0000 Z+0.0000; M91 blocks are machine coordinates)",
+        "line 3: the condition has no value",
+    ] {
+        assert!(!names_what_to_check(bare), "{bare}");
+    }
+}
+
+/// The detectors themselves: a 444 whose real surface stands 4 mm proud of the
+/// nominal point (beyond SET_UP + Q320) touches it while positioning: the trial
+/// reports a contact (I1's detector on the world machine) and calls the case beyond
+/// the docs; a 460 started 3 x its reach off the sphere does not end ok.
+#[test]
+fn the_detectors_see_a_contact_and_a_stop() {
+    let proud = Case {
+        cycle: 444.0,
+        surf: 4.0,
+        ..Case::nominal()
+    };
+    let t = operator_trials::trial(&proud);
+    assert_eq!(t.outcome, Outcome::Contact, "{:?}", t.message);
+    let s = operator_trials::setup::build(&proud).unwrap();
+    assert!(!s.beyond.is_empty());
+    let far = Case {
+        cycle: 460.0,
+        off: 3.0,
+        ..Case::nominal()
+    };
+    let t = operator_trials::trial(&far);
+    assert_ne!(t.outcome, Outcome::Ok, "{:?}", t.message);
+}
