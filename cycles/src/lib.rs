@@ -23,6 +23,7 @@
 //!   and string functions), [`flow_block`] and [`program_flow`] (labels, jumps,
 //!   subprograms, FN 14).
 
+pub mod check_walk;
 pub mod cycle;
 pub mod cycle431;
 pub mod cycle444;
@@ -56,6 +57,7 @@ pub mod probe_axis;
 pub mod probe_table;
 pub mod program;
 pub mod program_flow;
+pub mod program_warnings;
 pub mod progress;
 pub mod q_params;
 pub mod results;

@@ -5,13 +5,15 @@
 //! doing what only touches parameters itself and handing every other block (moves,
 //! cycles, datum changes) to its caller: `run` acts on them, `check` checks them.
 
-use crate::datum::Datum;
 use crate::flow_block::{Label, MAX_NESTING};
 use crate::formula::{eval_formula, Env, EvalError, EvalErrorKind, Expr, Lookup, StrExpr};
 use crate::program::{Block, Program, Statement};
 use crate::q_params::{QName, QParams, QValue};
 use std::borrow::Cow;
 use std::collections::BTreeMap;
+
+pub use crate::check_walk::{fingerprint, CheckFault, CheckWalk, MAX_CHECK_PATHS};
+use crate::program_warnings::reads_mm;
 
 /// Labels defined twice, and jumps or calls to labels that do not exist, each at its
 /// line.
@@ -250,12 +252,12 @@ pub enum Step {
 /// repeats left per CALL block, the jumps made so far.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Flow {
-    pc: usize,
-    returns: Vec<usize>,
-    repeats: BTreeMap<usize, u32>,
-    jumps: u64,
-    max_jumps: u64,
-    ending: bool,
+    pub(crate) pc: usize,
+    pub(crate) returns: Vec<usize>,
+    pub(crate) repeats: BTreeMap<usize, u32>,
+    pub(crate) jumps: u64,
+    pub(crate) max_jumps: u64,
+    pub(crate) ending: bool,
 }
 
 /// Block index of each label (and of each `LBL 0`).
@@ -489,293 +491,5 @@ pub fn mark_cycle_results(params: &mut QParams, cycle: u16, rotary_targets: &[QN
     }
     for n in crate::q_params::length_results_of(cycle) {
         params.mark_mm(n);
-    }
-}
-
-/// Whether a formula's value is a length in mm that a cycle measured: it reads a
-/// parameter that holds one ([`QParams::is_mm`]) and does not divide by 25.4 (the
-/// conversion to inches).
-fn reads_mm(formula: &crate::formula::Formula, params: &QParams) -> bool {
-    use crate::formula::{BinOp, Formula};
-    fn divides_by_inch(e: &Expr) -> bool {
-        match e {
-            Expr::Bin(BinOp::Div, a, b) => {
-                matches!(**b, Expr::Num(v) if (v - 25.4).abs() < 1e-9)
-                    || divides_by_inch(a)
-                    || divides_by_inch(b)
-            }
-            Expr::Bin(_, a, b) => divides_by_inch(a) || divides_by_inch(b),
-            Expr::Neg(e) | Expr::Func(_, e) => divides_by_inch(e),
-            _ => false,
-        }
-    }
-    let Formula::Number(e) = formula else {
-        return false;
-    };
-    let mut read = Vec::new();
-    e.params(&mut read);
-    read.iter().any(|n| params.is_mm(*n)) && !divides_by_inch(e)
-}
-
-/// The warning for a block of an INCH program that uses a length a cycle measured
-/// (in mm) as a length: an `L` block's X/Y/Z, or a cycle parameter of unit length
-/// given as a parameter. `params`: as `check` has them at the block.
-pub fn mm_in_inch_warnings(
-    program: &Program,
-    block: &Block,
-    params: &QParams,
-) -> Vec<crate::diagnostic::Diagnostic> {
-    use crate::length_unit::LengthUnit;
-    let mut out = Vec::new();
-    if program.unit != LengthUnit::Inch {
-        return out;
-    }
-    let mut warn = |line: usize, name: QName, used: &str| {
-        out.push(crate::diagnostic::Diagnostic {
-            line,
-            message: format!(
-                "warning: {name} is in mm (the cycle reports in mm); this INCH program reads it as inches ({used}): convert it first (Qn = {name} / 25.4)"
-            ),
-        })
-    };
-    // `+Q1`, `-QL2`: the parameter a value names.
-    let named = |value: &str| {
-        let v = value.trim_start_matches(['+', '-']);
-        QName::parse(&v.to_ascii_uppercase()).filter(|n| !n.is_text() && params.is_mm(*n))
-    };
-    match &block.statement {
-        Statement::Other(code) => {
-            let mut words = code.split_whitespace();
-            if !words.next().is_some_and(|w| w.eq_ignore_ascii_case("L")) {
-                return out;
-            }
-            for w in words {
-                let mut chars = w.chars();
-                let axis = chars.next().map(|c| c.to_ascii_uppercase());
-                if matches!(axis, Some('X' | 'Y' | 'Z')) {
-                    if let Some(n) = named(chars.as_str()) {
-                        warn(block.line, n, &format!("L {w}"));
-                    }
-                }
-            }
-        }
-        Statement::Deferred(d) => {
-            let Some(table) = crate::params::table(d.cycle) else {
-                return out;
-            };
-            for (i, text) in d.source.lines().enumerate() {
-                let code = text.split(';').next().unwrap_or("");
-                for w in code.split_whitespace() {
-                    let Some((param, value)) = w.split_once('=') else {
-                        continue;
-                    };
-                    let length = table.param(&param.to_ascii_uppercase()).is_some_and(|p| {
-                        matches!(
-                            p.kind,
-                            crate::params::Kind::Number {
-                                unit: crate::params::Unit::Length,
-                                ..
-                            }
-                        )
-                    });
-                    if let (true, Some(n)) = (length, named(value.trim_end_matches('~'))) {
-                        warn(d.line + i, n, &format!("cycle {} {w}", d.cycle));
-                    }
-                }
-            }
-        }
-        _ => {}
-    }
-    out
-}
-
-/// Block numbers that go backwards or repeat, each a warning at its line: the TNC
-/// renumbers the blocks of a program as it loads it, so they run in the order they
-/// stand; the number probebridge reports a block by is the one written.
-pub fn block_number_warnings(program: &Program) -> Vec<crate::diagnostic::Diagnostic> {
-    let mut out = Vec::new();
-    let mut last: Option<(u32, usize)> = None;
-    let mut seen: BTreeMap<u32, usize> = BTreeMap::new();
-    for b in &program.blocks {
-        let Some(n) = b.number else { continue };
-        let message = if let Some(first) = seen.get(&n) {
-            Some(format!(
-                "warning: block number {n} again (first on line {first}): the blocks run in the order they stand (the TNC renumbers them)"
-            ))
-        } else {
-            last.filter(|(before, _)| n < *before).map(|(before, at)| {
-                format!(
-                    "warning: block number {n} after {before} (line {at}): out of order; the blocks run in the order they stand (the TNC renumbers them)"
-                )
-            })
-        };
-        if let Some(message) = message {
-            out.push(crate::diagnostic::Diagnostic {
-                line: b.line,
-                message,
-            });
-        }
-        seen.entry(n).or_insert(b.line);
-        last = Some((n, b.line));
-    }
-    out
-}
-
-/// A fingerprint of a `check` path's state, so that a loop around a measured
-/// condition is walked once.
-pub fn fingerprint(flow: &Flow, params: &QParams, extra: &str) -> u64 {
-    use std::hash::{Hash, Hasher};
-    let mut h = std::collections::hash_map::DefaultHasher::new();
-    // Not the jump count: a loop comes back to the same state with more jumps.
-    (flow.pc, &flow.returns, &flow.repeats, flow.ending).hash(&mut h);
-    format!("{params:?}").hash(&mut h);
-    extra.hash(&mut h);
-    h.finish()
-}
-
-/// The most paths `check` follows beyond the first (each a condition on a measured
-/// result, both ways); what lies beyond is checked when the program runs.
-pub const MAX_CHECK_PATHS: usize = 64;
-
-/// One way through the program as `check` follows it.
-#[derive(Clone, Debug)]
-struct CheckPath {
-    flow: Flow,
-    params: QParams,
-    datum: Datum,
-    /// Where the blocks before leave the axes on this path (cycle 451 plans its moves
-    /// from there).
-    here: hal::AxisPositions,
-}
-
-/// `check`'s walk over the program: every block as `run` would reach it, with the
-/// parameters known before anything moves (constants, values computed from them, the
-/// QR values); a jump on a measured result is followed both ways.
-pub struct CheckWalk<'p> {
-    program: &'p Program,
-    current: Option<CheckPath>,
-    pending: Vec<CheckPath>,
-    seen: std::collections::HashSet<u64>,
-    paths: usize,
-    /// Q120..Q122 that cycle 451 writes on this machine (`mStrobeRotAxPos`).
-    rotary_targets: Vec<QName>,
-}
-
-/// A block `check` refuses while walking: its line, kind and why.
-#[derive(Clone, Debug, PartialEq)]
-pub struct CheckFault {
-    pub line: usize,
-    pub kind: FlowFaultKind,
-    pub message: String,
-}
-
-impl<'p> CheckWalk<'p> {
-    pub fn new(
-        program: &'p Program,
-        params: QParams,
-        datum: Datum,
-        here: hal::AxisPositions,
-        max_jumps: u64,
-        rotary_targets: Vec<QName>,
-    ) -> Self {
-        Self {
-            program,
-            current: Some(CheckPath {
-                flow: Flow::new(max_jumps),
-                params,
-                datum,
-                here,
-            }),
-            pending: Vec::new(),
-            seen: std::collections::HashSet::new(),
-            paths: 0,
-            rotary_targets,
-        }
-    }
-
-    /// The next block to check (a move, a cycle, a datum change, ...), `None` when
-    /// every path is walked.
-    pub fn next_block(&mut self) -> Result<Option<&'p Block>, CheckFault> {
-        let program = self.program;
-        loop {
-            let Some(cur) = self.current.as_mut() else {
-                match self.pending.pop() {
-                    Some(p) => {
-                        self.current = Some(p);
-                        continue;
-                    }
-                    None => return Ok(None),
-                }
-            };
-            let fault = |stop: FlowStop| match stop {
-                FlowStop::Fault {
-                    line,
-                    kind,
-                    message,
-                } => Some(CheckFault {
-                    line,
-                    kind,
-                    message,
-                }),
-                _ => None,
-            };
-            match cur.flow.advance(program, &mut cur.params) {
-                Ok(Step::Act(i)) => {
-                    let b = &program.blocks[i];
-                    match &b.statement {
-                        Statement::Cycle(c) => {
-                            mark_cycle_results(&mut cur.params, c.head.cycle, &self.rotary_targets)
-                        }
-                        Statement::Deferred(d) => {
-                            mark_cycle_results(&mut cur.params, d.cycle, &self.rotary_targets)
-                        }
-                        _ => {}
-                    }
-                    return Ok(Some(b));
-                }
-                // FN 14 is the program's own stop: this path ends there.
-                Ok(Step::End) | Err(FlowStop::Error { .. }) => self.current = None,
-                Err(FlowStop::Undecided { index, target }) => {
-                    let mut taken = cur.clone();
-                    if let Err(stop) = taken.flow.decide(program, index, target, true) {
-                        if let Some(f) = fault(stop) {
-                            return Err(f);
-                        }
-                    }
-                    cur.flow.decide(program, index, target, false).ok();
-                    let key = |p: &CheckPath| {
-                        fingerprint(&p.flow, &p.params, &format!("{:?}{:?}", p.datum, p.here))
-                    };
-                    if self.seen.insert(key(&taken)) && self.paths < MAX_CHECK_PATHS {
-                        self.paths += 1;
-                        self.pending.push(taken);
-                    }
-                    let fall = key(cur);
-                    if !self.seen.insert(fall) {
-                        self.current = None;
-                    }
-                }
-                Err(stop) => {
-                    if let Some(f) = fault(stop) {
-                        return Err(f);
-                    }
-                    self.current = None;
-                }
-            }
-        }
-    }
-
-    /// The datum, the parameters and the axes' positions of the path being walked.
-    pub fn state(&mut self) -> (&mut Datum, &QParams, &mut hal::AxisPositions) {
-        let cur = self
-            .current
-            .as_mut()
-            .expect("state() is asked after next_block() returned a block");
-        (&mut cur.datum, &cur.params, &mut cur.here)
-    }
-
-    /// This path goes no further (`run` stops there).
-    pub fn end_path(&mut self) {
-        self.current = None;
     }
 }

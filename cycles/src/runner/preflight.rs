@@ -274,7 +274,7 @@ pub fn preflight_program_from(
 /// repeats) through the assignments that compute from it. Each at its line, once,
 /// sorted by line. What the program cannot do is [`preflight_program`]'s.
 pub fn program_warnings(program: &Program, cfg: &CyclesConfig) -> Vec<crate::Diagnostic> {
-    let mut out = crate::program_flow::block_number_warnings(program);
+    let mut out = crate::program_warnings::block_number_warnings(program);
     if program.unit == crate::length_unit::LengthUnit::Inch {
         // An unreadable QR file is preflight_program's error; the walk needs no values
         // of it to follow the measured results.
@@ -290,7 +290,7 @@ pub fn program_warnings(program: &Program, cfg: &CyclesConfig) -> Vec<crate::Dia
         // A block that cannot be carried out ends the walk: preflight_program says so.
         while let Ok(Some(block)) = walk.next_block() {
             let (_, params, _) = walk.state();
-            out.extend(crate::program_flow::mm_in_inch_warnings(
+            out.extend(crate::program_warnings::mm_in_inch_warnings(
                 program, block, params,
             ));
         }
