@@ -206,20 +206,14 @@ impl<M: Machine> Measure<'_, '_, M> {
                     && guard.check_probe(&low, &probe).is_ok()
             })
         };
-        let spacing = 360.0 / f64::from(p.points);
-        let turned = (0..24)
-            .map(|k| p.reference_angle + spacing * f64::from(k) / 24.0)
-            .find(|phi0| fits(*phi0));
-        match turned {
-            Some(phi0) if phi0 != p.reference_angle => {
-                self.note(format!(
-                    "locating the sphere (first pass): the points start at {phi0:.1} deg instead of Q380 = {:.1} deg, to stay inside the software limits",
-                    p.reference_angle
-                ));
-                phi0
-            }
-            _ => p.reference_angle,
+        let (phi0, turned) = super::start_angle(p.reference_angle, p.points, fits);
+        if turned {
+            self.note(format!(
+                "locating the sphere (first pass): the points start at {phi0:.1} deg instead of Q380 = {:.1} deg, to stay inside the software limits",
+                p.reference_angle
+            ));
         }
+        phi0
     }
 
     /// Q431 = 0/2: the sphere centre is the active datum with the rotary axes at their

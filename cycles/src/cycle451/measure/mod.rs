@@ -49,6 +49,21 @@ pub(super) fn axis_map(axes: &[Axis], a: &Angles) -> BTreeMap<String, f64> {
         .collect()
 }
 
+/// Where a sphere's probing points start: Q380 when every point fits there, else the
+/// first of 24 steps across one point spacing at which they all fit (inside the
+/// software limits); Q380 when none does, so the move itself is refused with its
+/// limit. Whether the start was turned from Q380 (the operator is told).
+pub(super) fn start_angle(reference: f64, points: u32, fits: impl Fn(f64) -> bool) -> (f64, bool) {
+    let spacing = 360.0 / f64::from(points);
+    match (0..24)
+        .map(|k| reference + spacing * f64::from(k) / 24.0)
+        .find(|phi0| fits(*phi0))
+    {
+        Some(phi0) if phi0 != reference => (phi0, true),
+        _ => (reference, false),
+    }
+}
+
 pub(super) fn arr(v: &Vector3<f64>) -> [f64; 3] {
     [v.x, v.y, v.z]
 }

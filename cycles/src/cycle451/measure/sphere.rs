@@ -151,19 +151,13 @@ impl<M: Machine> Measure<'_, '_, M> {
                         .is_ok()
             })
         };
-        let spacing = 360.0 / f64::from(p.points);
-        let turned = (0..24)
-            .map(|k| p.reference_angle + spacing * f64::from(k) / 24.0)
-            .find(|phi0| fits(*phi0));
-        match turned {
-            Some(phi0) if phi0 != p.reference_angle => {
-                self.note(format!(
-                    "{what}: the probing points start at {phi0:.1} deg instead of Q380 = {:.1} deg, to stay inside the software limits",
-                    p.reference_angle
-                ));
-                phi0
-            }
-            _ => p.reference_angle,
+        let (phi0, turned) = super::start_angle(p.reference_angle, p.points, fits);
+        if turned {
+            self.note(format!(
+                "{what}: the probing points start at {phi0:.1} deg instead of Q380 = {:.1} deg, to stay inside the software limits",
+                p.reference_angle
+            ));
         }
+        phi0
     }
 }
