@@ -336,6 +336,27 @@ async def stalled(mes, queued):
                 "sequence_numbers": seqs}
 
 
+async def call_and_types(mes):
+    """As the user (over SignAndEncrypt): how long connecting took, Acknowledge's
+    answer, StartProgram with an Int32 where UInt16 is declared, and the discovery
+    URLs of FindServers."""
+    t0 = time.monotonic()
+    c = await mes.client(USER, PASSWORD)
+    async with c:
+        out = {"connect_s": time.monotonic() - t0}
+        ns, machine = await mes.machine_node(c)
+        production = await mes.child(machine, ns, "Production")
+        out["acknowledge"] = await call(c, production, "Acknowledge")
+        try:
+            await call(c, production, "StartProgram", ua.Variant(431, ua.VariantType.Int32))
+            out["int32"] = "taken"
+        except ua.UaStatusCodeError as e:
+            out["int32"] = type(e).__name__
+        servers = await c.find_servers()
+        out["discovery_urls"] = [u for s in servers for u in (s.DiscoveryUrls or [])]
+    return out
+
+
 async def main():
     url, machine, certdir, server_cert, cmd = sys.argv[1:6]
     args = sys.argv[6:]
@@ -353,6 +374,8 @@ async def main():
         out = await start_abort(mes, int(args[0]))
     elif cmd == "stalled":
         out = await stalled(mes, int(args[0]))
+    elif cmd == "call":
+        out = await call_and_types(mes)
     elif cmd == "connect":
         c = await mes.client(USER, PASSWORD)
         try:

@@ -9,7 +9,7 @@ use crate::serve::gateway::{lock, FaceCommand, Shared};
 use crate::serve::handshake::{CODE_ABORT, CODE_ACKNOWLEDGE, CODE_START};
 use crate::serve::register_map::REQ_PARAM_COUNT;
 use opcua::server::node_manager::memory::SimpleNodeManager;
-use opcua::types::{NodeId, StatusCode, Variant};
+use opcua::types::{NodeId, StatusCode, Variant, VariantScalarTypeId};
 
 /// Registers the three methods' callbacks.
 pub fn register(manager: &SimpleNodeManager, ns: u16, shared: &Shared) {
@@ -43,38 +43,43 @@ pub fn register(manager: &SimpleNodeManager, ns: u16, shared: &Shared) {
     }
 }
 
-/// StartProgram(Number, Parameters, Confirm): a number 0..65535, at most 8 parameters
-/// (the rest 0), a flag. A wrong argument is the caller's error (BadInvalidArgument),
-/// not a refusal of the gateway.
+/// StartProgram(Number UInt16, Parameters Float[<=8], Confirm Boolean), as the method's
+/// InputArguments declare them. An argument of another data type is refused with
+/// BadTypeMismatch (OPC 10000-4 §5.11.2: the stack does not check them against the
+/// declaration), more than 8 parameters with BadInvalidArgument: the caller's errors,
+/// not refusals of the gateway. Parameters and Confirm may be left out (0, false).
 fn start_arguments(args: &[Variant]) -> Result<FaceCommand, StatusCode> {
-    let number = args
-        .first()
-        .and_then(Variant::as_f64)
-        .filter(|n| n.fract() == 0.0 && (0.0..=65535.0).contains(n))
-        .ok_or(StatusCode::BadInvalidArgument)? as u16;
+    if args.len() > 3 {
+        return Err(StatusCode::BadTooManyArguments);
+    }
+    let number = match args.first() {
+        Some(Variant::UInt16(n)) => *n,
+        Some(_) => return Err(StatusCode::BadTypeMismatch),
+        None => return Err(StatusCode::BadArgumentsMissing),
+    };
     let mut params = [0.0f32; REQ_PARAM_COUNT];
     match args.get(1) {
         None | Some(Variant::Empty) => {}
-        Some(v) => {
-            let list = v.as_array().ok_or(StatusCode::BadInvalidArgument)?;
-            if list.len() > REQ_PARAM_COUNT {
+        Some(Variant::Array(list)) if list.value_type == VariantScalarTypeId::Float => {
+            if list.values.len() > REQ_PARAM_COUNT {
                 return Err(StatusCode::BadInvalidArgument);
             }
-            for (p, x) in params.iter_mut().zip(list) {
+            for (p, x) in params.iter_mut().zip(&list.values) {
                 // A non-finite parameter goes through, for the core to refuse it as
                 // the PLC face does (reason 7).
-                *p = x.as_f64().ok_or(StatusCode::BadInvalidArgument)? as f32;
+                match x {
+                    Variant::Float(f) => *p = *f,
+                    _ => return Err(StatusCode::BadTypeMismatch),
+                }
             }
         }
+        Some(_) => return Err(StatusCode::BadTypeMismatch),
     }
     let confirm = match args.get(2) {
         None | Some(Variant::Empty) => false,
         Some(Variant::Boolean(b)) => *b,
-        Some(_) => return Err(StatusCode::BadInvalidArgument),
+        Some(_) => return Err(StatusCode::BadTypeMismatch),
     };
-    if args.len() > 3 {
-        return Err(StatusCode::BadTooManyArguments);
-    }
     Ok(FaceCommand {
         code: CODE_START,
         program: number,
@@ -96,13 +101,27 @@ mod tests {
         assert_eq!(&cmd.params[..3], &[1.5, -2.25, 0.0]);
         assert!(cmd.confirm);
         assert_eq!(
-            start_arguments(&[Variant::from(70000i32)]),
+            start_arguments(&[Variant::from(431u16), Variant::from(vec![0.0f32; 9])]),
             Err(StatusCode::BadInvalidArgument)
         );
-        assert_eq!(
-            start_arguments(&[Variant::from(431u16), Variant::from(vec![0.0f64; 9])]),
-            Err(StatusCode::BadInvalidArgument)
-        );
-        assert_eq!(start_arguments(&[]), Err(StatusCode::BadInvalidArgument));
+    }
+
+    #[test]
+    fn arguments_of_another_data_type_are_a_type_mismatch() {
+        // An Int32 where UInt16 is declared was taken before (issue 36).
+        for args in [
+            vec![Variant::from(431i32)],
+            vec![Variant::from(431.0f64)],
+            vec![Variant::from(431u16), Variant::from(vec![1.5f64])],
+            vec![Variant::from(431u16), Variant::from(1.5f32)],
+            vec![Variant::from(431u16), Variant::Empty, Variant::from(1u8)],
+        ] {
+            assert_eq!(
+                start_arguments(&args),
+                Err(StatusCode::BadTypeMismatch),
+                "{args:?}"
+            );
+        }
+        assert_eq!(start_arguments(&[]), Err(StatusCode::BadArgumentsMissing));
     }
 }

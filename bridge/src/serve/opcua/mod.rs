@@ -174,7 +174,10 @@ impl Prepared {
             },
             history: ctx.cfg.history(),
             last_runs: section.last_runs,
-            max_connections: section.max_connections,
+            door: front::Limits {
+                max_connections: section.max_connections,
+                idle_timeout: Duration::from_millis(section.session_timeout_ms),
+            },
             listener: self.listener,
         };
         let face = OpcuaFace::start(setup, &self.pki, self.local_addr, endpoint_url)
@@ -224,7 +227,8 @@ fn server_builder(
         .trust_client_certs(section.trust_client_certs)
         .host(host)
         .port(port)
-        .discovery_urls(vec!["/".to_owned()])
+        // Full URLs: a client that finds the server uses them as they are.
+        .discovery_urls(vec![format!("opc.tcp://{host}:{port}/")])
         .max_sessions(section.max_sessions)
         .max_session_timeout_ms(section.session_timeout_ms)
         .subscription_poll_interval_ms(SUBSCRIPTION_TICK_MS)
@@ -275,7 +279,7 @@ struct Setup {
     identity: address_space::Identity,
     history: Option<crate::history::HistoryTarget>,
     last_runs: usize,
-    max_connections: usize,
+    door: front::Limits,
     listener: std::net::TcpListener,
 }
 
@@ -432,7 +436,7 @@ async fn bring_up(setup: Setup) -> Result<Parts, String> {
     info.port.store(public_port, Ordering::Release);
     let listener = tokio::net::TcpListener::from_std(setup.listener)
         .map_err(|e| format!("cannot listen: {e}"))?;
-    let front_task = tokio::spawn(front::serve(listener, internal_addr, setup.max_connections));
+    let front_task = tokio::spawn(front::serve(listener, internal_addr, setup.door));
     let publisher = values::Publisher::new(
         nodes,
         manager,
