@@ -311,6 +311,7 @@ fn the_mes_browses_subscribes_and_runs_a_431_as_the_plc_does() {
     assert_eq!(r["anonymous"], "BadUserAccessDenied", "{r}");
     assert_ne!(r["wrong_password"], "logged in", "{r}");
     assert_eq!(r["state"], "idle", "nothing started: {r}");
+    failed_logins_are_throttled(&serve, &py);
 
     the_431_as_the_plc(&serve, &py);
     stalled_and_capped(&serve, &py);
@@ -370,6 +371,30 @@ fn browse_and_tools(serve: &Serve, py: &Path) {
         ],
     );
     assert_eq!(read.trim(), "idle", "{read}");
+}
+
+/// Failed logins slow the next ones of the name (the refusals' wrong password was the
+/// first): the 4th and 5th failures wait 1 s and 2 s, the right password after them
+/// 4 s; the log sums them up in one line, not a line per guess. Before, about 17
+/// guesses a second were answered at once, two log lines each (issue 36).
+fn failed_logins_are_throttled(serve: &Serve, py: &Path) {
+    let g = serve.mes(py, MACHINE, &["guesses", "4"]);
+    println!("guesses: {g}");
+    let wrong: Vec<f64> = g["wrong_s"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    // The client's clock starts a little after the server's (the last answer's way
+    // back): 80 % of each wait.
+    assert!(wrong[2] >= 0.8 && wrong[3] >= 1.6, "{g}");
+    assert!(g["right_s"].as_f64().unwrap() >= 3.2, "{g}");
+    let log = serve.log();
+    let lines = log.lines().filter(|l| l.contains("failed login")).count();
+    assert_eq!(lines, 1, "{log}");
+    assert!(!log.contains("login refused"), "{log}");
+    assert!(!log.contains("BadIdentityTokenRejected"), "{log}");
 }
 
 /// The PLC's 431, then the MES's over SignAndEncrypt: the same results, the history's.

@@ -118,6 +118,7 @@ fn init_logging() {
         .with_max_level(level)
         .finish()
         .with(targets)
+        .with(opcua::login_throttle::StackLoginLines)
         .try_init();
 }
 

@@ -357,6 +357,27 @@ async def call_and_types(mes):
     return out
 
 
+async def guesses(mes, n):
+    """n logins with a wrong password, then one with the right one: how long each took
+    to be answered, and whether the last logged in."""
+    out = {"wrong_s": []}
+    for _ in range(n):
+        c = await mes.client(USER, "a guess")
+        t0 = time.monotonic()
+        try:
+            await c.connect()
+            await c.disconnect()
+            check(False, "a wrong password logged in")
+        except Exception:
+            pass
+        out["wrong_s"].append(time.monotonic() - t0)
+    c = await mes.client(USER, PASSWORD)
+    t0 = time.monotonic()
+    async with c:
+        out["right_s"] = time.monotonic() - t0
+    return out
+
+
 async def main():
     url, machine, certdir, server_cert, cmd = sys.argv[1:6]
     args = sys.argv[6:]
@@ -374,6 +395,8 @@ async def main():
         out = await start_abort(mes, int(args[0]))
     elif cmd == "stalled":
         out = await stalled(mes, int(args[0]))
+    elif cmd == "guesses":
+        out = await guesses(mes, int(args[0]))
     elif cmd == "call":
         out = await call_and_types(mes)
     elif cmd == "connect":

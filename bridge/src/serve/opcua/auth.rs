@@ -2,6 +2,7 @@
 //! `[opcua] anonymous` allows), users of the users file also call the methods. A
 //! password is taken only over a secured endpoint (Basic256Sha256), never over `none`.
 
+use super::login_throttle::LoginThrottle;
 use super::users::Users;
 use async_trait::async_trait;
 use opcua::crypto::SecurityPolicy;
@@ -11,6 +12,7 @@ use opcua::server::authenticator::{
 use opcua::server::ServerEndpoint;
 use opcua::types::{Error, NodeId, StatusCode, UAString, UserTokenPolicy, UserTokenType};
 use std::sync::Arc;
+use std::time::Instant;
 
 /// The policy id of anonymous tokens (the one the server checks them against).
 const POLICY_ID_ANONYMOUS: &str = "anonymous";
@@ -26,6 +28,7 @@ pub struct Auth {
     users: Arc<Users>,
     anonymous: bool,
     may_start: bool,
+    throttle: Arc<LoginThrottle>,
 }
 
 impl Auth {
@@ -34,7 +37,13 @@ impl Auth {
             users: Arc::new(users),
             anonymous,
             may_start,
+            throttle: Arc::default(),
         }
+    }
+
+    /// The failed logins' throttle (its summary is also logged periodically).
+    pub fn throttle(&self) -> Arc<LoginThrottle> {
+        self.throttle.clone()
     }
 
     /// The user a token is of (`None`: anonymous).
@@ -78,6 +87,11 @@ impl AuthManager for Auth {
         if endpoint.security_policy() == SecurityPolicy::None {
             return Err(rejected("no password over an endpoint without security"));
         }
+        let account = LoginThrottle::account(username, self.users.contains(username));
+        let wait = self.throttle.wait(&account, Instant::now());
+        if !wait.is_zero() {
+            tokio::time::sleep(wait).await;
+        }
         let (users, name, pw) = (
             self.users.clone(),
             username.to_string(),
@@ -87,14 +101,15 @@ impl AuthManager for Auth {
         let ok = tokio::task::spawn_blocking(move || users.verify(&name, &pw))
             .await
             .unwrap_or(false);
+        let now = Instant::now();
+        self.throttle.record(&account, ok, now);
         if ok {
             tracing::info!(user = username, "OPC UA face: user logged in");
             Ok(UserToken(format!("{USER_PREFIX}{username}")))
         } else {
-            tracing::warn!(
-                user = username,
-                "OPC UA face: login refused (unknown user or wrong password)"
-            );
+            if let Some(line) = self.throttle.summary(now) {
+                tracing::warn!("{line}");
+            }
             Err(rejected("unknown user or wrong password"))
         }
     }

@@ -18,6 +18,7 @@ pub mod address_space;
 pub mod auth;
 pub mod config;
 pub mod front;
+pub mod login_throttle;
 pub mod methods;
 pub mod users;
 pub mod values;
@@ -395,6 +396,7 @@ async fn bring_up(setup: Setup) -> Result<Parts, String> {
         .map_err(|e| e.to_string())?
         .port();
     let a = setup.server;
+    let throttle = a.auth.throttle();
     let (server, handle) = server_builder(
         &a.section,
         &a.securities,
@@ -445,5 +447,15 @@ async fn bring_up(setup: Setup) -> Result<Parts, String> {
         setup.identity.machine.clone(),
     );
     let publisher_task = tokio::spawn(publisher.run(setup.shared.clone()));
+    // The failed logins' summary also when no further failure comes to say it.
+    tokio::spawn(async move {
+        let mut tick = tokio::time::interval(login_throttle::SUMMARY_EVERY / 6);
+        loop {
+            tick.tick().await;
+            if let Some(line) = throttle.summary(Instant::now()) {
+                tracing::warn!("{line}");
+            }
+        }
+    });
     Ok((server_task, front_task, publisher_task, handle))
 }

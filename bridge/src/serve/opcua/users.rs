@@ -94,6 +94,10 @@ impl Users {
         self.hashes.len()
     }
 
+    pub fn contains(&self, name: &str) -> bool {
+        self.hashes.contains_key(name)
+    }
+
     /// Whether `password` is `name`'s. Slow on purpose (argon2id): call it off the
     /// runtime's threads.
     pub fn verify(&self, name: &str, password: &str) -> bool {
