@@ -172,6 +172,16 @@ enum Cmd {
         /// The user's name (letters, digits, _ - . @).
         name: String,
     },
+    /// The OPC UA face's server certificate: its names and validity; `--renew`
+    /// replaces it (and its key) by a new one, for the clients to trust.
+    OpcuaCertificate {
+        /// Gateway configuration (TOML).
+        #[arg(long, default_value = probebridge::serve::config::DEFAULT_PATH)]
+        config: PathBuf,
+        /// Make a new certificate (restart `serve` to use it).
+        #[arg(long)]
+        renew: bool,
+    },
     /// The recorded measurements of a gateway (its history file).
     History {
         /// The history file, or a PostgreSQL server's `postgres://` URL; default: the
@@ -349,6 +359,9 @@ fn main() -> ExitCode {
         .map(|()| 0),
         Cmd::Serve { config } => probebridge::serve::run(&config),
         Cmd::OpcuaUser { name } => commands::opcua_user::run(&name).map(|()| 0),
+        Cmd::OpcuaCertificate { config, renew } => {
+            commands::opcua_certificate::run(&config, renew).map(|()| 0)
+        }
         Cmd::Bench(BenchCmd::Trigger(args)) => commands::bench::trigger::run(&args).map(|()| 0),
     };
     // After a stop signal the session is closed (axes braked, drives disabled) and

@@ -5,6 +5,7 @@ pub mod check;
 pub mod demo;
 pub mod estimator;
 pub mod history;
+pub mod opcua_certificate;
 pub mod opcua_user;
 pub mod probe;
 pub mod run;

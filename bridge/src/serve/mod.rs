@@ -151,6 +151,9 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     let opcua = opcua::prepare(&cfg)?;
     let (machine_cfg, scenario) =
         crate::session::resolve_machine(&cfg.machine_options()).map_err(|e| e.to_string())?;
+    if let Some(o) = &opcua {
+        o.check_certificate(&cfg, &machine_cfg.name)?;
+    }
     let cycles = machine_state(&mut cfg, &machine_cfg, scenario.as_ref())?;
     let notifier = sd_notify::Notifier::from_env();
     notifier.notify("STATUS=bringing the machine up");

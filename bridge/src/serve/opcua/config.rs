@@ -36,6 +36,13 @@ pub struct OpcuaSection {
     /// Default: `opcua/users` in the state directory.
     #[serde(default)]
     pub users: Option<PathBuf>,
+    /// The lifetime of the server certificate the gateway makes, in days.
+    #[serde(default = "default_certificate_days")]
+    pub certificate_days: u32,
+    /// The addresses the certificate names when listening on every address (default:
+    /// the host's addresses when it is made).
+    #[serde(default)]
+    pub certificate_addresses: Vec<IpAddr>,
     /// Trust every client certificate (only for a closed test network).
     #[serde(default)]
     pub trust_client_certs: bool,
@@ -74,6 +81,9 @@ fn default_security() -> Vec<String> {
 }
 fn default_true() -> bool {
     true
+}
+fn default_certificate_days() -> u32 {
+    365
 }
 fn default_max_connections() -> usize {
     16
@@ -172,6 +182,12 @@ impl OpcuaSection {
                     "{} is more than opcua.max_connections ({}): a session needs a connection",
                     self.max_sessions, self.max_connections
                 ),
+            ));
+        }
+        if !(1..=3650).contains(&self.certificate_days) {
+            return Err((
+                "opcua.certificate_days",
+                format!("{} is outside 1..=3650", self.certificate_days),
             ));
         }
         if !(1_000..=3_600_000).contains(&self.session_timeout_ms) {
@@ -329,6 +345,7 @@ mod tests {
                 "outside",
             ),
             ("hostname = \"a b\"", "opcua.hostname", "not a host name"),
+            ("certificate_days = 0", "opcua.certificate_days", "outside"),
             ("model = \"a\\nb\"", "opcua.model", "control"),
         ] {
             let (k, why) = section(text).validate().unwrap_err();

@@ -16,6 +16,7 @@
 
 pub mod address_space;
 pub mod auth;
+pub mod certificate;
 pub mod config;
 pub mod front;
 pub mod login_throttle;
@@ -102,6 +103,7 @@ pub struct Prepared {
     users: users::Users,
     listener: std::net::TcpListener,
     local_addr: SocketAddr,
+    bind: SocketAddr,
     host: String,
 }
 
@@ -146,10 +148,75 @@ pub fn prepare(cfg: &super::config::GatewayConfig) -> Result<Option<Prepared>, S
         users,
         listener,
         local_addr,
+        bind,
     }))
 }
 
+/// The certificate of `[opcua]` for `machine`: its files and what it is made of.
+fn certificate_of(
+    section: &config::OpcuaSection,
+    pki: &Path,
+    bind: SocketAddr,
+    machine: &str,
+) -> (certificate::Files, certificate::Identity) {
+    let host = section.advertised_host(bind);
+    (
+        certificate::Files::new(pki, OWN_CERT, OWN_KEY),
+        certificate::Identity::new(section, bind, &host, machine),
+    )
+}
+
+/// `probebridge opcua-certificate`: says the server certificate's names and validity;
+/// with `renew`, replaces it (and its key) by a new one first.
+pub fn certificate_command(
+    cfg: &super::config::GatewayConfig,
+    machine: &str,
+    renew: bool,
+) -> Result<String, String> {
+    let file = cfg.path.display();
+    let section = cfg
+        .opcua
+        .as_ref()
+        .ok_or_else(|| format!("{file}: no [opcua] section: the OPC UA face is off"))?;
+    let bind = section
+        .bind()
+        .map_err(|(k, why)| format!("{file}: {k}: {why}"))?;
+    let (pki, _) = state_paths(section).map_err(|e| format!("{file}: opcua: {e}"))?;
+    private_dir(&pki).map_err(|e| format!("{file}: opcua.pki: {}: {e}", pki.display()))?;
+    let (files, who) = certificate_of(section, &pki, bind, machine);
+    let cert = match certificate::read(&files)? {
+        Some(c) if !renew => c,
+        _ => {
+            certificate::make(&files, &who)?;
+            std::fs::set_permissions(&files.key, std::fs::Permissions::from_mode(0o600))
+                .map_err(|e| format!("{}: {e}", files.key.display()))?;
+            certificate::read(&files)?.ok_or("the new certificate is gone")?
+        }
+    };
+    let v = certificate::Validity::of(&cert, std::time::SystemTime::now())?;
+    Ok(format!(
+        "{}: {}, valid until {} ({} days left), thumbprint {}",
+        files.cert.display(),
+        cert.subject_name(),
+        v.not_after,
+        v.left_s.div_euclid(24 * 3600),
+        cert.thumbprint().as_hex_string()
+    ))
+}
+
 impl Prepared {
+    /// The server certificate, before the machine opens: made if there is none, an
+    /// expired one refused, one close to expiry a warning.
+    pub fn check_certificate(
+        &self,
+        cfg: &super::config::GatewayConfig,
+        machine: &str,
+    ) -> Result<(), String> {
+        let (files, who) = certificate_of(&self.section, &self.pki, self.bind, machine);
+        certificate::check_at_start(&files, &who)
+            .map_err(|e| format!("{}: opcua: {e}", cfg.path.display()))
+    }
+
     /// Starts the face (the machine is up) and says its endpoint on stdout.
     pub fn start(self, ctx: &Context) -> Result<OpcuaFace, String> {
         let file = ctx.cfg.path.display();
@@ -204,7 +271,7 @@ fn server_builder(
     let version = env!("CARGO_PKG_VERSION");
     let mut b = ServerBuilder::new()
         .application_name(format!("probebridge {machine}"))
-        .application_uri(format!("urn:probebridge:{host}:{machine}"))
+        .application_uri(certificate::application_uri(host, machine))
         .product_uri("urn:probebridge")
         .build_info(BuildInfo {
             product_uri: "urn:probebridge".into(),
@@ -221,7 +288,8 @@ fn server_builder(
             },
             "probebridge",
         ))
-        .create_sample_keypair(true)
+        // Made by the gateway (certificate.rs) before the server starts.
+        .create_sample_keypair(false)
         .certificate_path(OWN_CERT)
         .private_key_path(OWN_KEY)
         .pki_dir(pki)
@@ -397,6 +465,7 @@ async fn bring_up(setup: Setup) -> Result<Parts, String> {
         .port();
     let a = setup.server;
     let throttle = a.auth.throttle();
+    let certificate = certificate::Files::new(&a.pki, OWN_CERT, OWN_KEY);
     let (server, handle) = server_builder(
         &a.section,
         &a.securities,
@@ -447,6 +516,16 @@ async fn bring_up(setup: Setup) -> Result<Parts, String> {
         setup.identity.machine.clone(),
     );
     let publisher_task = tokio::spawn(publisher.run(setup.shared.clone()));
+    tokio::spawn(async move {
+        let every = certificate::CHECK_EVERY;
+        let mut daily = tokio::time::interval_at(tokio::time::Instant::now() + every, every);
+        loop {
+            daily.tick().await;
+            if let Some(w) = certificate::check_now(&certificate) {
+                tracing::warn!("{w}");
+            }
+        }
+    });
     // The failed logins' summary also when no further failure comes to say it.
     tokio::spawn(async move {
         let mut tick = tokio::time::interval(login_throttle::SUMMARY_EVERY / 6);
