@@ -7,9 +7,10 @@
 //! - a connection that has not sent a Hello within [`HELLO_TIMEOUT`] is closed, and
 //!   one still waiting for its Hello is closed at once to make room for a new one when
 //!   `opcua.max_connections` are open (a real client sends its Hello as it connects);
-//! - a connection is closed when either side closes it (the server ends a channel
-//!   whose token was not renewed, a session nobody used) and when nothing crossed it
-//!   for the session timeout (no session outlives that silence anyway).
+//! - a connection is closed when either side closes it (the server ends one without
+//!   an OpenSecureChannel soon after the Hello, or whose channel token was not
+//!   renewed) and when nothing crossed it for the session timeout (no session outlives
+//!   that silence anyway).
 //!
 //! Accept errors are logged and retried; they never end the face.
 
