@@ -10,6 +10,7 @@
 use super::config::OpcuaSection;
 use opcua::crypto::{CertificateStore, X509Data, X509};
 use std::net::{IpAddr, SocketAddr};
+use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
@@ -174,11 +175,14 @@ pub fn read(files: &Files) -> Result<Option<X509>, String> {
         .map_err(|e| format!("{}: {e}", files.cert.display()))
 }
 
-/// Makes a new certificate and key (replacing any); its validity.
+/// Makes a new certificate and key (replacing any; the key readable by the service's
+/// user only); its validity.
 pub fn make(files: &Files, who: &Identity) -> Result<Validity, String> {
     let (cert, _) =
         CertificateStore::create_certificate_and_key(&who.x509(), true, &files.cert, &files.key)
             .map_err(|e| format!("cannot make the certificate {}: {e}", files.cert.display()))?;
+    std::fs::set_permissions(&files.key, std::fs::Permissions::from_mode(0o600))
+        .map_err(|e| format!("{}: {e}", files.key.display()))?;
     Validity::of(&cert, SystemTime::now())
 }
 

@@ -188,8 +188,6 @@ pub fn certificate_command(
         Some(c) if !renew => c,
         _ => {
             certificate::make(&files, &who)?;
-            std::fs::set_permissions(&files.key, std::fs::Permissions::from_mode(0o600))
-                .map_err(|e| format!("{}: {e}", files.key.display()))?;
             certificate::read(&files)?.ok_or("the new certificate is gone")?
         }
     };
