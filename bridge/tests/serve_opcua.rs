@@ -667,6 +667,8 @@ fn a_start_while_the_plc_runs_one_is_refused_and_an_abort_ends_a_451() {
             && r["program_number"] == 451),
         "{h:?}"
     );
+    drop(serve);
+    let _ = std::fs::remove_dir_all(dir);
 }
 
 /// The MES's 460 (on the fresh machine, before any abort): Cycle460 shows the probe
@@ -766,6 +768,7 @@ fn opcua_errors_say_where_and_why_before_the_machine_opens() {
         if users_mode.is_some() {
             assert!(err.contains("chmod 600"), "{err}");
         }
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
 
@@ -786,6 +789,7 @@ fn the_opcua_face_s_death_ends_the_service() {
     assert!(!status.success(), "{status:?}");
     let log = serve.log();
     assert!(log.contains("the OPC UA face is dead"), "{log}");
+    let _ = std::fs::remove_dir_all(&serve.dir);
 }
 
 /// Python (cryptography, asyncua's): the certificate's SANs and its days of validity.
