@@ -369,6 +369,24 @@ impl Store for PgStore {
         )
     }
 
+    fn find_run(
+        &mut self,
+        machine: &str,
+        started: &str,
+        program: &str,
+    ) -> Result<Option<i64>, String> {
+        let client = &self.client;
+        within(&self.rt, self.statement, "finding a spooled run", async {
+            Ok(client
+                .query_opt(
+                    "SELECT id FROM runs WHERE machine = $1 AND started = $2 AND program = $3 ORDER BY id LIMIT 1",
+                    &[&machine, &started, &program],
+                )
+                .await?
+                .map(|r| r.get(0)))
+        })
+    }
+
     fn count(&mut self) -> Result<i64, String> {
         let client = &self.client;
         within(&self.rt, self.statement, "counting", async {
