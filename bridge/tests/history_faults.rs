@@ -527,6 +527,8 @@ fn a_history_overwritten_while_serving_keeps_the_end_in_the_spool_and_refuses_st
         aside.join("history.sqlite").to_str().unwrap(),
     ]));
     assert!(!old.status.success());
+    drop(g);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The PostgreSQL server, or `None` with the reason printed (never in CI).

@@ -372,6 +372,9 @@ fn a_slow_flood_from_other_hosts_never_keeps_the_plc_out() {
         g.log()
     );
     drop(flood);
+    let dir = g.dir.clone();
+    drop(g);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

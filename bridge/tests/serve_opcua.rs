@@ -555,6 +555,9 @@ fn a_start_over_opcua_is_refused_at_once_while_the_history_is_known_corrupted() 
     let refusals = serve.log().matches("start refused: history").count();
     let at_once = serve.log().matches("unavailable: history").count();
     assert!(at_once >= 2, "{refusals} refusals:\n{}", serve.log());
+    let dir = serve.dir.clone();
+    drop(serve);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

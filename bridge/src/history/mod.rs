@@ -113,14 +113,10 @@ trait Store: Send {
     fn list(&mut self, filter: &Filter) -> Result<Vec<RunRow>, String>;
     fn close_interrupted(&mut self, machine: &str) -> Result<usize, String>;
     fn count(&mut self) -> Result<i64, String>;
-    /// The run of `machine` begun at `started` with `program`, if the history has it
-    /// (a spooled end finds its run by what it is, not by an id a fresh file reuses).
-    fn find_run(
-        &mut self,
-        machine: &str,
-        started: &str,
-        program: &str,
-    ) -> Result<Option<i64>, String>;
+    /// The run begun as `start` says (machine, start time, program, source, request
+    /// sequence), `id` first if it is that run, if the history has it: a spooled end
+    /// finds its run by what it is, not by an id a fresh file may have given another.
+    fn find_run(&mut self, id: i64, start: &spool::SpooledStart) -> Result<Option<i64>, String>;
     /// Whether the store reads back whole (SQLite: `PRAGMA quick_check`); a server
     /// checks its own files.
     fn check(&mut self) -> Result<(), String> {
@@ -361,17 +357,17 @@ impl History {
     }
 
     /// Completes a spooled end. With its start, the run is found by what it is
-    /// (machine, start time, program), or begun anew when the history does not have it
+    /// (machine, start time, program, source, request sequence; its id first, for two
+    /// runs begun within the same second), or begun anew when the history does not have it
     /// (a fresh file that replaced a corrupted one): never another run under its old
     /// id. Without (a spool from before starts were kept), by its id.
     fn finish_record(&mut self, record: &spool::SpoolRecord) -> Result<(), HistoryError> {
         let Some(start) = &record.start else {
             return self.finish_rows(record.id, &record.rows);
         };
-        let program = start.run.program.display().to_string();
         let found = self
             .store
-            .find_run(&start.run.machine, &start.started, &program)
+            .find_run(record.id, start)
             .map_err(|e| self.err(e))?;
         let id = match found {
             Some(id) => id,
@@ -623,6 +619,28 @@ mod tests {
         assert_eq!(
             (o.program.as_str(), o.status.as_str()),
             ("/p/444.h", "running")
+        );
+        // Two runs alike begun within the same second (an abort, a start at once; OPC
+        // UA's have no sequence): the end of the second completes the second.
+        let twin = NewRun {
+            request_seq: None,
+            ..run.clone()
+        };
+        let at = "2026-11-28T12:00:00Z";
+        let first = h.begin_at(&twin, at).unwrap();
+        let second = h.begin_at(&twin, at).unwrap();
+        let start = spool::SpooledStart {
+            run: twin,
+            started: at.into(),
+        };
+        let end =
+            spool::SpoolRecord::new("h".into(), second, Rows::of("done", &report()), Some(start));
+        h.finish_record(&end).unwrap();
+        let runs = h.list(&Filter::default()).unwrap();
+        let status = |id| runs.iter().find(|r| r.id == id).unwrap().status.clone();
+        assert_eq!(
+            (status(first), status(second)),
+            ("running".into(), "done".into())
         );
         let _ = std::fs::remove_dir_all(&dir);
     }

@@ -2,6 +2,7 @@
 //! reader (`probebridge history`) never blocks the gateway's writes, and a crash
 //! leaves the last committed transaction.
 
+use super::spool::SpooledStart;
 use super::{DispersionRow, Filter, IsoErrorRow, NewRun, ResultRow, Rows, RunRow, Store, Timeouts};
 use rusqlite::{params, Connection, OpenFlags};
 use std::path::{Path, PathBuf};
@@ -337,15 +338,19 @@ impl Store for SqliteStore {
             .map_err(text)
     }
 
-    fn find_run(
-        &mut self,
-        machine: &str,
-        started: &str,
-        program: &str,
-    ) -> Result<Option<i64>, String> {
+    fn find_run(&mut self, id: i64, start: &SpooledStart) -> Result<Option<i64>, String> {
+        let r = &start.run;
         let found = self.conn.query_row(
-            "SELECT id FROM runs WHERE machine = ?1 AND started = ?2 AND program = ?3 ORDER BY id LIMIT 1",
-            [machine, started, program],
+            "SELECT id FROM runs WHERE machine = ?1 AND started = ?2 AND program = ?3 AND source = ?4
+             AND request_seq IS ?5 ORDER BY id = ?6 DESC, id LIMIT 1",
+            params![
+                r.machine,
+                start.started,
+                r.program.display().to_string(),
+                r.source,
+                r.request_seq,
+                id
+            ],
             |r| r.get(0),
         );
         match found {
