@@ -97,13 +97,15 @@ impl Gateway {
         self.serve.plc_script(&self.py, "history_plc.py", args)
     }
 
-    /// A start of 431 that is refused: "history unavailable", nothing moved.
-    fn start_refused(&self) {
+    /// A start of 431 that is refused: "history unavailable", nothing moved. What the
+    /// PLC read.
+    fn start_refused(&self) -> serde_json::Value {
         let st = self.plc(&["start", "431"]);
         assert_eq!(st["ack_code"], START | REFUSED, "{st}\n{}", self.log());
         assert_eq!(st["reason"], REASON_HISTORY_UNAVAILABLE, "{st}");
         // Nothing started: the state is the last run's, never busy.
         assert_ne!(st["state"], BUSY, "{st}");
+        st
     }
 
     /// Starts 431 until the start is taken (the history is opened again in the
@@ -465,6 +467,68 @@ fn a_corrupted_page_refuses_starts_and_nothing_moves() {
     let seq = g.start_taken();
     g.assert_recorded(&g.plc(&["end", &seq]));
     assert_eq!(history(db.to_str().unwrap()).len(), 2);
+}
+
+/// Issue 35: the WAL, then the first page of the file overwritten while `serve` runs
+/// and a run is under way. The run's end goes to the spool (bit 6 set), never
+/// reported as recorded; the next starts are refused at once (reason 9). The plant's
+/// way out (docs/history.md): the corrupted file moved aside, the gateway makes a
+/// fresh one and replays the spool into it, starts are taken again.
+#[test]
+fn a_history_overwritten_while_serving_keeps_the_end_in_the_spool_and_refuses_starts() {
+    let Some(py) = python() else { return };
+    let dir = tmpdir("hist-overwritten");
+    let db = dir.join("history.sqlite");
+    let wal = dir.join("history.sqlite-wal");
+    let g = Gateway::start(&py, &dir, "overwritten", &format!("sqlite = {db:?}\n"));
+    let seq = g.start_taken();
+    g.assert_recorded(&g.plc(&["end", &seq]));
+    let seq = g.start_taken();
+    assert!(wal.is_file(), "the history writes ahead");
+    overwrite_with_noise(&wal, 0, u64::MAX);
+    overwrite_with_noise(&db, 0, 4096);
+    let end = g.plc(&["end", &seq]);
+    assert_done(&end, true);
+    let spool = dir.join("history.spool");
+    assert_eq!(spool_lines(&spool), 1, "{}", g.log());
+    // Known down: refused at once (the recorder's "unavailable", no write tried).
+    for _ in 0..2 {
+        let st = g.start_refused();
+        eprintln!(
+            "start refused (history corrupted), answered in {} ms",
+            st["answer_ms"]
+        );
+    }
+    let log = g.log();
+    assert!(log.contains("unavailable: history"), "{log}");
+    assert!(
+        log.contains("cannot be read back") || log.contains("quick_check"),
+        "{log}"
+    );
+    // The plant moves the corrupted file aside; the gateway opens a fresh one by itself
+    // and replays the spool into it: the run is there, done, with its results.
+    let aside = dir.join("aside");
+    std::fs::create_dir(&aside).unwrap();
+    for f in ["history.sqlite", "history.sqlite-wal", "history.sqlite-shm"] {
+        if dir.join(f).exists() {
+            std::fs::rename(dir.join(f), aside.join(f)).unwrap();
+        }
+    }
+    g.wait_recorded();
+    assert_one_done_run(db.to_str().unwrap());
+    assert_eq!(spool_lines(&spool), 0);
+    let seq = g.start_taken();
+    g.assert_recorded(&g.plc(&["end", &seq]));
+    assert_eq!(history(db.to_str().unwrap()).len(), 2);
+    // The old file stays as it was put aside: nothing reads it as a history.
+    let old = run(bin().args([
+        "history",
+        "--db",
+        aside.join("history.sqlite").to_str().unwrap(),
+    ]));
+    assert!(!old.status.success());
+    drop(g);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The PostgreSQL server, or `None` with the reason printed (never in CI).

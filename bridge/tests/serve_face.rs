@@ -215,7 +215,13 @@ fn open_fds(pid: u32) -> Vec<u64> {
 #[test]
 fn accept_errors_under_fd_exhaustion_are_retried_and_the_plc_gets_in() {
     let Some(py) = python() else { return };
-    let g = Gateway::start("fds", &[(431, "431-plane.h")], "", &[]);
+    // One address for every peer here: its cap as high as the face's.
+    let g = Gateway::start(
+        "fds",
+        &[(431, "431-plane.h")],
+        "max_connections_per_peer = 8\n",
+        &[],
+    );
     // Lower the running gateway's soft RLIMIT_NOFILE so that exactly 7 more
     // descriptors can be opened (a descriptor must be below the limit): the 8th idle
     // connection makes accept() fail with EMFILE, before the connection limit of 8.
@@ -298,7 +304,7 @@ fn the_connection_limit_refuses_extras_and_a_silent_one_makes_room() {
     let g = Gateway::start(
         "limit",
         &[(431, "431-plane.h")],
-        "",
+        "max_connections_per_peer = 8\n",
         &[("PROBEBRIDGE_LOG", "debug")],
     );
     // 20 peers connect and ask once; the default limit is 8.
@@ -321,6 +327,54 @@ fn the_connection_limit_refuses_extras_and_a_silent_one_makes_room() {
     assert!(got["connect_attempts"].as_u64().unwrap() > 1, "{got}");
     assert!(g.log().contains("for a new one from"), "{}", g.log());
     drop(peers);
+}
+
+/// Issue 35: idle connections opened at 20 a second and held, from two other hosts
+/// (127.0.0.2 and 127.0.0.3, loopback as well), while the PLC (127.0.0.1, the last
+/// owner of the request block) connects again and again. Before, the flood held all 8
+/// places within 0.4 s and a new connection got in only past one silent for 10 s:
+/// the PLC was refused. Now each host holds at most its 4 (half the face's 8) and the
+/// PLC's address keeps a place: every reconnect is served (a read answered within
+/// 1 s, a bound generous enough never to decide the outcome on a loaded machine).
+#[test]
+fn a_slow_flood_from_other_hosts_never_keeps_the_plc_out() {
+    let g = Gateway::start("flood", &[(431, "431-plane.h")], "", &[]);
+    let mut plc = Raw::connect(g.addr());
+    assert_eq!(plc.write(20, &[1], true), Ok(()), "the PLC owns the block");
+    drop(plc);
+    let mut flood = Vec::new();
+    let mut reconnects = Vec::new();
+    for i in 0..120 {
+        let host = if i % 2 == 0 {
+            [127, 0, 0, 2]
+        } else {
+            [127, 0, 0, 3]
+        };
+        flood.push(Raw::connect_from(host, g.addr()));
+        if i % 10 == 9 {
+            let t = Instant::now();
+            let mut p = Raw::connect(g.addr());
+            p.s.set_read_timeout(Some(Duration::from_secs(1))).unwrap();
+            reconnects.push((p.served(), t.elapsed().as_millis()));
+        }
+        // The flood's pace: 20 connections a second.
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    eprintln!("PLC reconnects during the flood (served, ms): {reconnects:?}");
+    assert!(
+        reconnects.iter().all(|(served, _)| *served),
+        "{reconnects:?}\n{}",
+        g.log()
+    );
+    assert!(
+        g.log().contains("(plc.max_connections_per_peer)"),
+        "{}",
+        g.log()
+    );
+    drop(flood);
+    let dir = g.dir.clone();
+    drop(g);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

@@ -584,6 +584,46 @@ fn the_cap_holds_for_clients_that_said_hello(serve: &Serve) {
     );
 }
 
+/// Issue 35: the history's WAL and first page overwritten while `serve` runs. The
+/// MES's first start is refused (reason 9) once its `running` row cannot be read
+/// back; from then on the history is known down and a start is refused at once (no
+/// write tried: the recorder's "unavailable"), as the PLC's is (history_faults.rs).
+#[test]
+fn a_start_over_opcua_is_refused_at_once_while_the_history_is_known_corrupted() {
+    let Some(py) = python() else { return };
+    let machine = MACHINE;
+    let serve = Serve::start(
+        "histdown",
+        "tilted-plane.toml",
+        &[(431, "431-plane.h")],
+        "may_start = true\n",
+        &[],
+        true,
+    );
+    trust_the_mes(&serve, &py, machine);
+    let db = serve.dir.join("history.sqlite");
+    overwrite_with_noise(&serve.dir.join("history.sqlite-wal"), 0, u64::MAX);
+    overwrite_with_noise(&db, 0, 4096);
+    let first = serve.mes(&py, machine, &["start", "431"]);
+    assert_eq!(first["answer"][0], 9, "{first}\n{}", serve.log());
+    let log = serve.log();
+    assert!(log.contains("cannot be read back"), "{log}");
+    for _ in 0..2 {
+        let again = serve.mes(&py, machine, &["start", "431"]);
+        assert_eq!(again["answer"][0], 9, "{again}");
+        eprintln!(
+            "OPC UA start refused (history known down) in {} ms",
+            again["ms"]
+        );
+    }
+    let refusals = serve.log().matches("start refused: history").count();
+    let at_once = serve.log().matches("unavailable: history").count();
+    assert!(at_once >= 2, "{refusals} refusals:\n{}", serve.log());
+    let dir = serve.dir.clone();
+    drop(serve);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn a_start_while_the_plc_runs_one_is_refused_and_an_abort_ends_a_451() {
     let Some(py) = python() else { return };

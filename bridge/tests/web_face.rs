@@ -352,3 +352,34 @@ fn browser_checks(serve: &Serve, ids: &[i64]) {
         "PROBEBRIDGE_WEB_STATUS_SCREENSHOT",
     );
 }
+
+/// Issue 35: a slowloris (the three places held, then 200 connections) wrote one WARN
+/// line per refused connection (3872 in 60 s at the plant), pushing the service's own
+/// lines out of journald's rate limit. Now one line per 10 s with the count held back.
+#[test]
+fn a_slowloris_costs_one_warning_not_one_per_refused_connection() {
+    let dir = tmpdir("web-slowloris");
+    let serve = start(
+        dir.clone(),
+        "listen = \"127.0.0.1:0\"\nmax_connections = 3\nrequest_timeout_ms = 60000\n",
+    );
+    let held: Vec<TcpStream> = (0..3)
+        .map(|_| TcpStream::connect(serve.web).unwrap())
+        .collect();
+    // Each one closed by the face (end of file) before the next: all 200 were seen.
+    for _ in 0..200 {
+        let mut s = TcpStream::connect(serve.web).unwrap();
+        s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+        assert_eq!(
+            s.read(&mut [0u8; 16]).unwrap(),
+            0,
+            "closed without an answer"
+        );
+    }
+    let log = std::fs::read_to_string(dir.join("serve.log")).unwrap();
+    let warnings = log.matches("connection limit reached").count();
+    eprintln!("200 refused connections: {warnings} warning line(s)");
+    assert_eq!(warnings, 1, "{log}");
+    drop(held);
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -113,6 +113,15 @@ trait Store: Send {
     fn list(&mut self, filter: &Filter) -> Result<Vec<RunRow>, String>;
     fn close_interrupted(&mut self, machine: &str) -> Result<usize, String>;
     fn count(&mut self) -> Result<i64, String>;
+    /// The run begun as `start` says (machine, start time, program, source, request
+    /// sequence), `id` first if it is that run, if the history has it: a spooled end
+    /// finds its run by what it is, not by an id a fresh file may have given another.
+    fn find_run(&mut self, id: i64, start: &spool::SpooledStart) -> Result<Option<i64>, String>;
+    /// Whether the store reads back whole (SQLite: `PRAGMA quick_check`); a server
+    /// checks its own files.
+    fn check(&mut self) -> Result<(), String> {
+        Ok(())
+    }
 }
 
 /// The end of a run as rows, the same for every backend (and in the spool).
@@ -197,8 +206,8 @@ pub struct RunStart<'a> {
     pub parameters: &'a [f64],
 }
 
-/// A run as it is begun (owned, for the recorder's thread).
-#[derive(Clone, Debug, PartialEq)]
+/// A run as it is begun (owned, for the recorder's thread; in the spool with its end).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct NewRun {
     pub machine: String,
     pub source: String,
@@ -335,17 +344,41 @@ impl History {
 
     /// Records a run as "running" before it moves; its id.
     pub fn begin(&mut self, run: &RunStart) -> Result<i64, HistoryError> {
-        self.begin_new(&NewRun::from(run))
+        self.begin_at(&NewRun::from(run), &time::now_utc())
     }
 
-    fn begin_new(&mut self, run: &NewRun) -> Result<i64, HistoryError> {
-        self.store
-            .begin(run, &time::now_utc())
-            .map_err(|e| self.err(e))
+    /// Records run `run` begun at `started` as `running`; its id.
+    fn begin_at(&mut self, run: &NewRun, started: &str) -> Result<i64, HistoryError> {
+        self.store.begin(run, started).map_err(|e| self.err(e))
     }
 
     fn finish_rows(&mut self, id: i64, rows: &Rows) -> Result<(), HistoryError> {
         self.store.finish(id, rows).map_err(|e| self.err(e))
+    }
+
+    /// Completes a spooled end. With its start, the run is found by what it is
+    /// (machine, start time, program, source, request sequence; its id first, for two
+    /// runs begun within the same second), or begun anew when the history does not have it
+    /// (a fresh file that replaced a corrupted one): never another run under its old
+    /// id. Without (a spool from before starts were kept), by its id.
+    fn finish_record(&mut self, record: &spool::SpoolRecord) -> Result<(), HistoryError> {
+        let Some(start) = &record.start else {
+            return self.finish_rows(record.id, &record.rows);
+        };
+        let found = self
+            .store
+            .find_run(record.id, start)
+            .map_err(|e| self.err(e))?;
+        let id = match found {
+            Some(id) => id,
+            None => self.begin_at(&start.run, &start.started)?,
+        };
+        self.finish_rows(id, &record.rows)
+    }
+
+    /// The store's integrity check (SQLite: `PRAGMA quick_check`).
+    pub fn check(&mut self) -> Result<(), HistoryError> {
+        self.store.check().map_err(|e| self.err(e))
     }
 
     fn discard(&mut self, id: i64) -> Result<(), HistoryError> {
@@ -541,6 +574,75 @@ mod tests {
             "aborted"
         );
         assert!(to_text(&all).contains("431.h"));
+    }
+
+    #[test]
+    fn a_spooled_end_replays_into_a_fresh_file_without_touching_another_run_of_its_id() {
+        let dir = std::env::temp_dir().join(format!("pb-history-fresh-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let run = NewRun {
+            machine: "table-ac".into(),
+            source: "serve".into(),
+            request_seq: Some(3),
+            program_number: Some(431),
+            program: PathBuf::from("/p/431.h"),
+            max_modification: Some(0.05),
+            parameters: vec![1.5],
+        };
+        // Run 1 of a file since corrupted: its end, with its start, in the spool.
+        let start = spool::SpooledStart {
+            run: run.clone(),
+            started: "2026-11-28T10:00:00Z".into(),
+        };
+        let record =
+            spool::SpoolRecord::new("h".into(), 1, Rows::of("done", &report()), Some(start));
+        // The fresh file in its place, whose run 1 is another run begun since.
+        let mut h = History::open(&HistoryTarget::Sqlite(dir.join("h.sqlite"))).unwrap();
+        let other = NewRun {
+            program: PathBuf::from("/p/444.h"),
+            ..run.clone()
+        };
+        assert_eq!(h.begin_at(&other, "2026-11-28T11:00:00Z").unwrap(), 1);
+        h.finish_record(&record).unwrap();
+        // Replayed again (a crash before the spool forgot it): still one run.
+        h.finish_record(&record).unwrap();
+        let runs = h.list(&Filter::default()).unwrap();
+        assert_eq!(runs.len(), 2, "{runs:?}");
+        let r = runs.iter().find(|r| r.program == "/p/431.h").unwrap();
+        assert_eq!(
+            (r.status.as_str(), r.started.as_str(), r.results.len()),
+            ("done", "2026-11-28T10:00:00Z", 2)
+        );
+        assert_eq!(r.parameters, [1.5]);
+        let o = runs.iter().find(|r| r.id == 1).unwrap();
+        assert_eq!(
+            (o.program.as_str(), o.status.as_str()),
+            ("/p/444.h", "running")
+        );
+        // Two runs alike begun within the same second (an abort, a start at once; OPC
+        // UA's have no sequence): the end of the second completes the second.
+        let twin = NewRun {
+            request_seq: None,
+            ..run.clone()
+        };
+        let at = "2026-11-28T12:00:00Z";
+        let first = h.begin_at(&twin, at).unwrap();
+        let second = h.begin_at(&twin, at).unwrap();
+        let start = spool::SpooledStart {
+            run: twin,
+            started: at.into(),
+        };
+        let end =
+            spool::SpoolRecord::new("h".into(), second, Rows::of("done", &report()), Some(start));
+        h.finish_record(&end).unwrap();
+        let runs = h.list(&Filter::default()).unwrap();
+        let status = |id| runs.iter().find(|r| r.id == id).unwrap().status.clone();
+        assert_eq!(
+            (status(first), status(second)),
+            ("running".into(), "done".into())
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

@@ -7,6 +7,7 @@
 //! statement timeout, whatever the kernel's TCP timers say. A connection that timed
 //! out is dropped; the caller opens a new one.
 
+use super::spool::SpooledStart;
 use super::{DispersionRow, Filter, IsoErrorRow, NewRun, ResultRow, Rows, RunRow, Store, Timeouts};
 use std::future::Future;
 use std::time::Duration;
@@ -367,6 +368,23 @@ impl Store for PgStore {
                 .map(|n| n as usize)
             },
         )
+    }
+
+    fn find_run(&mut self, id: i64, start: &SpooledStart) -> Result<Option<i64>, String> {
+        let client = &self.client;
+        let r = &start.run;
+        let program = r.program.display().to_string();
+        let seq = r.request_seq.map(i32::from);
+        within(&self.rt, self.statement, "finding a spooled run", async {
+            Ok(client
+                .query_opt(
+                    "SELECT id FROM runs WHERE machine = $1 AND started = $2 AND program = $3 AND source = $4
+                     AND request_seq IS NOT DISTINCT FROM $5 ORDER BY id = $6 DESC, id LIMIT 1",
+                    &[&r.machine, &start.started, &program, &r.source, &seq, &id],
+                )
+                .await?
+                .map(|row| row.get(0)))
+        })
     }
 
     fn count(&mut self) -> Result<i64, String> {

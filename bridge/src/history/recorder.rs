@@ -14,9 +14,10 @@
 //!   the spool's ends have been replayed, so that a run that completed is never
 //!   relabelled.
 
-use super::spool::{Spool, SpoolRecord};
-use super::{History, HistoryTarget, NewRun, Rows, Timeouts, NO_RUN};
+use super::spool::{Spool, SpoolRecord, SpooledStart};
+use super::{time, History, HistoryTarget, NewRun, Rows, Timeouts, NO_RUN};
 use cycles::results::ProgramReport;
+use std::collections::HashMap;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
@@ -29,6 +30,9 @@ const REOPEN_MAX: Duration = Duration::from_secs(5);
 /// Attempts at writing the end of a run before it goes to the spool.
 const FINISH_ATTEMPTS: u32 = 3;
 const RETRY_PAUSE: Duration = Duration::from_millis(100);
+/// How often the open history's integrity is checked (`PRAGMA quick_check`), besides
+/// at each open.
+const CHECK_EVERY: Duration = Duration::from_secs(24 * 3600);
 
 /// Where the end of a run was kept.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -45,6 +49,7 @@ pub enum Kept {
 enum Op {
     Begin {
         run: NewRun,
+        started: String,
         reply: mpsc::SyncSender<Result<i64, String>>,
     },
     Finish {
@@ -72,6 +77,9 @@ pub struct Recorder {
     timeouts: Timeouts,
     target: HistoryTarget,
     worker: Arc<Mutex<Option<JoinHandle<()>>>>,
+    /// The runs begun and not yet ended: their start goes into the spool with their
+    /// end, so that a fresh history can take it.
+    begun: Arc<Mutex<HashMap<i64, SpooledStart>>>,
 }
 
 fn guard<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -134,6 +142,7 @@ impl Recorder {
             unknown: Vec::new(),
             failing: None,
             opened_once: false,
+            checked: Instant::now(),
         };
         let handle = std::thread::Builder::new()
             .name("probebridge-history".into())
@@ -149,6 +158,7 @@ impl Recorder {
             timeouts,
             target,
             worker: Arc::new(Mutex::new(Some(handle))),
+            begun: Arc::default(),
         })
     }
 
@@ -177,12 +187,21 @@ impl Recorder {
             ));
         }
         let (reply, answer) = mpsc::sync_channel(1);
+        let started = time::now_utc();
         self.tx
-            .send(Op::Begin { run, reply })
+            .send(Op::Begin {
+                run: run.clone(),
+                started: started.clone(),
+                reply,
+            })
             .map_err(|_| "the history thread has ended".to_string())?;
         let limit = self.timeouts.statement + Duration::from_millis(500);
         match answer.recv_timeout(limit) {
-            Ok(r) => r,
+            Ok(Ok(id)) => {
+                guard(&self.begun).insert(id, SpooledStart { run, started });
+                Ok(id)
+            }
+            Ok(Err(e)) => Err(e),
             Err(_) => Err(format!(
                 "history {}: the start was not recorded within {} ms",
                 self.target.display(),
@@ -194,7 +213,8 @@ impl Recorder {
     /// Completes run `id`. Returns once the end is in the history or fsynced in the
     /// spool (at most about twice the statement timeout), or says it was not kept.
     pub fn finish(&self, id: i64, status: &str, report: &ProgramReport) -> Kept {
-        let record = SpoolRecord::new(self.target.display(), id, Rows::of(status, report));
+        let start = guard(&self.begun).remove(&id);
+        let record = SpoolRecord::new(self.target.display(), id, Rows::of(status, report), start);
         let (reply, answer) = mpsc::sync_channel(1);
         let sent = self.tx.send(Op::Finish {
             record: record.clone(),
@@ -269,6 +289,8 @@ struct Worker {
     /// The error last logged, while the history fails (each new one is logged once).
     failing: Option<String>,
     opened_once: bool,
+    /// When the integrity was last checked.
+    checked: Instant,
 }
 
 impl Worker {
@@ -282,8 +304,12 @@ impl Worker {
                 Duration::from_secs(5)
             };
             match rx.recv_timeout(idle) {
-                Ok(Op::Begin { run, reply }) => {
-                    let r = self.begin(&run);
+                Ok(Op::Begin {
+                    run,
+                    started,
+                    reply,
+                }) => {
+                    let r = self.begin(&run, &started);
                     if let Ok(id) = r {
                         if reply.send(Ok(id)).is_err() {
                             // The start was refused meanwhile (too slow): it never ran.
@@ -307,6 +333,8 @@ impl Worker {
             }
             if self.store.is_none() && Instant::now() >= self.next_open {
                 self.open();
+            } else if self.store.is_some() && self.checked.elapsed() >= CHECK_EVERY {
+                self.check();
             }
             if self.store.is_some() && self.pending() > 0 {
                 self.replay();
@@ -332,6 +360,7 @@ impl Worker {
                 if !std::mem::replace(&mut self.opened_once, true) {
                     tracing::info!(at = %self.target.display(), "history");
                 }
+                self.check();
                 self.replay();
                 if self.store.is_some() && !self.interrupted_closed {
                     self.close_interrupted();
@@ -343,6 +372,16 @@ impl Worker {
             Err(e) => self.down(e.to_string()),
         }
         self.publish();
+    }
+
+    /// The integrity check: a history that fails it is down (its file corrupted: the
+    /// spool keeps the ends of runs, starts are refused until it reads whole again).
+    fn check(&mut self) {
+        self.checked = Instant::now();
+        let Some(h) = self.store.as_mut() else { return };
+        if let Err(e) = h.check() {
+            self.down(e.to_string());
+        }
     }
 
     /// A write went through: the history works (again).
@@ -387,7 +426,7 @@ impl Worker {
         self.wait = (self.wait * 2).min(REOPEN_MAX);
     }
 
-    fn begin(&mut self, run: &NewRun) -> Result<i64, String> {
+    fn begin(&mut self, run: &NewRun, started: &str) -> Result<i64, String> {
         let Some(h) = self.store.as_mut() else {
             return Err(format!(
                 "history {} unavailable: {}",
@@ -395,7 +434,7 @@ impl Worker {
                 guard(&self.status.last_error)
             ));
         };
-        match h.begin_new(run) {
+        match h.begin_at(run, started) {
             Ok(id) => {
                 self.works();
                 Ok(id)
@@ -435,7 +474,7 @@ impl Worker {
                 last = guard(&self.status.last_error).clone();
                 continue;
             };
-            match h.finish_rows(record.id, &record.rows) {
+            match h.finish_record(&record) {
                 Ok(()) => {
                     self.works();
                     return Kept::Recorded;
@@ -485,7 +524,7 @@ impl Worker {
                 continue;
             }
             let Some(h) = self.store.as_mut() else { break };
-            match h.finish_rows(r.id, &r.rows) {
+            match h.finish_record(r) {
                 Ok(()) => {
                     self.works();
                     tracing::info!(run = r.id, status = %r.rows.status, "history: spooled end of the run recorded");

@@ -11,7 +11,7 @@
 //! opened. Such a line is never dropped silently: it is reported and moved, byte for
 //! byte, to `SPOOL.damaged` beside the spool.
 
-use super::Rows;
+use super::{NewRun, Rows};
 use serde::{Deserialize, Serialize};
 use std::fs::{File, OpenOptions};
 use std::io::{Read, Write};
@@ -29,16 +29,30 @@ pub struct SpoolRecord {
     pub history: String,
     pub id: i64,
     pub rows: Rows,
+    /// The run as it was begun: the replay finds the run by it, or begins it in a
+    /// history that lost it (a fresh file in place of a corrupted one). None in records
+    /// spooled before it was kept, and for runs this gateway did not begin.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub start: Option<SpooledStart>,
+}
+
+/// A run's start, as the history had it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SpooledStart {
+    pub run: NewRun,
+    /// ISO 8601 UTC, the `started` of its row.
+    pub started: String,
 }
 
 impl SpoolRecord {
-    pub fn new(history: String, id: i64, rows: Rows) -> Self {
+    pub fn new(history: String, id: i64, rows: Rows, start: Option<SpooledStart>) -> Self {
         Self {
             spool: FORMAT.into(),
             version: VERSION,
             history,
             id,
             rows,
+            start,
         }
     }
 
@@ -307,11 +321,11 @@ mod tests {
         let p = d.join("history.spool");
         let (mut s, problems) = Spool::open(&p).unwrap();
         assert!(problems.is_empty() && s.is_empty());
-        s.append(SpoolRecord::new("h".into(), 1, rows("done")))
+        s.append(SpoolRecord::new("h".into(), 1, rows("done"), None))
             .unwrap();
-        s.append(SpoolRecord::new("h".into(), 1, rows("done")))
+        s.append(SpoolRecord::new("h".into(), 1, rows("done"), None))
             .unwrap();
-        s.append(SpoolRecord::new("h".into(), 2, rows("aborted")))
+        s.append(SpoolRecord::new("h".into(), 2, rows("aborted"), None))
             .unwrap();
         drop(s);
         let (mut s, problems) = Spool::open(&p).unwrap();
@@ -329,14 +343,14 @@ mod tests {
         let p = d.join("history.spool");
         let (mut s, _) = Spool::open(&p).unwrap();
         for id in 1..=3 {
-            s.append(SpoolRecord::new("h".into(), id, rows("done")))
+            s.append(SpoolRecord::new("h".into(), id, rows("done"), None))
                 .unwrap();
         }
         drop(s);
         let mut text = std::fs::read_to_string(&p).unwrap();
         // Damage record 2 (one digit of a value), and tear a fourth record.
         text = text.replacen("\"id\":2,", "\"id\":9,", 1);
-        let torn = SpoolRecord::new("h".into(), 4, rows("done")).line();
+        let torn = SpoolRecord::new("h".into(), 4, rows("done"), None).line();
         text.push_str(&torn[..torn.len() / 2]);
         std::fs::write(&p, &text).unwrap();
         let (mut s, problems) = Spool::open(&p).unwrap();
@@ -347,7 +361,7 @@ mod tests {
         let damaged = std::fs::read_to_string(damaged_path(&p)).unwrap();
         assert!(damaged.contains("\"id\":9,") && damaged.contains("\"id\":4,"));
         // Appending goes on after the whole records.
-        s.append(SpoolRecord::new("h".into(), 5, rows("done")))
+        s.append(SpoolRecord::new("h".into(), 5, rows("done"), None))
             .unwrap();
         let (s, problems) = Spool::open(&p).unwrap();
         assert!(problems.is_empty(), "{problems:?}");

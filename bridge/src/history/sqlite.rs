@@ -2,9 +2,10 @@
 //! reader (`probebridge history`) never blocks the gateway's writes, and a crash
 //! leaves the last committed transaction.
 
+use super::spool::SpooledStart;
 use super::{DispersionRow, Filter, IsoErrorRow, NewRun, ResultRow, Rows, RunRow, Store, Timeouts};
-use rusqlite::{params, Connection};
-use std::path::Path;
+use rusqlite::{params, Connection, OpenFlags};
+use std::path::{Path, PathBuf};
 
 const SCHEMA: &str = "
 CREATE TABLE IF NOT EXISTS runs (
@@ -85,6 +86,8 @@ fn migrate(conn: &Connection) -> rusqlite::Result<()> {
 
 pub struct SqliteStore {
     conn: Connection,
+    path: PathBuf,
+    timeouts: Timeouts,
 }
 
 fn text(e: rusqlite::Error) -> String {
@@ -101,7 +104,37 @@ impl SqliteStore {
             .map_err(text)?;
         conn.execute_batch(SCHEMA).map_err(text)?;
         migrate(&conn).map_err(text)?;
-        Ok(Self { conn })
+        Ok(Self {
+            conn,
+            path: path.to_path_buf(),
+            timeouts: *timeouts,
+        })
+    }
+
+    /// Reads run `id` back through a connection of its own, as `probebridge history`
+    /// would: its status and its number of results. The writing connection's commit
+    /// alone proves little: it keeps the pages it wrote in its cache and appends to the
+    /// WAL where it last left it, so a file overwritten under it (the WAL, the first
+    /// page) still takes its commits while nobody else can read them.
+    fn read_back(&self, id: i64, status: &str, results: usize) -> Result<(), String> {
+        let fresh = || -> rusqlite::Result<(String, i64)> {
+            let c = Connection::open_with_flags(&self.path, OpenFlags::SQLITE_OPEN_READ_ONLY)?;
+            c.busy_timeout(self.timeouts.statement)?;
+            c.query_row(
+                "SELECT status, (SELECT COUNT(*) FROM results WHERE run_id = ?1) FROM runs WHERE id = ?1",
+                [id],
+                |r| Ok((r.get(0)?, r.get(1)?)),
+            )
+        };
+        match fresh() {
+            Ok((s, n)) if s == status && n == results as i64 => Ok(()),
+            Ok((s, n)) => Err(format!(
+                "run {id} written as {status:?} with {results} results reads back as {s:?} with {n}"
+            )),
+            Err(e) => Err(format!(
+                "run {id} written, but the file cannot be read back: {e}"
+            )),
+        }
     }
 
     fn results(&self, id: i64) -> rusqlite::Result<Vec<ResultRow>> {
@@ -224,6 +257,7 @@ impl Store for SqliteStore {
             .map_err(text)?;
         }
         tx.commit().map_err(text)?;
+        self.read_back(id, "running", 0)?;
         Ok(id)
     }
 
@@ -270,7 +304,8 @@ impl Store for SqliteStore {
             )
             .map_err(text)?;
         }
-        tx.commit().map_err(text)
+        tx.commit().map_err(text)?;
+        self.read_back(id, &rows.status, rows.results.len())
     }
 
     fn discard(&mut self, id: i64) -> Result<(), String> {
@@ -301,5 +336,47 @@ impl Store for SqliteStore {
         self.conn
             .query_row("SELECT COUNT(*) FROM runs", [], |r| r.get(0))
             .map_err(text)
+    }
+
+    fn find_run(&mut self, id: i64, start: &SpooledStart) -> Result<Option<i64>, String> {
+        let r = &start.run;
+        let found = self.conn.query_row(
+            "SELECT id FROM runs WHERE machine = ?1 AND started = ?2 AND program = ?3 AND source = ?4
+             AND request_seq IS ?5 ORDER BY id = ?6 DESC, id LIMIT 1",
+            params![
+                r.machine,
+                start.started,
+                r.program.display().to_string(),
+                r.source,
+                r.request_seq,
+                id
+            ],
+            |r| r.get(0),
+        );
+        match found {
+            Ok(id) => Ok(Some(id)),
+            Err(rusqlite::Error::QueryReturnedNoRows) => Ok(None),
+            Err(e) => Err(text(e)),
+        }
+    }
+
+    /// `PRAGMA quick_check` through a connection of its own (the file as a reader
+    /// finds it, not the writer's cache).
+    fn check(&mut self) -> Result<(), String> {
+        let run = || -> rusqlite::Result<Vec<String>> {
+            let c = Connection::open_with_flags(&self.path, OpenFlags::SQLITE_OPEN_READ_ONLY)?;
+            c.busy_timeout(self.timeouts.statement)?;
+            let mut stmt = c.prepare("PRAGMA quick_check")?;
+            let rows = stmt.query_map([], |r| r.get::<_, String>(0))?;
+            rows.collect()
+        };
+        match run() {
+            Ok(lines) if lines == ["ok"] => Ok(()),
+            Ok(lines) => Err(format!(
+                "integrity check (quick_check) failed: {}",
+                lines.join("; ")
+            )),
+            Err(e) => Err(format!("integrity check (quick_check) failed: {e}")),
+        }
     }
 }

@@ -201,6 +201,9 @@ pub struct PlcSection {
     /// silent one has been silent for `owner_timeout_ms`: it is closed for the new).
     #[serde(default = "default_max_connections")]
     pub max_connections: u64,
+    /// Connections of one peer address at most (absent: half of `max_connections`,
+    /// rounded up): one host's flood leaves room for the PLC.
+    pub max_connections_per_peer: Option<u64>,
     /// A connection that owns the request block and says nothing for this long loses
     /// it to the next writer.
     #[serde(default = "default_owner_timeout_ms")]
@@ -218,6 +221,7 @@ impl Default for PlcSection {
             heartbeat_timeout_ms: default_heartbeat_timeout_ms(),
             int_scale: default_int_scale(),
             max_connections: default_max_connections(),
+            max_connections_per_peer: None,
             owner_timeout_ms: default_owner_timeout_ms(),
             allow: None,
         }
@@ -410,6 +414,10 @@ impl GatewayConfig {
                 format!("{} is outside 1..{MAX_CONNECTIONS}", p.max_connections),
             ));
         }
+        if !(1..=p.max_connections).contains(&self.per_peer_cap()) {
+            let why = format!("{} is outside 1..plc.max_connections", self.per_peer_cap());
+            return Err(self.invalid("plc.max_connections_per_peer", why));
+        }
         if !(MIN_OWNER_TIMEOUT_MS..=MAX_OWNER_TIMEOUT_MS).contains(&p.owner_timeout_ms) {
             return Err(self.invalid(
                 "plc.owner_timeout_ms",
@@ -501,6 +509,10 @@ impl GatewayConfig {
             Some(entries) => super::peer_allow::AllowList::parse(entries)
                 .map_err(|e| self.invalid("plc.allow", e)),
         }
+    }
+
+    pub fn per_peer_cap(&self) -> u64 {
+        (self.plc.max_connections_per_peer).unwrap_or(self.plc.max_connections.div_ceil(2))
     }
 
     pub fn owner_timeout(&self) -> Duration {

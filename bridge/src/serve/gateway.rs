@@ -216,6 +216,11 @@ impl Core {
         self.owner.heard(conn, Instant::now());
     }
 
+    /// The address of the connection that owns the request block, if one does.
+    pub fn owner_ip(&self) -> Option<IpAddr> {
+        self.owner.owner_ip()
+    }
+
     pub fn disconnected(&mut self, conn: u64) {
         self.owner.disconnected(conn);
     }

@@ -136,6 +136,7 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     let order = cfg.word_order().map_err(|e| e.to_string())?;
     let face_opts = modbus_face::FaceOptions {
         max_connections: cfg.plc.max_connections as usize,
+        max_per_peer: cfg.per_peer_cap() as usize,
         silence: cfg.owner_timeout(),
         allow: cfg.allow().map_err(|e| e.to_string())?,
     };

@@ -4,9 +4,15 @@
 //!
 //! The face must stay reachable for its PLC whatever else is on the network:
 //! - peers outside `plc.allow` are refused at accept;
+//! - at most `plc.max_connections_per_peer` of one address: one host's flood of idle
+//!   connections leaves the others room (its own connection silent longest is closed
+//!   for its new one once silent for the owner timeout, else the new one is refused);
 //! - at most `plc.max_connections` are served; one more is refused at accept, unless
 //!   the connection silent longest has been silent for the owner timeout: that one is
 //!   closed for the new (a PLC that rebooted gets back in past idle squatters);
+//! - the address of the last owner of the request block (the PLC) keeps a place: its
+//!   new connection at the limit closes the silent-longest connection of another
+//!   address, however recent, and no other address's new connection closes one of it;
 //! - an accept error (EMFILE, ENFILE, ENOBUFS, ...) is logged and retried after a
 //!   short wait: it never ends the server;
 //! - accepted sockets have TCP keepalive (a dead peer is noticed in about 10 s) and a
@@ -54,6 +60,8 @@ const EXC_SERVER_DEVICE_BUSY: u8 = 6;
 #[derive(Clone, Debug)]
 pub struct FaceOptions {
     pub max_connections: usize,
+    /// Connections of one address at most.
+    pub max_per_peer: usize,
     /// A connection silent this long may be closed for a new one at the limit.
     pub silence: Duration,
     pub allow: AllowList,
@@ -131,6 +139,8 @@ async fn serve(
 struct Registry {
     conns: BTreeMap<u64, Entry>,
     log: FaceLog,
+    /// The address of the last connection that owned the request block.
+    last_owner: Option<IpAddr>,
 }
 
 struct Entry {
@@ -154,6 +164,7 @@ async fn accept_loop(
     let reg: SharedRegistry = Arc::new(Mutex::new(Registry {
         conns: BTreeMap::new(),
         log: FaceLog::new(Instant::now()),
+        last_owner: None,
     }));
     let mut next_id = 1u64;
     let mut retry = ACCEPT_RETRY_FIRST;
@@ -164,9 +175,7 @@ async fn accept_loop(
             _ = summary.tick() => {
                 let mut r = registry(&reg);
                 let open = r.conns.len();
-                if let Some(line) = r.log.summary(Instant::now(), open, opts.max_connections) {
-                    tracing::info!("{line}");
-                }
+                r.log.log_summary(Instant::now(), open, opts.max_connections);
                 continue;
             }
             a = listener.accept() => a,
@@ -207,6 +216,15 @@ async fn accept_loop(
     }
 }
 
+/// The connection silent longest among those `which` picks, and for how long.
+fn quietest(r: &Registry, now: Instant, which: impl Fn(&Entry) -> bool) -> Option<(u64, Duration)> {
+    r.conns
+        .iter()
+        .filter(|(_, e)| which(e))
+        .map(|(id, e)| (*id, now.saturating_duration_since(e.heard)))
+        .max_by_key(|(_, silent)| *silent)
+}
+
 /// Takes or refuses a new connection; `Some` with its close signal and id if taken.
 fn admit(
     reg: &SharedRegistry,
@@ -216,7 +234,8 @@ fn admit(
 ) -> Option<(Arc<Notify>, u64)> {
     let now = Instant::now();
     let mut r = registry(reg);
-    if !opts.allow.permits(peer.ip()) {
+    let ip = peer.ip();
+    if !opts.allow.permits(ip) {
         if let Some(held) = r.log.count(Event::RefusedPeer, now) {
             tracing::warn!(
                 %peer,
@@ -226,37 +245,54 @@ fn admit(
         }
         return None;
     }
-    if r.conns.len() >= opts.max_connections {
-        let quietest = r
-            .conns
-            .iter()
-            .map(|(id, e)| (*id, now.saturating_duration_since(e.heard)))
-            .max_by_key(|(_, silent)| *silent);
-        match quietest {
-            Some((id, silent)) if silent >= opts.silence => {
-                if let Some(e) = r.conns.remove(&id) {
-                    e.close.notify_one();
-                    r.log.count(Event::Evicted, now);
-                    tracing::debug!(
-                        "PLC face: closing connection {id} of {}, silent for {} ms, for a new \
-                         one from {peer}",
-                        e.peer,
-                        silent.as_millis()
-                    );
-                }
+    let owners = r.last_owner == Some(ip);
+    let same = r.conns.values().filter(|e| e.peer.ip() == ip).count();
+    // (A cap per address as high as the face's is the face's: said as such.)
+    let room = if same >= opts.max_per_peer && opts.max_per_peer < opts.max_connections {
+        // Its own connection silent longest makes room, once silent long enough.
+        quietest(&r, now, |e| e.peer.ip() == ip)
+            .filter(|(_, silent)| *silent >= opts.silence)
+            .ok_or(Event::RefusedPerPeer)
+            .map(Some)
+    } else if r.conns.len() >= opts.max_connections {
+        let found = if owners {
+            // The PLC's address keeps a place: another address's connection goes.
+            quietest(&r, now, |e| e.peer.ip() != ip)
+        } else {
+            quietest(&r, now, |e| Some(e.peer.ip()) != r.last_owner)
+                .filter(|(_, silent)| *silent >= opts.silence)
+        };
+        found.ok_or(Event::RefusedFull).map(Some)
+    } else {
+        Ok(None)
+    };
+    match room {
+        Ok(Some((id, silent))) => {
+            if let Some(e) = r.conns.remove(&id) {
+                e.close.notify_one();
+                r.log.count(Event::Evicted, now);
+                tracing::debug!(
+                    "PLC face: closing connection {id} of {}, silent for {} ms, for a new \
+                     one from {peer}",
+                    e.peer,
+                    silent.as_millis()
+                );
             }
-            _ => {
-                let max = opts.max_connections;
-                if let Some(held) = r.log.count(Event::RefusedFull, now) {
-                    tracing::warn!(
-                        %peer,
-                        "PLC face: refused {peer}: {max} connections open (plc.max_connections), \
-                         none silent for the owner timeout ({held} more refused since the last \
-                         such line)"
-                    );
-                }
-                return None;
+        }
+        Ok(None) => {}
+        Err(refusal) => {
+            if let Some(held) = r.log.count(refusal, now) {
+                let (max, key) = match refusal {
+                    Event::RefusedPerPeer => (opts.max_per_peer, "plc.max_connections_per_peer"),
+                    _ => (opts.max_connections, "plc.max_connections"),
+                };
+                tracing::warn!(
+                    %peer,
+                    "PLC face: refused {peer}: {max} connections open ({key}), none silent for \
+                     the owner timeout ({held} more refused since the last such line)"
+                );
             }
+            return None;
         }
     }
     let id = *next_id;
@@ -369,19 +405,26 @@ async fn connection(
                 Err(e) => break e.to_string(),
             },
         };
-        if let Some(e) = registry(&closing.reg).conns.get_mut(&id) {
-            e.heard = Instant::now();
-        }
-        let answer = {
+        let (answer, owner) = {
             let mut core = lock(&closing.shared);
             core.heard(id);
-            answer(
+            let a = answer(
                 &mut core,
                 id,
                 peer.ip(),
                 &frame[MBAP_LEN..MBAP_LEN + pdu_len],
-            )
+            );
+            (a, core.owner_ip())
         };
+        {
+            let mut r = registry(&closing.reg);
+            if let Some(e) = r.conns.get_mut(&id) {
+                e.heard = Instant::now();
+            }
+            if owner.is_some() {
+                r.last_owner = owner;
+            }
+        }
         let mut out = Vec::with_capacity(MBAP_LEN + answer.len());
         out.extend_from_slice(&frame[..4]);
         out.extend_from_slice(&(answer.len() as u16 + 1).to_be_bytes());

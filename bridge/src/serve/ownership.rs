@@ -91,6 +91,11 @@ impl Ownership {
     pub fn owner(&self) -> Option<u64> {
         self.owner.map(|o| o.conn)
     }
+
+    /// The owner's address, while there is one.
+    pub fn owner_ip(&self) -> Option<IpAddr> {
+        self.owner.map(|o| o.ip)
+    }
 }
 
 #[cfg(test)]

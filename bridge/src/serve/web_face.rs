@@ -10,6 +10,7 @@
 //! the Content-Security-Policy allows no script at all and no inline style on the
 //! gateway's own pages.
 
+use super::face_log::{Event, FaceLog, Limiter, SUMMARY_EVERY};
 use super::gateway::{lock, Shared};
 use crate::history::trend::{self, escape, Alarm, Style};
 use crate::history::{Filter, History, HistoryTarget, RunRow};
@@ -24,8 +25,9 @@ use std::io;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::Arc;
+use std::sync::Mutex;
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// The measuring protocols the face serves, by their fixed file names.
 pub const PROTOCOLS: [&str; 3] = [
@@ -54,6 +56,14 @@ pub struct Site {
     /// Where the measuring protocols are written.
     pub logs: PathBuf,
     pub machine: String,
+    /// What peers cause, counted and said sparingly.
+    log: Mutex<FaceLog>,
+    /// The trend page's history failures, said at most once per period.
+    history_failed: Mutex<Limiter>,
+}
+
+fn lock_log(site: &Site) -> std::sync::MutexGuard<'_, FaceLog> {
+    site.log.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -88,6 +98,8 @@ pub fn start_configured(
             .clone()
             .unwrap_or_else(|| cfg.programs.folder.clone()),
         machine: machine.to_string(),
+        log: Mutex::new(FaceLog::named("web face", Instant::now())),
+        history_failed: Mutex::default(),
     };
     let limits = Limits {
         max_connections: cfg.web.max_connections,
@@ -146,22 +158,36 @@ async fn serve(
 ) -> io::Result<()> {
     let listener = tokio::net::TcpListener::from_std(listener)?;
     let slots = Arc::new(tokio::sync::Semaphore::new(limits.max_connections));
+    let mut summary = tokio::time::interval(SUMMARY_EVERY / 4);
     loop {
         let (stream, addr) = tokio::select! {
             _ = &mut stop => return Ok(()),
+            _ = summary.tick() => {
+                let open = limits.max_connections - slots.available_permits();
+                lock_log(&site).log_summary(Instant::now(), open, limits.max_connections);
+                continue;
+            }
             accepted = listener.accept() => match accepted {
                 Ok(a) => a,
                 Err(e) => {
-                    tracing::warn!("web face: {e}");
+                    if let Some(held) = lock_log(&site).count(Event::AcceptError, Instant::now()) {
+                        tracing::warn!("web face: {e} ({held} more accept errors since the last such line)");
+                    }
                     continue;
                 }
             },
         };
         let Ok(slot) = slots.clone().try_acquire_owned() else {
-            tracing::warn!(%addr, "web face: connection limit reached; closed");
+            if let Some(held) = lock_log(&site).count(Event::RefusedFull, Instant::now()) {
+                tracing::warn!(
+                    %addr,
+                    "web face: connection limit reached; closed ({held} more closed since the last such line)"
+                );
+            }
             drop(stream);
             continue;
         };
+        lock_log(&site).count(Event::Accepted, Instant::now());
         let site = site.clone();
         tokio::spawn(async move {
             let _slot = slot;
@@ -303,7 +329,15 @@ fn trend_page(site: &Site, machine: Option<usize>) -> Answer {
     let runs = match runs(site) {
         Ok(r) => r,
         Err(e) => {
-            tracing::warn!("web face: {e}");
+            // A peer asks as often as it likes: said once per period, counted.
+            if let Some(held) = site
+                .history_failed
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .pass(Instant::now())
+            {
+                tracing::warn!("web face: {e} ({held} more such pages since the last such line)");
+            }
             return Answer::error(StatusCode::SERVICE_UNAVAILABLE, &e);
         }
     };

@@ -72,3 +72,26 @@ pub fn run_program(
         .map(|t| serde_json::from_str(&t).expect("the JSON run wrote"));
     (out, v)
 }
+
+/// Overwrites `len` bytes of `path` from `at` (to its end if shorter) with pseudo-random
+/// bytes (xorshift, seeded): a disk, a stray `dd` or a bad copy, as the history may
+/// meet them. The file keeps its length.
+#[allow(dead_code, reason = "the history tests' alone")]
+pub fn overwrite_with_noise(path: &Path, at: u64, len: u64) {
+    use std::io::{Seek, SeekFrom, Write};
+    let size = std::fs::metadata(path).unwrap().len();
+    let len = len.min(size.saturating_sub(at));
+    let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
+    let noise: Vec<u8> = (0..len)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x as u8
+        })
+        .collect();
+    let mut f = std::fs::OpenOptions::new().write(true).open(path).unwrap();
+    f.seek(SeekFrom::Start(at)).unwrap();
+    f.write_all(&noise).unwrap();
+    f.sync_all().unwrap();
+}

@@ -3,11 +3,12 @@
 between the start of a run and its end.
 
 Usage: history_plc.py HOST PORT start PROGRAM | end SEQ | abort | state
-Prints one JSON object: the state block (and for `start` the sequence used, for `end`
+Prints one JSON object: the state block (and for `start` the sequence used and the milliseconds until its answer, for `end`
 of a done run its REAL results)."""
 
 import json
 import sys
+import time
 
 from plc import ABORT, BUSY, DONE, START, Plc, check
 
@@ -29,8 +30,10 @@ def main():
     host, port, cmd = sys.argv[1], int(sys.argv[2]), sys.argv[3]
     plc = Plc(host, port)
     if cmd == "start":
+        t = time.monotonic()
         plc.request(START, int(sys.argv[4]), flags=1)
         out = state(plc)
+        out["answer_ms"] = round((time.monotonic() - t) * 1000, 1)
         out["seq"] = plc.seq
     elif cmd == "end":
         seq = int(sys.argv[4])

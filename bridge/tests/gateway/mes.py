@@ -253,6 +253,18 @@ async def start_while_plc_runs(mes, program):
                 "after": after, "abort_again": again}
 
 
+async def start(mes, program):
+    """As the user: StartProgram once; its answer and how long it took (ms)."""
+    c = await mes.client(USER, PASSWORD)
+    async with c:
+        ns, machine = await mes.machine_node(c)
+        production = await mes.child(machine, ns, "Production")
+        t = time.monotonic()
+        answer = await call(c, production, "StartProgram", ua.Variant(program, ua.VariantType.UInt16),
+                            ua.Variant([0.0] * 8, ua.VariantType.Float), True)
+        return {"answer": answer, "ms": round((time.monotonic() - t) * 1000, 1)}
+
+
 async def start_abort(mes, program):
     """As the user: StartProgram, then Abort once it has probed a point: the run ends
     aborted (error kind 20)."""
@@ -393,6 +405,8 @@ async def main():
         out = await refusals(mes, int(args[0]))
     elif cmd == "while_plc_runs":
         out = await start_while_plc_runs(mes, int(args[0]))
+    elif cmd == "start":
+        out = await start(mes, int(args[0]))
     elif cmd == "start_abort":
         out = await start_abort(mes, int(args[0]))
     elif cmd == "stalled":
