@@ -92,7 +92,7 @@ pub async fn serve(listener: TcpListener, server: SocketAddr, limits: Limits) {
     let max_connections = limits.max_connections;
     let open = Arc::new(AtomicUsize::new(0));
     let waiting = Arc::new(Mutex::new(Waiting::default()));
-    let log = Arc::new(Mutex::new(FaceLog::new(Instant::now())));
+    let log = Arc::new(Mutex::new(FaceLog::named("OPC UA face", Instant::now())));
     let mut retry = ACCEPT_RETRY_FIRST;
     let mut summary = tokio::time::interval(SUMMARY_EVERY / 4);
     loop {
