@@ -57,7 +57,7 @@ pub fn plan_moves(
         .map_err(|e| PlanError::new(PlanErrorKind::Moves, format!("active kinematics: {e}")))?;
     let model = KinematicModel::new(&kinematics_plan.chain, &ErrorSet::from_map(&active.errors));
     let (worlds, possible) = worlds(params, call, cfg, &model, datum, start);
-    q408_for_every_start(params, call, cfg, &model, &worlds, start)?;
+    q408_for_every_start(params, call, cfg, &model, &worlds)?;
     let as_plan = |e: CycleError| match e {
         CycleError::Plan(m) => PlanError::new(PlanErrorKind::Moves, m),
         e => PlanError::new(PlanErrorKind::Moves, e.to_string()),
@@ -207,7 +207,6 @@ fn q408_for_every_start(
     cfg: &CyclesConfig,
     model: &KinematicModel,
     worlds: &[World],
-    start: &AxisPositions,
 ) -> Result<(), PlanError> {
     let h = params.retract_height;
     if h <= 0.0 || !(params.preset == 1 || params.preset == 3) {
@@ -218,9 +217,11 @@ fn q408_for_every_start(
     let Some(limits) = cfg.machine.axis(axis) else {
         return Ok(());
     };
-    let a0 = angles_of(start);
-    // The preset the cycle sets in each world: the ball centre at the sphere centre.
-    let preset = |w: &World| model.ball_in_machine(&a0, &model.predict(&a0, &w.truth.centre))[t];
+    // The preset the cycle sets in each world: the ball centre at the sphere centre
+    // with the rotary axes at 0, wherever they stood at the start.
+    let zero = [0.0; 3];
+    let preset =
+        |w: &World| model.ball_in_machine(&zero, &model.predict(&zero, &w.truth.centre))[t];
     let (high, highest) = worlds
         .iter()
         .map(|w| (w, preset(w)))
