@@ -21,7 +21,7 @@ use crate::error::CycleError;
 use crate::kinematics::model::{angles_of, ErrorSet, KinematicModel};
 use crate::kinematics::LocalEstimator;
 use crate::kinematics_file::ActiveKinematics;
-use crate::plan::{in_every_world, when, PlanMachine, Sphere, SphereSet, World};
+use crate::plan::{in_every_world, when, PlanMachine, Sphere, SphereSet, StartReach, World};
 use hal::AxisPositions;
 use nalgebra::Vector3;
 use std::path::Path;
@@ -57,7 +57,7 @@ pub fn plan_moves(
         .map_err(|e| PlanError::new(PlanErrorKind::Moves, format!("active kinematics: {e}")))?;
     let model = KinematicModel::new(&kinematics_plan.chain, &ErrorSet::from_map(&active.errors));
     let (worlds, possible) = worlds(params, call, cfg, &model, datum, start);
-    q408_for_every_start(params, call, cfg, &model, &worlds, start)?;
+    q408_for_every_start(params, call, cfg, &model, &worlds)?;
     let as_plan = |e: CycleError| match e {
         CycleError::Plan(m) => PlanError::new(PlanErrorKind::Moves, m),
         e => PlanError::new(PlanErrorKind::Moves, e.to_string()),
@@ -146,55 +146,21 @@ pub fn worlds(
         );
     }
     let a0 = angles_of(start);
-    let clearance = probe.set_up + params.clearance;
-    let n = model.tool_vector(&a0, tool_unit(call));
-    let s = Vector3::from(start.xyz());
-    let table = |p: Vector3<f64>| model.table_point(&a0, &p);
-    // The sphere `gap` below the start along the tool axis (ball centre over the
-    // pole), `off` across it.
-    let at = |off: Vector3<f64>, gap: f64| Sphere {
-        centre: table(s + off - n * (rs + gap)),
-        touch: rs,
-    };
-    let zero = Vector3::zeros();
-    let mut worlds = vec![
-        World {
-            truth: at(zero, clearance),
-            what: None,
-        },
-        World {
-            truth: at(zero, 0.0),
-            what: Some(format!(
-                "the probe starts just above the sphere's pole (the sphere {clearance:.4} mm higher than Q320 + SET_UP below the start)"
-            )),
-        },
-    ];
-    let reach = LOCATE_REACH * rs;
-    let [main, minor, _] = call.tool.axis.indices();
-    for i in [main, minor] {
+    let [main, minor, tool] = call.tool.axis.indices();
+    let unit = |i: usize| {
         let mut e = Vector3::zeros();
         e[i] = 1.0;
-        let w = model.tool_vector(&a0, e);
-        for sign in [1.0, -1.0] {
-            worlds.push(World {
-                truth: at(w * (sign * reach), clearance),
-                what: Some(format!(
-                    "the sphere centre stands {reach:.4} mm off below the start toward {}",
-                    toward(&(w * sign))
-                )),
-            });
-        }
-    }
-    let lowest = s - n * (rs + dev + clearance);
-    let base = table(lowest);
-    let possible = SphereSet {
-        base,
-        axis: table(lowest + n) - base,
-        length: clearance + dev,
-        radial: reach,
-        touch: rs + dev,
+        model.tool_vector(&a0, e)
     };
-    (worlds, possible)
+    StartReach {
+        start: Vector3::from(start.xyz()),
+        frame: [unit(main), unit(minor), unit(tool)],
+        rs,
+        clear: probe.set_up + params.clearance,
+        reach: LOCATE_REACH * rs,
+        dev,
+    }
+    .worlds(|p| model.table_point(&a0, &p))
 }
 
 /// Q408 > 0 with Q431 = 1/3: the probe retracts to Q408 above the preset the cycle
@@ -207,7 +173,6 @@ fn q408_for_every_start(
     cfg: &CyclesConfig,
     model: &KinematicModel,
     worlds: &[World],
-    start: &AxisPositions,
 ) -> Result<(), PlanError> {
     let h = params.retract_height;
     if h <= 0.0 || !(params.preset == 1 || params.preset == 3) {
@@ -218,9 +183,11 @@ fn q408_for_every_start(
     let Some(limits) = cfg.machine.axis(axis) else {
         return Ok(());
     };
-    let a0 = angles_of(start);
-    // The preset the cycle sets in each world: the ball centre at the sphere centre.
-    let preset = |w: &World| model.ball_in_machine(&a0, &model.predict(&a0, &w.truth.centre))[t];
+    // The preset the cycle sets in each world: the ball centre at the sphere centre
+    // with the rotary axes at 0, wherever they stood at the start.
+    let zero = [0.0; 3];
+    let preset =
+        |w: &World| model.ball_in_machine(&zero, &model.predict(&zero, &w.truth.centre))[t];
     let (high, highest) = worlds
         .iter()
         .map(|w| (w, preset(w)))
@@ -243,21 +210,4 @@ fn q408_for_every_start(
             ((limits.max - highest) * 1e4 + 1e-3).floor() / 1e4
         ),
     ))
-}
-
-/// A direction as the axis it points along ("+X"), or its components.
-fn toward(v: &Vector3<f64>) -> String {
-    for (i, name) in ["X", "Y", "Z"].iter().enumerate() {
-        if v[i].abs() > 1.0 - 1e-9 {
-            return format!("{}{name}", if v[i] > 0.0 { "+" } else { "-" });
-        }
-    }
-    format!("X{:+.3} Y{:+.3} Z{:+.3}", v.x, v.y, v.z)
-}
-
-/// The tool direction at all axes 0 (the probe's +tool axis), machine X/Y/Z.
-fn tool_unit(call: &CycleBlock) -> Vector3<f64> {
-    let mut v = Vector3::zeros();
-    v[call.tool.axis.tool_index()] = 1.0;
-    v
 }

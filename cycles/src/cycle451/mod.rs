@@ -11,11 +11,17 @@
 //!    above it (an `L` block or the operator put it there). It probes down along the
 //!    tool axis, then measures the sphere around that estimate, which becomes the
 //!    preset; with the axes not moved since, that measurement is the first axis's
-//!    reference. Q431 = 0/2: the sphere centre is the active datum (preset table row
-//!    plus shift, [`crate::datum`]); the probe goes there from wherever it stands, up
-//!    to the safe height, over, down, without a locating measurement. Q431 = 2/3 set
-//!    the preset to the centre at the reference after measuring; the active row of
-//!    the preset table is written in modes 1..3 once everything else succeeded.
+//!    reference. With a rotary axis off 0 the axes then turn to 0 and the sphere is
+//!    measured again there: that is the preset (not the located centre carried to 0
+//!    through the active kinematics, whose errors the cycle measures). Q431 = 0/2:
+//!    the sphere centre is the active datum (preset table row plus shift,
+//!    [`crate::datum`]); the probe goes there from wherever it stands, up to the safe
+//!    height, over, down, probes the pole and locates the sphere from that contact
+//!    (first pass only): a sphere further from the datum than the cycle can measure
+//!    around it stops the cycle, and every probe that misses names the preset.
+//!    Q431 = 2/3 set the preset to the centre at the reference after measuring; the
+//!    active row of the preset table is written in modes 1..3 once everything else
+//!    succeeded.
 //! 2. Per measured axis, in the order A, B, C: the 0 deg reference first, then the
 //!    measuring positions ([`crate::kinematics::positions`]); the other rotary axes stand
 //!    at their incidence angles (Q413/Q417/Q421). Between positions the probe retracts to

@@ -20,6 +20,8 @@ pub mod path;
 pub use machine::PlanMachine;
 pub use path::{first_touch, Sphere, SphereSet, PATH_STEP, TOUCH_TOLERANCE};
 
+use nalgebra::Vector3;
+
 /// One geometry the cycle may meet: the sphere as it stands there, and what makes it
 /// differ from the one the block expects (`None`: the expected one).
 #[derive(Clone, Debug, PartialEq)]
@@ -53,4 +55,89 @@ pub fn in_every_world<T, E>(
 pub fn when(message: &str, what: &str) -> String {
     let m = message.trim_end_matches("; nothing moved");
     format!("{m}, when {what} (a start the docs allow); nothing moved")
+}
+
+/// Where a start the docs allow puts the sphere: below the ball centre `start`
+/// (machine X/Y/Z) along the tool axis, from Q320 + SET_UP (`clear`) below its pole
+/// (expected) up to just below the ball, and up to `reach` off across the tool axis.
+/// 451 and 460 plan their first contact against it ([`StartReach::worlds`]).
+#[derive(Clone, Copy, Debug)]
+pub struct StartReach {
+    /// The ball centre at the start, machine X/Y/Z.
+    pub start: Vector3<f64>,
+    /// The working plane's main and minor axes and the tool axis (pointing away from
+    /// the sphere), machine X/Y/Z, as the axes stand at the start.
+    pub frame: [Vector3<f64>; 3],
+    /// Q407 + R: the ball centre's distance from the sphere centre at a contact.
+    pub rs: f64,
+    /// Q320 + SET_UP.
+    pub clear: f64,
+    /// How far off across the tool axis the sphere centre may stand.
+    pub reach: f64,
+    /// How much larger than `rs` a sphere may be before the first contact shows it.
+    pub dev: f64,
+}
+
+impl StartReach {
+    /// Every sphere the start allows, the expected one first (`clear` below the pole),
+    /// then each extreme alone (a start at two limits at once is beyond what the pole
+    /// probe reaches): just below the ball, and `reach` off toward each side of the
+    /// working plane; and the set of all of them a move before the first contact must
+    /// keep off. `to_table` takes a machine point to the spheres' coordinates (table
+    /// coordinates where the rotary axes turn the sphere).
+    pub fn worlds(
+        &self,
+        to_table: impl Fn(Vector3<f64>) -> Vector3<f64>,
+    ) -> (Vec<World>, SphereSet) {
+        let [main, minor, n] = self.frame;
+        let (rs, clear, reach) = (self.rs, self.clear, self.reach);
+        let at = |off: Vector3<f64>, gap: f64| Sphere {
+            centre: to_table(self.start + off - n * (rs + gap)),
+            touch: rs,
+        };
+        let zero = Vector3::zeros();
+        let mut worlds = vec![
+            World {
+                truth: at(zero, clear),
+                what: None,
+            },
+            World {
+                truth: at(zero, 0.0),
+                what: Some(format!(
+                    "the probe starts just above the sphere's pole (the sphere {clear:.4} mm higher than Q320 + SET_UP below the start)"
+                )),
+            },
+        ];
+        for w in [main, minor] {
+            for sign in [1.0, -1.0] {
+                worlds.push(World {
+                    truth: at(w * (sign * reach), clear),
+                    what: Some(format!(
+                        "the sphere centre stands {reach:.4} mm off below the start toward {}",
+                        toward(&(w * sign))
+                    )),
+                });
+            }
+        }
+        let lowest = self.start - n * (rs + self.dev + clear);
+        let base = to_table(lowest);
+        let possible = SphereSet {
+            base,
+            axis: to_table(lowest + n) - base,
+            length: clear + self.dev,
+            radial: reach,
+            touch: rs + self.dev,
+        };
+        (worlds, possible)
+    }
+}
+
+/// A direction as the axis it points along ("+X"), or its components.
+fn toward(v: &Vector3<f64>) -> String {
+    for (i, name) in ["X", "Y", "Z"].iter().enumerate() {
+        if v[i].abs() > 1.0 - 1e-9 {
+            return format!("{}{name}", if v[i] > 0.0 { "+" } else { "-" });
+        }
+    }
+    format!("X{:+.3} Y{:+.3} Z{:+.3}", v.x, v.y, v.z)
 }

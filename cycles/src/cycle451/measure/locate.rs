@@ -15,9 +15,10 @@ impl<M: Machine> Measure<'_, '_, M> {
     /// positioning move clears the sphere for any centre consistent with that contact;
     /// its radius is checked against Q407 and maxDevCalBall before the next move. Second
     /// pass: the sphere measured around that centre, radius monitored against
-    /// maxDevCalBall. Returns the centre with the rotary axes at 0 (ball centre in
-    /// machine X/Y/Z, through the active kinematics when they stood elsewhere); Q431 =
-    /// 1/3 set the preset there.
+    /// maxDevCalBall. With a rotary axis off 0 the axes then turn to 0 and the sphere
+    /// is measured there ([`Measure::locate_at_zero`]). Returns the centre with the
+    /// rotary axes at 0 (ball centre in machine X/Y/Z), measured; Q431 = 1/3 set the
+    /// preset there.
     pub fn locate(&mut self) -> Result<Vector3<f64>, CycleError> {
         let start = self.start;
         let p = &self.plan.params;
@@ -44,26 +45,26 @@ impl<M: Machine> Measure<'_, '_, M> {
             "locating the sphere (first pass): the sphere centre is about {:.4} mm from below the start position; measuring it again around that centre",
             ((rough - touch) - n * n.dot(&(rough - touch))).norm()
         ));
-        let located = self.sphere(&start, rough, "locating the sphere")?;
+        let mut located = self.sphere(&start, rough, "locating the sphere")?;
         self.table_point = self.model.table_point(&located.angles, &located.centre);
         // The preset is the sphere centre with the rotary axes at 0 (where the
-        // reference is measured), wherever the operator left them: the located centre
-        // carried back to the table and predicted at 0 through the active kinematics.
+        // reference is measured), wherever the operator left them. Carried there
+        // through the active kinematics it would take the very errors the cycle
+        // measures: with the axes turned, the sphere is measured again at 0.
         let zero = [0.0; 3];
-        let ball = self
+        let mut ball = self
             .model
             .ball_in_machine(&zero, &self.model.predict(&zero, &self.table_point));
         let turned = located.angles.iter().any(|a| a.abs() > 1e-9);
+        if turned {
+            // Q408 counts from the preset while the axes turn: the predicted one.
+            self.preset = ball;
+            located = self.locate_at_zero(&start)?;
+            ball = self.model.ball_in_machine(&zero, &located.centre);
+        }
         self.located = Some(located);
         if p.preset == 1 || p.preset == 3 {
             self.preset = ball;
-            if turned {
-                self.note(format!(
-                    "Q431={}: the sphere was located with the rotary axes at {}; the preset is its centre with them at 0, through the active kinematics",
-                    p.preset,
-                    self.rotary(&start)
-                ));
-            }
             self.note(format!(
                 "Q431={}: {} X{:+.4} Y{:+.4} Z{:+.4}",
                 p.preset,
@@ -76,26 +77,37 @@ impl<M: Machine> Measure<'_, '_, M> {
         Ok(ball)
     }
 
-    /// A locating probe that found no sphere: the error with what to check (where to
-    /// pre-position, and the rotary axes when they stood off 0).
+    /// The sphere located with the rotary axes at `start` (not all 0): they turn to 0
+    /// as between any two positions ([`Measure::go_to`]: at Q408 above the predicted
+    /// preset, or at the height that clears the sphere at every angle of the turn),
+    /// and the sphere is measured there around where the active kinematics put it.
+    /// That measurement is the preset (Q431 = 1/3) and, the axes not moving since, the
+    /// first axis's reference.
+    fn locate_at_zero(&mut self, start: &Angles) -> Result<super::Sphere, CycleError> {
+        let zero = [0.0; 3];
+        self.note(format!(
+            "Q431={}: the sphere was located with the rotary axes at {}; they turn to 0 and the sphere is measured there, where the preset is taken",
+            self.plan.params.preset,
+            self.rotary(start)
+        ));
+        self.go_to(zero, None)?;
+        let expected = self.model.predict(&zero, &self.table_point);
+        let s = self.sphere(
+            &zero,
+            expected,
+            "locating the sphere with the rotary axes at 0",
+        )?;
+        self.table_point = self.model.table_point(&zero, &s.centre);
+        Ok(s)
+    }
+
+    /// A locating probe that found no sphere: the error with what to check (Q431 = 0/2:
+    /// the preset; 1/3: where to pre-position, and the rotary axes when they stood
+    /// off 0).
     fn not_found(&self, e: CycleError) -> CycleError {
         let rs = self.plan.params.sphere_radius + self.probe.radius;
-        let q431 = self.plan.params.preset;
         match e {
-            CycleError::Machine {
-                step,
-                kind,
-                message,
-            } if kind == hal::ErrorKind::NotTriggered && (q431 == 0 || q431 == 2) => {
-                CycleError::Machine {
-                    step,
-                    kind,
-                    message: format!(
-                        "{message}: the sphere is not where the active datum X{:+.4} Y{:+.4} Z{:+.4} puts it (Q431={q431}); set the preset at the sphere centre, or use Q431=1 with the probe over it",
-                        self.preset.x, self.preset.y, self.preset.z
-                    ),
-                }
-            }
+            e if self.at_datum() => self.not_at_preset(e),
             CycleError::Machine {
                 step,
                 kind,
@@ -108,6 +120,33 @@ impl<M: Machine> Measure<'_, '_, M> {
                     LOCATE_REACH * rs,
                     self.clearance(),
                     turned_table(&self.start)
+                ),
+            },
+            e => e,
+        }
+    }
+
+    /// Q431 = 0/2: the sphere is taken at the active preset.
+    pub(super) fn at_datum(&self) -> bool {
+        matches!(self.plan.params.preset, 0 | 2)
+    }
+
+    /// Q431 = 0/2, a probe that did not trigger (locating or measuring): the sphere is
+    /// not where the active preset puts it, so the message names the preset and what
+    /// to do. Any other error is returned as it is.
+    pub(super) fn not_at_preset(&self, e: CycleError) -> CycleError {
+        let q431 = self.plan.params.preset;
+        match e {
+            CycleError::Machine {
+                step,
+                kind,
+                message,
+            } if kind == hal::ErrorKind::NotTriggered && self.at_datum() => CycleError::Machine {
+                step,
+                kind,
+                message: format!(
+                    "{message}: no sphere where the active preset X{:+.4} Y{:+.4} Z{:+.4} puts it (with Q431={q431} the sphere centre is taken at the preset, with the rotary axes at 0); check the preset (set it at the sphere centre), or use Q431=1 with the probe over the sphere",
+                    self.preset.x, self.preset.y, self.preset.z
                 ),
             },
             e => e,
@@ -297,8 +336,9 @@ impl<M: Machine> Measure<'_, '_, M> {
     /// at `a`: probes for the pole, locates the sphere from that contact as the first
     /// locating pass does (every move clears any sphere the contact allows), and stops
     /// when its centre is further from where the datum puts it than
-    /// [`DATUM_TOLERANCE`] x (Q320 + SET_UP): the measurement around the datum
-    /// clears a sphere only that far off. Leaves the probe over the pole.
+    /// [`DATUM_TOLERANCE`] x (Q320 + SET_UP or DIST, the smaller): the measurement
+    /// around the datum clears a sphere only that far off, and reaches it. Leaves the
+    /// probe over the pole.
     fn find_at_datum(&mut self, a: &Angles, rise: f64) -> Result<(), CycleError> {
         let p = &self.plan.params;
         let q431 = p.preset;
@@ -313,27 +353,13 @@ impl<M: Machine> Measure<'_, '_, M> {
                 -n,
                 dist,
             )
-            .map_err(|e| match e {
-                CycleError::Machine {
-                    step,
-                    kind,
-                    message,
-                } if kind == hal::ErrorKind::NotTriggered => CycleError::Machine {
-                    step,
-                    kind,
-                    message: format!(
-                        "{message}: no sphere at the active datum X{:+.4} Y{:+.4} Z{:+.4} (the sphere centre with the rotary axes at 0, Q431={q431}); set the preset at the sphere centre, or use Q431=1 with the probe over it",
-                        datum.x, datum.y, datum.z
-                    ),
-                },
-                e => e,
-            })?;
+            .map_err(|e| self.not_at_preset(e))?;
         let centre = self.first_pass(a, run, pole)?;
         let off = (centre - expected).norm();
-        let tolerance = DATUM_TOLERANCE * self.clearance();
+        let tolerance = DATUM_TOLERANCE * self.clearance().min(self.probe.dist);
         if off > tolerance {
             return Err(CycleError::Geometry(format!(
-                "Q431={q431}: the sphere centre is {off:.2} mm from the preset (found {:+.3} {:+.3} {:+.3} mm off the active datum X{:+.4} Y{:+.4} Z{:+.4} along X, Y, Z); the cycle measures it around the preset only within {tolerance:.2} mm (half of Q320 + SET_UP): set the preset, or use Q431=1; stopped before the next move, nothing was changed",
+                "Q431={q431}: the sphere centre is {off:.2} mm from the preset (found {:+.3} {:+.3} {:+.3} mm off the active datum X{:+.4} Y{:+.4} Z{:+.4} along X, Y, Z); the cycle measures it around the preset only within {tolerance:.2} mm (half of Q320 + SET_UP or of DIST, the smaller): set the preset, or use Q431=1; stopped before the next move, nothing was changed",
                 centre.x - expected.x,
                 centre.y - expected.y,
                 centre.z - expected.z,

@@ -35,8 +35,9 @@ pub const LOCATE_REACH: f64 = 0.6;
 /// ball radius (1.5 x [`LOCATE_REACH`]).
 pub const DATUM_REACH: f64 = 1.5 * LOCATE_REACH;
 /// Q431 = 0/2: how far from where the datum puts it the sphere may be found for the
-/// cycle to measure it there, as a fraction of Q320 + SET_UP (its equator approaches
-/// pass Q320 + SET_UP from the expected sphere: this leaves half of it).
+/// cycle to measure it there, as a fraction of Q320 + SET_UP or of the probe table's
+/// DIST, the smaller (its equator approaches pass Q320 + SET_UP from the expected
+/// sphere, and each probe looks DIST past it: this leaves half of either).
 pub const DATUM_TOLERANCE: f64 = 0.5;
 /// Depth of the first locating pass's points below the pole contact, as a fraction
 /// of Q407 + ball radius: a start within [`LOCATE_REACH`] puts the centre 0.8 to 1

@@ -143,7 +143,7 @@ impl<M: Machine> Measure<'_, '_, M> {
     /// axis at every angle of this turn (or higher, where the probe already stands).
     /// The approach (over the pole start at that height, then down to it) starts only
     /// after they stand at `to`.
-    fn go_to(&mut self, to: Angles, via: Option<Angles>) -> Result<(), CycleError> {
+    pub(super) fn go_to(&mut self, to: Angles, via: Option<Angles>) -> Result<(), CycleError> {
         let moves = (0..3).any(|s| (to[s] - self.now[s]).abs() > 1e-9) || via.is_some();
         if !moves {
             let pole = self.predicted_pole(&to);

@@ -29,7 +29,8 @@ impl<M: Machine> Measure<'_, '_, M> {
             let top = c + n * reach;
             let phi0 = self.equator_start(a, c, what);
             self.move_xyz(&format!("{what}: moving over the pole"), top)?;
-            contacts.push(self.probe(&format!("{what}: probing the pole"), -n, dist)?);
+            let pole = self.probe(&format!("{what}: probing the pole"), -n, dist);
+            contacts.push(pole.map_err(|e| self.not_at_preset(e))?);
             self.move_xyz(&format!("{what}: retracting from the pole"), top)?;
             for i in 0..p.points {
                 let phi = (phi0 + 360.0 * f64::from(i) / f64::from(p.points)).to_radians();
@@ -37,7 +38,8 @@ impl<M: Machine> Measure<'_, '_, M> {
                 let step = format!("{what}: point {} of {}", i + 1, p.points);
                 self.move_xyz(&step, top + w * reach)?;
                 self.move_xyz(&step, c + w * reach)?;
-                contacts.push(self.probe(&step, -w, dist)?);
+                let contact = self.probe(&step, -w, dist);
+                contacts.push(contact.map_err(|e| self.not_at_preset(e))?);
                 self.move_xyz(&step, c + w * reach)?;
                 self.move_xyz(&step, top + w * reach)?;
             }
