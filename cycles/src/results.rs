@@ -168,9 +168,24 @@ impl ProgramReport {
                 out.push_str(&k.summary());
             }
         }
-        if !self.parameters.is_empty() {
+        // The parameters the cycles above do not already show with their final value
+        // (a cycle's results are parameters too: listing them again doubled them).
+        let mut shown: BTreeMap<&str, QValue> = BTreeMap::new();
+        for c in &self.cycles {
+            shown.extend(c.q.iter().map(|(k, v)| (k.as_str(), QValue::Number(*v))));
+            shown.extend(
+                c.qs.iter()
+                    .map(|(k, v)| (k.as_str(), QValue::Text(v.clone()))),
+            );
+        }
+        let rest: Vec<_> = self
+            .parameters
+            .iter()
+            .filter(|(k, v)| shown.get(k.as_str()) != Some(*v))
+            .collect();
+        if !rest.is_empty() {
             out.push_str("parameters\n");
-            for (k, v) in &self.parameters {
+            for (k, v) in rest {
                 out.push_str(&format!("  {k} = {v}\n"));
             }
         }
@@ -178,5 +193,37 @@ impl ProgramReport {
             out.push_str(&format!("program stopped: {s}\n"));
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_result_is_printed_once() {
+        let mut q = BTreeMap::new();
+        q.insert("Q150".to_string(), 1.25);
+        let mut report = ProgramReport {
+            cycles: vec![CycleResult {
+                block: 3,
+                cycle: 451,
+                q,
+                qs: BTreeMap::new(),
+                status: Status::Ok,
+                message: None,
+                u: BTreeMap::new(),
+                kinematics: None,
+                calibration: None,
+            }],
+            ..Default::default()
+        };
+        report
+            .parameters
+            .insert("Q150".into(), QValue::Number(1.25));
+        report.parameters.insert("Q10".into(), QValue::Number(2.0));
+        let text = report.to_text();
+        assert_eq!(text.matches("Q150 = +1.2500").count(), 1, "{text}");
+        assert!(text.contains("parameters\n  Q10 = +2.0000\n"), "{text}");
     }
 }

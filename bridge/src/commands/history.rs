@@ -36,13 +36,13 @@ pub fn run(args: &HistoryArgs) -> Result<(), String> {
     let target = match &args.db {
         Some(p) => HistoryTarget::from_arg(p),
         None => {
-            let cfg = GatewayConfig::load(&args.config).map_err(|e| e.to_string())?;
+            let cfg = GatewayConfig::load(&args.config).map_err(|e| needs_a_history(&e))?;
             alarm = cfg.alarm();
             cfg.history().ok_or_else(|| {
-                format!(
+                needs_a_history(&format!(
                     "{}: history.enabled is false: no history",
                     args.config.display()
-                )
+                ))
             })?
         }
     };
@@ -77,6 +77,15 @@ pub fn run(args: &HistoryArgs) -> Result<(), String> {
         .map_err(|e| format!("cannot write the history to stdout: {e}"))
 }
 
+/// Why no history was found, with what the command needs: without `--db` it reads the
+/// gateway configuration, which a clone or a fresh machine does not have.
+fn needs_a_history(why: &dyn std::fmt::Display) -> String {
+    format!(
+        "{why}\nhistory needs the recorded runs: --db FILE (the SQLite file or a postgres:// \
+         URL that `run --history` or `serve` wrote), or --config GATEWAY.toml with history enabled"
+    )
+}
+
 /// The trend page at `path`; several machines: `path` is their index and each
 /// machine's page is `STEM-N.html` beside it. All checked before any is written.
 fn write_trend(path: &std::path::Path, runs: &[RunRow], alarm: &Alarm) -> Result<(), String> {
@@ -96,4 +105,33 @@ fn write_trend(path: &std::path::Path, runs: &[RunRow], alarm: &Alarm) -> Result
         crate::output::write_atomic(p, html.as_bytes())?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(config: PathBuf) -> HistoryArgs {
+        HistoryArgs {
+            db: None,
+            config,
+            machine: None,
+            since: None,
+            json: false,
+            html: None,
+            alarm_um: None,
+            alarm_arcsec: None,
+        }
+    }
+
+    #[test]
+    fn without_db_or_a_readable_config_it_says_what_it_needs() {
+        let e = run(&args(PathBuf::from(
+            "/nonexistent/probebridge/gateway.toml",
+        )))
+        .unwrap_err();
+        assert!(e.contains("/nonexistent/probebridge/gateway.toml"), "{e}");
+        assert!(e.contains("--db FILE"), "{e}");
+        assert!(e.contains("--config"), "{e}");
+    }
 }

@@ -438,7 +438,7 @@ impl RunStore {
                 let _ = if result.ok {
                     writeln!(
                         log,
-                        "estimator: run {} sphere centre ({:.6}, {:.6}, {:.6}) radius {:.6} rms {:.2e} from {} points",
+                        "estimator: run {} ball-centre sphere (radius = sphere Q407 + stylus R): centre ({:.6}, {:.6}, {:.6}) radius {:.6} rms {:.2e} from {} points",
                         result.run_id,
                         result.centre[0],
                         result.centre[1],
