@@ -295,13 +295,7 @@ impl PlaneParams {
         let q260 = self.safe_height;
         // The ball centre's pre-position in the program's coordinates.
         let at = |s: &Vector3<f64>| xyz((s + shift - origin).into());
-        let up = Leg {
-            step: "moving to the safe height".into(),
-            route: format!(
-                "along the tool axis from where the probe stood to the clearance height Q260={q260:+.4}"
-            ),
-            check: "the way from where the blocks before the cycle left the probe to Q260 is not free: check Q260 (a tool-axis coordinate in the active preset, above the part) and those blocks".into(),
-        };
+        let up = Leg::up_to_q260(q260);
         let over = (0..3)
             .map(|i| Leg {
                 step: format!("positioning over point {}", i + 1),

@@ -360,11 +360,7 @@ impl Probing3dParams {
             "the part stands behind the probed point along its normal: check the normal ({NORMAL}) against the part"
         );
         Legs {
-            up: leg(
-                "moving to the safe height",
-                format!("along the tool axis from where the probe stood to the clearance height Q260={q260:+.4}"),
-                "the way from where the blocks before the cycle left the probe to Q260 is not free: check Q260 (a tool-axis coordinate in the active preset, above the part) and those blocks".into(),
-            ),
+            up: Leg::up_to_q260(q260),
             over: leg(
                 "positioning in the working plane",
                 format!("across at the clearance height Q260={q260:+.4} to over the pre-position {pre}"),

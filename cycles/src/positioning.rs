@@ -27,6 +27,18 @@ pub(crate) struct Leg {
 }
 
 impl Leg {
+    /// The first move of a cycle: along the tool axis from where the blocks before it
+    /// left the probe to the clearance height Q260 = `q260` (program coordinates).
+    pub fn up_to_q260(q260: f64) -> Self {
+        Leg {
+            step: "moving to the safe height".into(),
+            route: format!(
+                "along the tool axis from where the probe stood to the clearance height Q260={q260:+.4}"
+            ),
+            check: "the way from where the blocks before the cycle left the probe to Q260 is not free: check Q260 (a tool-axis coordinate in the active preset, above the part) and those blocks".into(),
+        }
+    }
+
     /// This move's error: a contact names the route and what to check.
     fn error<E: hal::machine::Error>(&self, e: &E) -> CycleError {
         match CycleError::machine(&self.step, e) {
