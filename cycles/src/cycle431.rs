@@ -10,7 +10,7 @@ use crate::measuring_log::plane::{plane_log_text, write_plane_log, PlaneRecord, 
 use crate::measuring_log::{timestamp_utc, MeasuringLogError};
 use crate::plane::{plane_angles, COLLINEAR_SIN};
 use crate::planned_move::PlannedMove;
-use crate::positioning::Positioner;
+use crate::positioning::{xyz, Leg, Positioner};
 use crate::results::CycleOutput;
 use crate::uncertainty::{fit_uncertainty, Fit, UncertaintyError};
 use hal::{Axis, AxisPositions, Machine, ProbeMove};
@@ -272,6 +272,82 @@ impl PlaneParams {
     }
 }
 
+/// The cycle's positioning moves as the operator reads them ([`Leg`]): up to Q260,
+/// and for each point across at Q260, down to its pre-position and back up.
+struct Legs {
+    up: Leg,
+    over: Vec<Leg>,
+    down: Vec<Leg>,
+    back: Vec<Leg>,
+}
+
+impl PlaneParams {
+    /// The legs to the pre-positions `starts` (axes, machine XYZ) with the active
+    /// datum at `origin`. What each contact means: on the way up or across, material
+    /// above Q260; on the way down to a pre-position, the part stands higher at that
+    /// point than R + SET_UP + Q320 above the programmed point (the point, the preset
+    /// or Q320 is wrong).
+    fn legs(&self, call: &CycleBlock, origin: Vector3<f64>, starts: &[Vector3<f64>; 3]) -> Legs {
+        let probe = &call.tool.probe;
+        let cal = probe.calibration();
+        let axis = call.tool.axis;
+        let shift = Vector3::from(cal.centre_shift(axis));
+        let q260 = self.safe_height;
+        // The ball centre's pre-position in the program's coordinates.
+        let at = |s: &Vector3<f64>| xyz((s + shift - origin).into());
+        let up = Leg::up_to_q260(q260);
+        let over = (0..3)
+            .map(|i| Leg {
+                step: format!("positioning over point {}", i + 1),
+                route: format!(
+                    "across at the clearance height Q260={q260:+.4} to over its pre-position {}",
+                    at(&starts[i])
+                ),
+                check: "the part stands higher than Q260 on the way: check Q260 against the part's highest point between the points (the probe crosses at Q260 unmonitored) and the preset".into(),
+            })
+            .collect();
+        let down = (0..3)
+            .map(|i| Leg {
+                step: format!("approaching point {}", i + 1),
+                route: format!(
+                    "down from the clearance height Q260={q260:+.4} to its pre-position {}, R + SET_UP + Q320 = {:.4} mm above the programmed point",
+                    at(&starts[i]),
+                    cal.r + probe.set_up + self.clearance
+                ),
+                check: format!(
+                    "the part stands higher at point {} than SET_UP + Q320 = {:.4} mm above the programmed point: check point {}'s coordinates ({}) and the preset against the part, or raise Q320 (SET_UP = {:.4} mm)",
+                    i + 1,
+                    probe.set_up + self.clearance,
+                    i + 1,
+                    POINTS[i].join(", "),
+                    probe.set_up
+                ),
+            })
+            .collect();
+        let back = (0..3)
+            .map(|i| Leg {
+                step: "moving to the safe height".into(),
+                route: format!(
+                    "up from point {} to the clearance height Q260={q260:+.4}",
+                    i + 1
+                ),
+                check: format!(
+                    "the part stands over point {} below Q260: check Q260 and point {}'s coordinates ({}) against the part",
+                    i + 1,
+                    i + 1,
+                    POINTS[i].join(", ")
+                ),
+            })
+            .collect();
+        Legs {
+            up,
+            over,
+            down,
+            back,
+        }
+    }
+}
+
 /// Probes the three points and computes the plane's angles.
 fn measure<M: Machine>(
     call: &CycleBlock,
@@ -301,10 +377,11 @@ fn measure<M: Machine>(
         progress: &mut *ctx.progress,
     };
     let mut measured = p.points;
-    pos.safe_height(safe_height)?;
+    let legs = p.legs(call, origin, &starts);
+    pos.safe_height(safe_height, &legs.up)?;
     for (i, start) in starts.iter().enumerate() {
-        pos.over((*start).into())?;
-        pos.to(&format!("approaching point {}", i + 1), (*start).into())?;
+        pos.over((*start).into(), &legs.over[i])?;
+        pos.to((*start).into(), &legs.down[i])?;
         let contact = pos.probe(
             &format!("probing point {}", i + 1),
             (-up).into(),
@@ -317,7 +394,7 @@ fn measure<M: Machine>(
         // the angles exact).
         let centre = Vector3::from(contact.positions.xyz()) + shift;
         measured[i][2] = centre[t] - radius - origin[t];
-        pos.safe_height(safe_height)?;
+        pos.safe_height(safe_height, &legs.back[i])?;
     }
     let angles = plane_angles(measured[0].into(), measured[1].into(), measured[2].into())
         .map_err(|e| CycleError::Geometry(e.to_string()))?;

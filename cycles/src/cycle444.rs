@@ -9,7 +9,7 @@ use crate::error::CycleError;
 use crate::length_unit::LengthUnit;
 use crate::measuring_log::probing3d::{write_probing3d_log, Probing3dRecord, PROBING_3D_LOG};
 use crate::planned_move::PlannedMove;
-use crate::positioning::Positioner;
+use crate::positioning::{xyz, Leg, Positioner};
 use crate::probe_table::calibration::Table3d;
 use crate::progress::ProgressSink;
 use crate::results::CycleOutput;
@@ -311,6 +311,98 @@ fn round_up(v: f64) -> f64 {
     (v * 1e4 - 1e-3).ceil() / 1e4
 }
 
+/// The cycle's positioning moves as the operator reads them ([`Leg`]), in the order
+/// they run: to Q260 and over the pre-position (up then across, or from above across
+/// then down), down to the pre-position, back MB from the contact, under an overhang
+/// back to the pre-position, up to Q260.
+struct Legs {
+    up: Leg,
+    over: Leg,
+    over_from_above: Leg,
+    down_to_q260: Leg,
+    pre_position: Leg,
+    retract: Leg,
+    back: Leg,
+    leave: Leg,
+}
+
+const POINT: &str = "Q263, Q264, Q294";
+const NORMAL: &str = "Q581, Q582, Q583";
+
+impl Probing3dParams {
+    /// The legs to the pre-position `start` (axes, machine XYZ) with the active datum
+    /// at `origin`. What a contact means on each: at or above Q260, material Q260 does
+    /// not clear; on the way down to the pre-position, the surface stands more than
+    /// SET_UP + Q320 beyond the programmed point along the normal, or (under an
+    /// overhang) the way down passes under material; after the contact, material
+    /// behind the point along the normal.
+    fn legs(&self, call: &CycleBlock, origin: Vector3<f64>, start: Vector3<f64>) -> Legs {
+        let probe = &call.tool.probe;
+        let cal = probe.calibration();
+        let shift = Vector3::from(cal.centre_shift(call.tool.axis));
+        let q260 = self.safe_height;
+        // The ball centre's pre-position in the program's coordinates.
+        let pre = xyz((start + shift - origin).into());
+        let clear = probe.set_up + self.clearance;
+        let leg = |step: &str, route: String, check: String| Leg {
+            step: step.to_string(),
+            route,
+            check,
+        };
+        let above_q260 = format!(
+            "the part stands higher than Q260 there: check Q260 against the part over the point ({POINT}) and the preset (the probe moves at Q260 unmonitored)"
+        );
+        let off_point = format!(
+            "the surface stands more than SET_UP + Q320 = {clear:.4} mm beyond the programmed point along its normal, or (a normal below the working plane) the way down from Q260 passes under the part: check the point ({POINT}), its normal ({NORMAL}) and the preset against the part, or raise Q320 (SET_UP = {:.4} mm)",
+            probe.set_up
+        );
+        let behind = format!(
+            "the part stands behind the probed point along its normal: check the normal ({NORMAL}) against the part"
+        );
+        Legs {
+            up: Leg::up_to_q260(q260),
+            over: leg(
+                "positioning in the working plane",
+                format!("across at the clearance height Q260={q260:+.4} to over the pre-position {pre}"),
+                above_q260.clone(),
+            ),
+            over_from_above: leg(
+                "positioning in the working plane",
+                format!("across above the clearance height Q260={q260:+.4}, where the probe stood, to over the pre-position {pre}"),
+                "the part stands higher than where the blocks before the cycle left the probe: check those blocks and the preset".into(),
+            ),
+            down_to_q260: leg(
+                "moving to the safe height",
+                format!("down over the pre-position {pre} to the clearance height Q260={q260:+.4}"),
+                above_q260,
+            ),
+            pre_position: leg(
+                "moving to the pre-position",
+                format!(
+                    "down from the clearance height Q260={q260:+.4} to {pre}, R + SET_UP + Q320 = {:.4} mm from the programmed point along its normal",
+                    cal.r + clear
+                ),
+                off_point.clone(),
+            ),
+            retract: leg(
+                "retracting",
+                format!("MB = {:.4} mm back along the normal from the contact", probe.mb),
+                behind.clone(),
+            ),
+            back: leg(
+                "back to the pre-position",
+                format!("along the normal to {pre}"),
+                behind,
+            ),
+            leave: leg(
+                "moving to the safe height",
+                format!("up from the pre-position {pre} to the clearance height Q260={q260:+.4}"),
+                off_point,
+            ),
+        }
+    }
+}
+
 /// Probes the point; its result parameters and what the log shows of it.
 fn measure<M: Machine>(
     call: &CycleBlock,
@@ -341,25 +433,26 @@ fn measure<M: Machine>(
         block: call.block,
         progress,
     };
+    let legs = p.legs(call, origin, start);
     if from_above(here, safe_height) {
-        pos.over(start.into())?;
-        pos.safe_height(safe_height)?;
+        pos.over(start.into(), &legs.over_from_above)?;
+        pos.safe_height(safe_height, &legs.down_to_q260)?;
     } else {
-        pos.safe_height(safe_height)?;
-        pos.over(start.into())?;
+        pos.safe_height(safe_height, &legs.up)?;
+        pos.over(start.into(), &legs.over)?;
     }
-    pos.to("moving to the pre-position", start.into())?;
+    pos.to(start.into(), &legs.pre_position)?;
     let contact = pos.probe("probing the point", direction.into(), probe.f, max_distance)?;
     let centre = Vector3::from(contact.positions.xyz());
     // Retract from the contact by MB against the probing direction, then clear.
-    pos.to("retracting", (centre + n * probe.mb).into())?;
+    pos.to((centre + n * probe.mb).into(), &legs.retract)?;
     if under_material(n, axis) {
         // Back the way it came: along the normal to the pre-position, which was
         // reached straight from the safe height. Straight up from under an overhang (a
         // point below a sphere's equator) would go through the material.
-        pos.to("back to the pre-position", start.into())?;
+        pos.to(start.into(), &legs.back)?;
     }
-    pos.safe_height(safe_height)?;
+    pos.safe_height(safe_height, &legs.leave)?;
 
     // The true ball centre at the contact, and the effective radius in the
     // direction the contact pushed the ball (the normal): the probe's calibration.

@@ -1,11 +1,65 @@
 //! The probe's positioning logic shared by the cycles: up to the safe height along the
 //! tool axis, across in the working plane, down to the start point; probing moves.
-//! Every machine call reports a progress event and maps errors to [`CycleError`].
+//! Every machine call reports a progress event and maps errors to [`CycleError`]; a
+//! contact during a positioning move says which move it was and what to check
+//! ([`Leg`]).
 
 use crate::error::CycleError;
 use crate::probe_axis::ProbeAxis;
 use crate::progress::{ProgressEvent, ProgressSink};
-use hal::{AxisPositions, Contact, Machine, ProbeMove};
+use hal::{AxisPositions, Contact, ErrorKind, Machine, ProbeMove};
+
+/// A positioning move as the operator reads it. The cycle plans it from what the block
+/// says (the points, Q320, Q260); where the part is not where the block says, the probe
+/// touches it on the way, the axes brake and the cycle stops. The machine knows only
+/// where the axes were going: the message must say which move of the cycle it was and
+/// what the operator checks.
+pub(crate) struct Leg {
+    /// The step every message of this move names (`approaching point 2`), as the
+    /// planned moves name it.
+    pub step: String,
+    /// Where the move goes, in the program's coordinates, added to the step on a
+    /// contact (`down from the clearance height Q260=+60.0000 to ...`).
+    pub route: String,
+    /// What to check after a contact on this move (the parameters, the point, the
+    /// preset).
+    pub check: String,
+}
+
+impl Leg {
+    /// The first move of a cycle: along the tool axis from where the blocks before it
+    /// left the probe to the clearance height Q260 = `q260` (program coordinates).
+    pub fn up_to_q260(q260: f64) -> Self {
+        Leg {
+            step: "moving to the safe height".into(),
+            route: format!(
+                "along the tool axis from where the probe stood to the clearance height Q260={q260:+.4}"
+            ),
+            check: "the way from where the blocks before the cycle left the probe to Q260 is not free: check Q260 (a tool-axis coordinate in the active preset, above the part) and those blocks".into(),
+        }
+    }
+
+    /// This move's error: a contact names the route and what to check.
+    fn error<E: hal::machine::Error>(&self, e: &E) -> CycleError {
+        match CycleError::machine(&self.step, e) {
+            CycleError::Machine {
+                step,
+                kind: kind @ (ErrorKind::ProbeCollision | ErrorKind::AlreadyDeflected),
+                message,
+            } => CycleError::Machine {
+                step: format!("{step}, {}", self.route),
+                kind,
+                message: format!("{message}; {}", self.check),
+            },
+            other => other,
+        }
+    }
+}
+
+/// `p` (machine X, Y, Z) as a program writes a position: `X+1.0000 Y+2.0000 Z+3.0000`.
+pub(crate) fn xyz(p: [f64; 3]) -> String {
+    format!("X{:+.4} Y{:+.4} Z{:+.4}", p[0], p[1], p[2])
+}
 
 pub(crate) struct Positioner<'a, M: Machine> {
     pub machine: &'a mut M,
@@ -17,7 +71,7 @@ pub(crate) struct Positioner<'a, M: Machine> {
 }
 
 impl<M: Machine> Positioner<'_, M> {
-    fn move_to(&mut self, step: &str, target: AxisPositions) -> Result<(), CycleError> {
+    fn move_to(&mut self, leg: &Leg, target: AxisPositions) -> Result<(), CycleError> {
         (self.progress)(ProgressEvent::Move {
             block: self.block,
             target,
@@ -25,28 +79,28 @@ impl<M: Machine> Positioner<'_, M> {
         });
         self.machine
             .move_to(&target, self.fmax)
-            .map_err(|e| CycleError::machine(step, &e))
+            .map_err(|e| leg.error(&e))
     }
 
     /// Only the tool axis moves, to `height`.
-    pub fn safe_height(&mut self, height: f64) -> Result<(), CycleError> {
+    pub fn safe_height(&mut self, height: f64, leg: &Leg) -> Result<(), CycleError> {
         let target = AxisPositions::new().with(self.axis.axis(), height);
-        self.move_to("moving to the safe height", target)
+        self.move_to(leg, target)
     }
 
     /// At the current tool-axis height, over `point` (machine XYZ) in the working plane.
-    pub fn over(&mut self, point: [f64; 3]) -> Result<(), CycleError> {
+    pub fn over(&mut self, point: [f64; 3], leg: &Leg) -> Result<(), CycleError> {
         let [main, minor, _] = self.axis.indices();
         let mut target = AxisPositions::new();
         for i in [main, minor] {
             target.set(hal::Axis::LINEAR[i], point[i]);
         }
-        self.move_to("positioning in the working plane", target)
+        self.move_to(leg, target)
     }
 
     /// Straight to `point` (machine XYZ).
-    pub fn to(&mut self, step: &str, point: [f64; 3]) -> Result<(), CycleError> {
-        self.move_to(step, AxisPositions::linear(point))
+    pub fn to(&mut self, point: [f64; 3], leg: &Leg) -> Result<(), CycleError> {
+        self.move_to(leg, AxisPositions::linear(point))
     }
 
     pub fn probe(

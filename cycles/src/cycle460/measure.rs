@@ -1,7 +1,7 @@
 //! Cycle 460's probing: the pole from the start position (roughly over the sphere, as
 //! the operator set it up), three points that locate the sphere (centre and radius)
 //! from outside every place it can be for a start up to 1.5 x the reach, the checks of
-//! what was located against Q407 and the reach, the equator's Q423 points with the
+//! what was located against Q407, the probe table's R and the reach, the equator's Q423 points with the
 //! spindle at 0° (and at 180° where it can be oriented) and the pole again over the
 //! centre they gave, repeated at the measured equator until ring and pole agree, and
 //! with Q455 the rings of the 3D calibration (below the equator too). All with the
@@ -35,9 +35,12 @@ pub const START_REACH: f64 = 0.5;
 pub const LOCATE_REACH: f64 = 1.5 * START_REACH;
 /// Points that locate the sphere centre before the rings (a circle needs three).
 pub const LOCATING_POINTS: usize = 3;
-/// How far R may differ from the probe table's before the cycle (a changed stylus),
-/// mm: the sphere found may differ from Q407 + R by this plus maxDevCalBall. Beyond
-/// it Q407 or the table's R is wrong, and the cycle stops.
+/// How far the sphere may differ from Q407 + the probe table's R (beyond
+/// maxDevCalBall) and still be located without a contact outside a probing move, mm:
+/// the moves up to locating are planned for it, so that a Q407 typed up to this much
+/// wrong, or a table R left from another stylus, is found and refused, not run into.
+/// Located, a sphere off by more than maxDevCalBall stops the cycle
+/// ([`Probing::locate`]).
 pub const MAX_STYLUS_CHANGE: f64 = 2.0;
 /// The equator rings are probed again until their height and the one the pole over
 /// their centre gives agree to this, mm.
@@ -94,8 +97,6 @@ pub struct Probed {
     pub contacts_3d: Vec<Contact3d>,
     /// Whether the spindle could be oriented.
     pub oriented: bool,
-    /// What the probing found that the operator should know (a changed R).
-    pub notes: Vec<String>,
 }
 
 /// The machine and what the cycle knows while it probes.
@@ -316,9 +317,9 @@ impl<M: Machine> Probing<'_, '_, M> {
         Ok((centre, radius))
     }
 
-    /// How far the ball-centre sphere found may differ from Q407 + R (the table's),
-    /// mm: maxDevCalBall plus a changed stylus's R.
-    fn radius_accept(&self) -> f64 {
+    /// How far the ball-centre sphere may differ from Q407 + R (the table's) for the
+    /// moves up to locating it, mm: maxDevCalBall plus [`MAX_STYLUS_CHANGE`].
+    fn radius_planned(&self) -> f64 {
         self.ctx.cfg.parameters.max_dev_cal_ball + MAX_STYLUS_CHANGE
     }
 
@@ -351,14 +352,14 @@ impl<M: Machine> Probing<'_, '_, M> {
             })?;
         // The clearance height holds for every sphere the locating points allow: its
         // centre up to LOCATE_REACH off the start, its radius down to what the cycle
-        // accepts (a smaller sphere's pole stands higher above a flank contact).
-        let smallest = (self.rs - self.radius_accept()).max(self.rs / 2.0);
+        // is planned for (a smaller sphere's pole stands higher above a flank contact).
+        let smallest = (self.rs - self.radius_planned()).max(self.rs / 2.0);
         let above = n.dot(&first) + self.clear + flank_drop(smallest, LOCATE_REACH * self.rs);
         self.go(
             "cycle 460: retracting from the pole",
             self.at_height(first, above),
         )?;
-        let (mut centre, notes) = self.locate(start, first, above)?;
+        let mut centre = self.locate(start, first, above)?;
         let mut top = n.dot(&centre) + self.rs + self.clear;
         let mut last = None;
         for pass in 1..=MAX_EQUATOR_PASSES {
@@ -389,7 +390,6 @@ impl<M: Machine> Probing<'_, '_, M> {
                     pole,
                     contacts_3d,
                     oriented,
-                    notes,
                 });
             }
             last = Some((height, found));
@@ -404,25 +404,24 @@ impl<M: Machine> Probing<'_, '_, M> {
     }
 
     /// The sphere centre (ball centre coordinates) from the first pole contact
-    /// `first`, probed from `start`, and the notes it gives: [`LOCATING_POINTS`]
-    /// points at the height the contact suggests, each started LOCATE_REACH x
-    /// (Q407 + R) plus what the cycle accepts of a radius error further out than
-    /// usual, so outside every sphere a start up to 1.5 x the reach allows, and
-    /// reached via the clearance height `top`. Their circle and the pole contact give
-    /// the sphere (centre and radius): it must agree with Q407 within what the cycle
-    /// accepts, and the pole contact must lie no lower than a start within the reach
-    /// allows; else the cycle stops here, before the next move. From here on the
-    /// moves use the measured radius.
+    /// `first`, probed from `start`: [`LOCATING_POINTS`] points at the height the
+    /// contact suggests, each started LOCATE_REACH x (Q407 + R) plus the radius error
+    /// the moves are planned for further out than usual, so outside every sphere a
+    /// start up to 1.5 x the reach allows, and reached via the clearance height `top`.
+    /// Their circle and the pole contact give the sphere (centre and radius): the R it
+    /// gives with Q407 must agree with the probe table's R within maxDevCalBall, and
+    /// the pole contact must lie no lower than a start within the reach allows; else
+    /// the cycle stops here, before the next move. From here on the moves use the
+    /// measured radius.
     fn locate(
         &mut self,
         start: Vector3<f64>,
         first: Vector3<f64>,
         top: f64,
-    ) -> Result<(Vector3<f64>, Vec<String>), CycleError> {
+    ) -> Result<Vector3<f64>, CycleError> {
         let n = self.frame[2];
-        let accept = self.radius_accept();
         let far = LOCATE_REACH * self.rs;
-        let margin = far + accept;
+        let margin = far + self.radius_planned();
         let hl = n.dot(&first) - self.rs;
         let guess = self.at_height(start, hl);
         let mut contacts = Vec::with_capacity(LOCATING_POINTS);
@@ -450,16 +449,7 @@ impl<M: Machine> Probing<'_, '_, M> {
         let centre_t =
             (off * off + first_t * first_t - rho * rho - hl * hl) / (2.0 * (first_t - hl));
         let s = rho.hypot(hl - centre_t);
-        let table_r = self.call.tool.probe.calibration().r;
-        let q407 = self.p.sphere_radius;
-        let dev = s - self.rs;
-        if dev.is_nan() || dev.abs() > accept {
-            return Err(CycleError::Geometry(format!(
-                "cycle 460: the sphere found has radius {:.4} mm (its ball-centre radius {s:.4} less the probe table's R = {table_r:.4}), Q407 = {q407:.4} mm: {dev:+.4} mm apart, more than the {accept:.4} mm the cycle accepts (maxDevCalBall = {} plus {MAX_STYLUS_CHANGE} mm for a changed stylus's R); check Q407 against the sphere's certificate and the probe table's R; the probe table was not changed",
-                s - table_r,
-                self.ctx.cfg.parameters.max_dev_cal_ball
-            )));
-        }
+        self.against_the_table(s)?;
         let drop = centre_t + s - first_t;
         let reach = START_REACH * s;
         let allowed = flank_drop(s, reach);
@@ -469,14 +459,6 @@ impl<M: Machine> Probing<'_, '_, M> {
                 "cycle 460: the first pole contact is {drop:.4} mm below the sphere's pole, more than the {allowed:.4} mm a start within the reach allows: the start was {from_start:.4} mm off the sphere centre; position the probe over the sphere centre, at most {reach:.3} mm off (half of Q407 + R); the probe table was not changed"
             )));
         }
-        let mut notes = Vec::new();
-        if dev.abs() > self.ctx.cfg.parameters.max_dev_cal_ball {
-            notes.push(format!(
-                "the sphere found is {dev:+.4} mm off Q407 + the probe table's R = {:.4} mm: taken as a changed stylus (R about {:.4}); if the stylus was not changed, check Q407",
-                q407 + table_r,
-                s - q407
-            ));
-        }
         self.rs = s;
         let block = self.block();
         (self.ctx.progress)(ProgressEvent::Note {
@@ -485,7 +467,30 @@ impl<M: Machine> Probing<'_, '_, M> {
                 "cycle 460: the sphere centre is {from_start:.4} mm from below the start position"
             ),
         });
-        Ok((axis + n * centre_t, notes))
+        Ok(axis + n * centre_t)
+    }
+
+    /// The located sphere's ball-centre radius `s` against Q407 + the probe table's R:
+    /// the contacts see only the sum, so a Q407 typed wrong and a table R left from
+    /// another stylus look the same. Within maxDevCalBall the difference is the
+    /// stylus's (and the certificate's) and goes into R; beyond it the cycle stops
+    /// before the next move, nothing written: the operator knows which of the two it
+    /// is (a stylus changed, or not), the cycle cannot.
+    fn against_the_table(&self, s: f64) -> Result<(), CycleError> {
+        let probe = &self.call.tool.probe;
+        let table_r = probe.calibration().r;
+        let q407 = self.p.sphere_radius;
+        let measured = s - q407;
+        let dev = measured - table_r;
+        let max_dev = self.ctx.cfg.parameters.max_dev_cal_ball;
+        if dev.is_nan() || dev.abs() > max_dev {
+            return Err(CycleError::Geometry(format!(
+                "cycle 460: with Q407 = {q407:.4} mm the sphere found gives R = {measured:.4} mm (its ball-centre radius {s:.4} less Q407), but the probe table holds R = {table_r:.4} mm for probe \"{}\": {dev:+.4} mm apart, more than maxDevCalBall = {max_dev} mm (with the table's R the sphere measures radius {:.4} mm); if the stylus was changed, enter its nominal radius in the probe table (R) and run 460 again; otherwise check Q407 against the sphere's certificate; stopped before the next move, the probe table was not changed",
+                probe.name,
+                s - table_r
+            )));
+        }
+        Ok(())
     }
 
     /// The 3D calibration's rings about `centre`, spindle at 0°: Q455 directions each,

@@ -48,7 +48,7 @@ pub fn evaluate(
     frame: &[Vector3<f64>; 3],
     origin_t: f64,
 ) -> Result<(Calibration, Vector3<f64>, Vec<String>), CycleError> {
-    let mut notes = probed.notes.clone();
+    let mut notes = Vec::new();
     let n = frame[2];
     let eq = &probed.equator;
     let plane = |v: &Vector3<f64>| [frame[0].dot(v), frame[1].dot(v)];
@@ -273,7 +273,6 @@ mod tests {
             pole: c + Vector3::new(-off[0], -off[1], s),
             contacts_3d: Vec::new(),
             oriented: true,
-            notes: Vec::new(),
         };
         let p = CalibrationParams {
             sphere_radius: q407,

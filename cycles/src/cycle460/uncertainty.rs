@@ -173,7 +173,6 @@ mod tests {
         Probed {
             equator,
             equator_height: 50.0,
-            notes: Vec::new(),
             pole: Vector3::new(0.0, 0.0, 65.5),
             contacts_3d: Vec::new(),
             oriented: true,

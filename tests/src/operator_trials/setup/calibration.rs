@@ -50,6 +50,7 @@ pub(super) fn cycle460(
         Truth::Calibration(truth460(
             case,
             typed,
+            tol,
             s.sc.machine.spindle.is_some() || case.backend == 2.0,
         )),
     )
@@ -67,17 +68,24 @@ fn block460(case: &Case, typed: f64, q320: f64, q434: f64, inch: bool) -> String
     )
 }
 
-/// 460's columns: the stylus's truth, with the certificate's part of Q407 in R (the
-/// docs: it goes in unseen, within maxDevCalBall), and the lobes where 3 or 4 points
-/// cannot tell them from the circle.
-fn truth460(case: &Case, typed: f64, oriented: bool) -> Vec<(&'static str, f64, f64)> {
+/// 460's columns: the stylus's truth, with Q407's error in R where the cycle cannot
+/// see it (the docs: the contacts see only Q407 + R, so Q407's error goes into R
+/// unseen where R then agrees with the probe table's within maxDevCalBall; beyond,
+/// the cycle stops), and the lobes where 3 or 4 points cannot tell them from the
+/// circle.
+fn truth460(case: &Case, typed: f64, tol: f64, oriented: bool) -> Vec<(&'static str, f64, f64)> {
     let axial = if case.axial.is_nan() {
         case.pretravel
     } else {
         case.axial
     };
     let aliased = if case.points <= 4.0 { case.lobing } else { 0.0 };
-    let q407 = if (typed - SPHERE).abs() <= 0.1 {
+    let effective = BALL - case.pretravel;
+    // The R the cycle measures less the table's; 5 µm for what the locating contacts
+    // see of the pre-travel's direction and the lobes.
+    let table = (effective + case.stale_r).max(0.05);
+    let apart = effective + SPHERE - typed - table;
+    let q407 = if apart.abs() <= tol + 0.005 {
         SPHERE - typed
     } else {
         0.0
