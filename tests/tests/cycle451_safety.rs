@@ -166,6 +166,18 @@ fn no_collision(r: &Run, case: &str) {
 }
 
 /// Moves and probing moves of the cycle, in order (after its start).
+/// A stop with Q431=0/2 before the measurement: nothing written, no "measuring" note.
+fn stopped_before_measuring(r: &Run, case: &str, what: &str) {
+    assert!(!r.written, "{case}: something was written");
+    assert!(
+        !r.events.iter().any(|e| matches!(
+            e,
+            ProgressEvent::Note { text, .. } if text.starts_with("measuring ")
+        )),
+        "{case}: {what}"
+    );
+}
+
 fn cycle_motion(r: &Run) -> Vec<&ProgressEvent> {
     let started = r
         .events
@@ -337,15 +349,8 @@ fn q431_0_and_2_stop_when_the_sphere_is_away_from_the_preset() {
                     "{case}: {m}"
                 );
             }
-            assert!(!r.written, "{case}: something was written");
             // Stopped where it found that out: nothing measured around the datum.
-            assert!(
-                !r.events.iter().any(|e| matches!(
-                    e,
-                    ProgressEvent::Note { text, .. } if text.starts_with("measuring ")
-                )),
-                "{case}: it went on measuring"
-            );
+            stopped_before_measuring(&r, &case, "it went on measuring");
         }
     }
 }
@@ -409,14 +414,7 @@ fn q431_0_and_2_name_the_preset_when_q320_is_larger_than_dist() {
                     "{case}: {m}"
                 );
             }
-            assert!(!r.written, "{case}: something was written");
-            assert!(
-                !r.events.iter().any(|e| matches!(
-                    e,
-                    ProgressEvent::Note { text, .. } if text.starts_with("measuring ")
-                )),
-                "{case}: it went on measuring around the preset"
-            );
+            stopped_before_measuring(&r, &case, "it went on measuring around the preset");
         }
     }
 }
