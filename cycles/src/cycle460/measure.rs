@@ -40,7 +40,7 @@ pub const LOCATING_POINTS: usize = 3;
 /// the moves up to locating are planned for it, so that a Q407 typed up to this much
 /// wrong, or a table R left from another stylus, is found and refused, not run into.
 /// Located, a sphere off by more than maxDevCalBall stops the cycle
-/// ([`Probing::locate`]).
+/// (`Probing::locate`).
 pub const MAX_STYLUS_CHANGE: f64 = 2.0;
 /// The equator rings are probed again until their height and the one the pole over
 /// their centre gives agree to this, mm.
