@@ -46,7 +46,7 @@ fn the_plc_is_answered_while_a_start_waits_for_a_slow_history() {
             "[machine]\nscenario = {:?}\nservice = \"pbslow-{}\"\n\
              [programs]\nfolder = \"programs\"\n\
              [plc]\nlisten = \"127.0.0.1:0\"\nheartbeat_timeout_ms = 0\n\
-             [history]\nsqlite = {db:?}\nstatement_timeout_ms = 30000\n",
+             [history]\nsqlite = {db:?}\nstatement_timeout_ms = 10000\n",
             configs()
                 .join("scenarios/tilted-plane.toml")
                 .to_str()
