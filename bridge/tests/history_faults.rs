@@ -26,11 +26,14 @@ mod serve;
 use serve::{copy_programs, Serve};
 #[path = "common/postgres_server.rs"]
 mod postgres_server;
+#[path = "common/sqlite_lock.rs"]
+mod sqlite_lock;
+use sqlite_lock::lock_sqlite;
 
 use common::*;
-use std::io::{BufRead, BufReader, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 const REFUSED: u64 = 0x8000;
@@ -198,41 +201,6 @@ fn assert_one_done_run(db: &str) {
 
 fn spool_lines(path: &Path) -> usize {
     std::fs::read_to_string(path).map_or(0, |t| t.lines().count())
-}
-
-/// Another process holding an exclusive transaction on the SQLite file (python3's
-/// sqlite3, as any other program could); released on drop.
-struct SqliteLock(Child);
-
-fn lock_sqlite(py: &Path, db: &Path) -> SqliteLock {
-    let mut child = Command::new(py)
-        .args([
-            "-c",
-            "import sqlite3, sys\n\
-             c = sqlite3.connect(sys.argv[1], isolation_level=None, timeout=30)\n\
-             c.execute('BEGIN EXCLUSIVE')\n\
-             print('locked', flush=True)\n\
-             sys.stdin.read()\n\
-             c.execute('ROLLBACK')\n",
-        ])
-        .arg(db)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    assert_eq!(line.trim(), "locked");
-    SqliteLock(child)
-}
-
-impl Drop for SqliteLock {
-    fn drop(&mut self) {
-        drop(self.0.stdin.take());
-        let _ = self.0.wait();
-    }
 }
 
 #[test]

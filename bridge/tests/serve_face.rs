@@ -198,6 +198,23 @@ impl Raw {
         self.write(0, &block, false)
     }
 
+    /// The state block once the gateway has acknowledged sequence `seq` (register 32):
+    /// a start is answered once prepared, as the handshake says.
+    fn acknowledged(&mut self, seq: u16) -> Vec<u16> {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            let st = self.read(32, 4).unwrap().unwrap();
+            if st[0] == seq {
+                return st;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "seq {seq} never acknowledged: {st:?}"
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
     /// Whether the gateway serves this connection: a read answered (not closed).
     fn served(&mut self) -> bool {
         matches!(self.read(32, 1), Ok(Ok(_)))
@@ -525,7 +542,7 @@ fn the_register_table_holds_at_its_edges() {
     assert!(plc.served(), "the connection is still served");
     // A start of a program that does not exist: reason 3, nothing moves.
     assert_eq!(plc.request(1, 1, 999), Ok(()));
-    let st = plc.read(32, 4).unwrap().unwrap();
+    let st = plc.acknowledged(1);
     assert_eq!((st[0], st[1], st[2]), (1, 0x8001, 3), "{st:?}");
     // FC6 to the sequence register alone would re-run the request block as it
     // stands: refused with IllegalDataValue, the sequence and the state unchanged.
@@ -540,7 +557,7 @@ fn the_register_table_holds_at_its_edges() {
     assert_eq!(plc.read(32, 1).unwrap().unwrap(), [1]);
     // A program that is not UTF-8: reason 4 (invalid), not 3 (no such program).
     assert_eq!(plc.request(1, 2, 432), Ok(()));
-    let st = plc.read(32, 4).unwrap().unwrap();
+    let st = plc.acknowledged(2);
     assert_eq!((st[0], st[1], st[2]), (2, 0x8001, 4), "{st:?}");
     assert!(g.log().contains("not UTF-8"), "{}", g.log());
     // The heartbeat alone and the same sequence again are ordinary writes.

@@ -25,6 +25,17 @@ pub enum FaceHealth {
     Ended(String),
 }
 
+/// The runtime a face's thread runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Flavour {
+    /// One thread (the PLC face: nothing it calls blocks).
+    CurrentThread,
+    /// Worker threads, so that a call may wait with `tokio::task::block_in_place` while
+    /// the face's other tasks (its heartbeat included) go on: the OPC UA face, whose
+    /// StartProgram waits for the start to be prepared on the machine thread.
+    MultiThread,
+}
+
 /// The face's side of the heartbeat: [`Heartbeat::run`] on the face's runtime ticks it
 /// for as long as the runtime runs its tasks.
 pub struct Heartbeat {
@@ -55,10 +66,10 @@ pub struct FaceThread {
 }
 
 impl FaceThread {
-    /// Starts thread `name` with a current-thread tokio runtime that runs the future
+    /// Starts thread `name` with a tokio runtime of `flavour` that runs the future
     /// `serve` makes of the face's heartbeat and its stop. The future is made on the
     /// thread, so it need not be `Send`. `Err` from it is why the face ended.
-    pub fn spawn<F, Fut>(name: &str, serve: F) -> io::Result<Self>
+    pub fn spawn<F, Fut>(name: &str, flavour: Flavour, serve: F) -> io::Result<Self>
     where
         F: FnOnce(Heartbeat, oneshot::Receiver<()>) -> Fut + Send + 'static,
         Fut: Future<Output = Result<(), String>>,
@@ -72,7 +83,15 @@ impl FaceThread {
         };
         let thread = std::thread::Builder::new().name(name.into()).spawn(
             move || -> Result<(), String> {
-                let rt = tokio::runtime::Builder::new_current_thread()
+                let mut builder = match flavour {
+                    Flavour::CurrentThread => tokio::runtime::Builder::new_current_thread(),
+                    Flavour::MultiThread => {
+                        let mut b = tokio::runtime::Builder::new_multi_thread();
+                        b.worker_threads(2);
+                        b
+                    }
+                };
+                let rt = builder
                     .enable_all()
                     .build()
                     .map_err(|e| format!("cannot start its runtime: {e}"))?;

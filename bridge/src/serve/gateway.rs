@@ -1,44 +1,26 @@
-//! What the faces (PLC, OPC UA) and the machine thread share: the register map, the
-//! handshake, the connection that owns the writes, the queue of one job to the machine
-//! thread, and what the OPC UA face shows of the runs.
+//! What the faces (PLC, OPC UA, web) and the machine thread share: the register map,
+//! the handshake, the connection that owns the writes, the starts handed to the
+//! machine thread, and what the OPC UA face shows of the runs. Nothing here does I/O
+//! under the lock: a start is prepared on the machine thread ([`super::prepare`]).
 
-use super::handshake::{AbortReason, Action, Face, Handshake, Outcome, Refusal, State};
+use super::handshake::{
+    AbortReason, Action, Command, Face, Handshake, Outcome, Refusal, Start, State,
+};
 use super::ownership::{Ownership, Takeover};
 use super::register_map::{MapException, RegisterMap};
+use super::results::ResultValues;
 use crate::history::recorder::Recorder;
-use crate::history::NewRun;
-use cycles::program::{Program, ProgramError};
-use cycles::CyclesConfig;
 use hal::AbortFlag;
 use std::collections::BTreeMap;
 use std::net::IpAddr;
-use std::path::PathBuf;
-use std::sync::mpsc::Sender;
+use std::sync::mpsc::{Receiver, Sender, SyncSender};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Instant, SystemTime};
-
-/// A measurement for the machine thread.
-pub struct Job {
-    pub seq: u16,
-    pub number: u16,
-    pub program: Program,
-    pub confirm: bool,
-    /// The request's parameters 1..8, recorded with the run.
-    pub params: [f32; super::register_map::REQ_PARAM_COUNT],
-    /// The run's row in the history (written before the start was taken).
-    pub record: Option<i64>,
-    /// The cycles' configuration with the machine's state as its files held it when
-    /// the start was taken (the last run's preset or calibration included).
-    pub cycles: CyclesConfig,
-}
 
 /// A command of the OPC UA face (it has no request block): start, abort or acknowledge.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FaceCommand {
-    pub code: u16,
-    pub program: u16,
-    pub params: [f32; super::register_map::REQ_PARAM_COUNT],
-    pub confirm: bool,
+    pub command: Command,
     /// Who asked (the OPC UA user), for the log.
     pub who: String,
 }
@@ -59,11 +41,31 @@ pub struct RunInfo {
 #[derive(Clone, Debug, PartialEq)]
 pub struct CycleResults {
     pub at: SystemTime,
-    pub values: BTreeMap<String, f64>,
+    pub values: ResultValues,
+}
+
+/// A start for the machine thread to prepare (see [`super::prepare`]) and run.
+pub struct StartRequest {
+    pub start: Start,
+    /// Who asked (the OPC UA user; "PLC"), for the log.
+    pub who: String,
+    /// Where the answer goes, for a face that waits for it (OPC UA's methods).
+    reply: Option<SyncSender<Result<(), Refusal>>>,
+}
+
+/// The answer to a start being prepared: wait for it without the faces' lock.
+pub struct Pending(Receiver<Result<(), Refusal>>);
+
+impl Pending {
+    /// The start taken, or why it was refused (the machine thread gone: machine not
+    /// ready).
+    pub fn wait(self) -> Result<(), Refusal> {
+        self.0.recv().unwrap_or(Err(Refusal::MachineNotReady))
+    }
 }
 
 pub enum ToMachine {
-    Run(Box<Job>),
+    Start(Box<StartRequest>),
     Quit,
 }
 
@@ -78,8 +80,6 @@ pub enum WriteRefusal {
 pub struct Core {
     pub map: RegisterMap,
     pub hs: Handshake,
-    programs: PathBuf,
-    cycles: CyclesConfig,
     jobs: Sender<ToMachine>,
     /// The machine's stop request (hal's, which brakes a move under way); re-armed when
     /// the measurement it cut short has ended.
@@ -115,19 +115,10 @@ pub fn lock(shared: &Shared) -> MutexGuard<'_, Core> {
 }
 
 impl Core {
-    pub fn new(
-        map: RegisterMap,
-        hs: Handshake,
-        owner: Ownership,
-        programs: PathBuf,
-        cycles: CyclesConfig,
-        jobs: Sender<ToMachine>,
-    ) -> Self {
+    pub fn new(map: RegisterMap, hs: Handshake, owner: Ownership, jobs: Sender<ToMachine>) -> Self {
         let mut c = Self {
             map,
             hs,
-            programs,
-            cycles,
             jobs,
             abort: AbortFlag::fresh(),
             abort_reason: None,
@@ -227,24 +218,7 @@ impl Core {
 
     fn on_request(&mut self, now: Instant) {
         let req = self.map.request();
-        let (folder, cfg, history) = (&self.programs, &self.cycles, &self.history);
-        let action = self.hs.on_request(&req, now, |n| {
-            let cfg = state_now(cfg)?;
-            let program = resolve_program(folder, &cfg, n)?;
-            // The run is in the history as `running` before the start is taken.
-            let record = match history {
-                Some(h) => Some(begin_run(
-                    h,
-                    &cfg,
-                    RunOrigin::Plc { seq: req.seq },
-                    n,
-                    &req.params,
-                    &program,
-                )?),
-                None => None,
-            };
-            Ok((program, record, cfg))
-        });
+        let action = self.hs.on_request(&req, now);
         if self.hs.view().reason != 0 && self.hs.view().ack_seq == req.seq && action.is_none() {
             tracing::info!(
                 seq = req.seq,
@@ -254,27 +228,8 @@ impl Core {
             );
         }
         match action {
-            Some(Action::Start {
-                seq,
-                program: (program, record, cycles),
-                confirm,
-            }) => {
-                tracing::info!(
-                    seq,
-                    program = req.program,
-                    params = ?req.params,
-                    "measurement started"
-                );
-                let job = Job {
-                    seq,
-                    number: req.program,
-                    program,
-                    confirm,
-                    params: req.params,
-                    record,
-                    cycles,
-                };
-                self.start(job, Face::Plc);
+            Some(Action::Prepare(start)) => {
+                self.prepare(start, "PLC".into(), None);
             }
             Some(Action::Abort) => {
                 tracing::info!(seq = req.seq, "abort requested by the PLC");
@@ -285,27 +240,73 @@ impl Core {
         self.publish();
     }
 
-    /// Hands a taken start to the machine thread.
-    fn start(&mut self, job: Job, face: Face) {
+    /// Hands a start to the machine thread, which prepares it off this lock and
+    /// answers with [`Core::prepared`].
+    fn prepare(
+        &mut self,
+        start: Start,
+        who: String,
+        reply: Option<SyncSender<Result<(), Refusal>>>,
+    ) {
+        // An abort from here on hits this run, not the last one.
         self.job_generation = self.abort.generation();
-        // The old results stop matching any request before the run starts.
-        self.map
-            .set_results(job.seq.wrapping_sub(1), &BTreeMap::new());
-        self.run = Some(RunInfo {
-            program: job.number,
-            face,
-            started: SystemTime::now(),
-            ended: None,
-            outcome: None,
-        });
-        if self.jobs.send(ToMachine::Run(Box::new(job))).is_err() {
-            let outcome = Outcome::Error {
-                kind: super::handshake::ERROR_KIND_CYCLE,
-                code: 0,
+        let request = StartRequest { start, who, reply };
+        if let Err(e) = self.jobs.send(ToMachine::Start(Box::new(request))) {
+            let ToMachine::Start(request) = e.0 else {
+                return;
             };
-            self.hs.finish(outcome, 0);
-            self.end_run(outcome);
+            tracing::error!("start refused: the machine thread has ended");
+            let _ = self.prepared(&request, Err(Refusal::MachineNotReady));
         }
+    }
+
+    /// The machine thread prepared a start: it is taken (the old results stop
+    /// matching any request, the state is busy) or refused; the face that waits hears
+    /// of it. Whether the run is under way (the machine thread runs it).
+    pub fn prepared(&mut self, request: &StartRequest, answer: Result<(), Refusal>) -> bool {
+        let start = &request.start;
+        let taken = self.hs.prepared(start, answer, Instant::now());
+        match answer {
+            Ok(()) if !taken => {
+                tracing::error!(
+                    seq = start.seq,
+                    "a start that was not being prepared: dropped"
+                );
+            }
+            Ok(()) => {
+                tracing::info!(
+                    seq = start.seq,
+                    program = start.program,
+                    params = ?start.params,
+                    face = ?start.face,
+                    who = %request.who,
+                    "measurement started"
+                );
+                self.map
+                    .set_results(start.seq.wrapping_sub(1), &BTreeMap::new());
+                self.run = Some(RunInfo {
+                    program: start.program,
+                    face: start.face,
+                    started: SystemTime::now(),
+                    ended: None,
+                    outcome: None,
+                });
+            }
+            Err(r) => tracing::info!(
+                seq = start.seq,
+                program = start.program,
+                face = ?start.face,
+                who = %request.who,
+                reason = r as u16,
+                "start refused ({})",
+                r.describe()
+            ),
+        }
+        if let Some(reply) = &request.reply {
+            let _ = reply.try_send(answer.and(if taken { Ok(()) } else { Err(Refusal::Busy) }));
+        }
+        self.publish();
+        taken
     }
 
     fn end_run(&mut self, outcome: Outcome) {
@@ -316,76 +317,40 @@ impl Core {
     }
 
     /// A command of the OPC UA face, by the PLC's rules (one measurement at a time,
-    /// the same refusals, the same abort flag); `Err` says why it was refused.
-    pub fn command(&mut self, cmd: &FaceCommand) -> Result<(), Refusal> {
-        let now = Instant::now();
-        let (folder, cfg, history) = (&self.programs, &self.cycles, &self.history);
-        let answer = self
-            .hs
-            .command(cmd.code, cmd.program, cmd.params, cmd.confirm, now, |n| {
-                let cfg = state_now(cfg)?;
-                let program = resolve_program(folder, &cfg, n)?;
-                let record = match history {
-                    Some(h) => Some(begin_run(
-                        h,
-                        &cfg,
-                        RunOrigin::OpcUa,
-                        n,
-                        &cmd.params,
-                        &program,
-                    )?),
-                    None => None,
-                };
-                Ok((program, record, cfg))
-            });
+    /// the same refusals, the same abort flag); `Err` says why it was refused. A start
+    /// is answered once prepared: wait on the [`Pending`] after the lock is released.
+    pub fn command(&mut self, cmd: &FaceCommand) -> Result<Option<Pending>, Refusal> {
+        let answer = self.hs.command(cmd.command, Face::OpcUa);
         match &answer {
-            Ok(Some(Action::Start { .. })) => {}
+            Ok(Some(Action::Prepare(_))) => {}
             Ok(_) => tracing::info!(
-                code = cmd.code,
+                command = ?cmd.command,
                 who = %cmd.who,
                 "OPC UA face: request taken"
             ),
             Err(r) => tracing::info!(
-                code = cmd.code,
-                program = cmd.program,
+                command = ?cmd.command,
                 who = %cmd.who,
                 reason = *r as u16,
                 "OPC UA face: request refused ({})",
                 r.describe()
             ),
         }
-        let result = answer.as_ref().map(|_| ()).map_err(|r| *r);
-        match answer {
-            Ok(Some(Action::Start {
-                seq,
-                program: (program, record, cycles),
-                confirm,
-            })) => {
-                tracing::info!(
-                    program = cmd.program,
-                    params = ?cmd.params,
-                    who = %cmd.who,
-                    "measurement started over OPC UA"
-                );
-                let job = Job {
-                    seq,
-                    number: cmd.program,
-                    program,
-                    confirm,
-                    params: cmd.params,
-                    record,
-                    cycles,
-                };
-                self.start(job, Face::OpcUa);
+        let pending = match answer? {
+            Some(Action::Prepare(start)) => {
+                let (tx, rx) = std::sync::mpsc::sync_channel(1);
+                self.prepare(start, cmd.who.clone(), Some(tx));
+                Some(Pending(rx))
             }
-            Ok(Some(Action::Abort)) => {
+            Some(Action::Abort) => {
                 tracing::info!(who = %cmd.who, "abort requested over OPC UA");
                 self.request_abort(AbortReason::Request);
+                None
             }
-            Ok(None) | Err(_) => {}
-        }
+            None => None,
+        };
         self.publish();
-        result
+        Ok(pending)
     }
 
     /// Aborts the running measurement (the first reason wins). A shutdown also stops
@@ -434,7 +399,7 @@ impl Core {
 
     /// The measurement ended (the machine is at rest): its outcome, and the stop
     /// request re-armed for the next one (not after a shutdown).
-    pub fn finish(&mut self, outcome: Outcome, cycle: u16, values: &BTreeMap<String, f64>) {
+    pub fn finish(&mut self, outcome: Outcome, cycle: u16, values: &ResultValues) {
         if self.abort_reason != Some(AbortReason::Shutdown) {
             self.abort.rearm();
             self.abort_reason = None;
@@ -452,7 +417,7 @@ impl Core {
     }
 
     /// The results of each cycle of a run that ended done (before [`Core::finish`]).
-    pub fn set_cycle_results(&mut self, cycles: Vec<(u16, BTreeMap<String, f64>)>) {
+    pub fn set_cycle_results(&mut self, cycles: Vec<(u16, ResultValues)>) {
         let at = SystemTime::now();
         for (cycle, values) in cycles {
             self.by_cycle.insert(cycle, CycleResults { at, values });
@@ -480,84 +445,5 @@ impl Core {
 
     pub fn machine_ok(&self) -> bool {
         self.hs.machine_ok()
-    }
-}
-
-/// Which face a recorded run came from: the PLC's request sequence, or OPC UA.
-#[derive(Clone, Copy, Debug)]
-enum RunOrigin {
-    Plc { seq: u16 },
-    OpcUa,
-}
-
-/// Writes the `running` row of a start; a failure refuses it ("history unavailable").
-/// The history's source is "serve" for the PLC's starts, "opcua" for OPC UA's.
-fn begin_run(
-    history: &Recorder,
-    cfg: &CyclesConfig,
-    origin: RunOrigin,
-    number: u16,
-    params: &[f32],
-    program: &Program,
-) -> Result<i64, Refusal> {
-    let (source, request_seq) = match origin {
-        RunOrigin::Plc { seq } => ("serve", Some(seq)),
-        RunOrigin::OpcUa => ("opcua", None),
-    };
-    history
-        .begin(NewRun {
-            machine: cfg.machine.name.clone(),
-            source: source.into(),
-            request_seq,
-            program_number: Some(number),
-            program: program.path.clone().unwrap_or_default(),
-            max_modification: Some(cfg.parameters.max_modification),
-            parameters: params.iter().map(|&p| f64::from(p)).collect(),
-        })
-        .map_err(|e| {
-            tracing::error!(?origin, "start refused: {e}");
-            Refusal::HistoryUnavailable
-        })
-}
-
-/// The cycles' configuration with the machine's state read again from its files; a
-/// state that cannot be read refuses the start (the machine cannot run with it;
-/// nothing moved), and the log says which file and why.
-fn state_now(cfg: &CyclesConfig) -> Result<CyclesConfig, Refusal> {
-    cfg.reread_state().map_err(|e| {
-        tracing::error!("start refused: the machine's state cannot be read: {e}");
-        Refusal::MachineNotReady
-    })
-}
-
-/// Program number NNN is `NNN.h` in the program folder (at least three digits).
-pub fn resolve_program(
-    folder: &std::path::Path,
-    cfg: &CyclesConfig,
-    number: u16,
-) -> Result<Program, Refusal> {
-    let path = folder.join(format!("{number:03}.h"));
-    if !path.is_file() {
-        tracing::warn!("no program {}", path.display());
-        return Err(Refusal::UnknownProgram);
-    }
-    match Program::load(&path, cfg) {
-        Ok(p) => Ok(p),
-        Err(ProgramError::Invalid { path, errors }) => {
-            for d in &errors.0 {
-                tracing::warn!("{}: {d}", path.display());
-            }
-            Err(Refusal::InvalidProgram)
-        }
-        // There but unreadable (not UTF-8, over 1 MiB, no permission): not a program
-        // this gateway can run, which is reason 4, not "no such program".
-        Err(ProgramError::Read { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
-            tracing::warn!("no program {}", path.display());
-            Err(Refusal::UnknownProgram)
-        }
-        Err(e) => {
-            tracing::warn!("{e}");
-            Err(Refusal::InvalidProgram)
-        }
     }
 }

@@ -6,6 +6,11 @@
 use super::register_map::{Request, StateView, FLAGS_KNOWN};
 use std::time::{Duration, Instant};
 
+pub use super::outcome::{
+    machine_error_kind, AbortReason, Outcome, Refusal, ERROR_KIND_ABORT_REQUEST, ERROR_KIND_CYCLE,
+    ERROR_KIND_NOT_KEPT, ERROR_KIND_PLC_HEARTBEAT, ERROR_KIND_PROGRAM, ERROR_KIND_SHUTDOWN,
+};
+
 pub const CODE_START: u16 = 1;
 pub const CODE_ABORT: u16 = 2;
 pub const CODE_ACKNOWLEDGE: u16 = 3;
@@ -52,124 +57,41 @@ pub const BIT_RESULTS_VALID: u16 = 1 << 5;
 /// Ends of runs are in the spool, not yet in the history.
 pub const BIT_NOT_RECORDED: u16 = 1 << 6;
 
-/// Why a request was refused (the reason register).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u16)]
-pub enum Refusal {
-    /// A measurement is running.
-    Busy = 1,
-    /// The request code is none of start, abort, acknowledge.
-    UnknownCode = 2,
-    /// No program NNN.h in the program folder.
-    UnknownProgram = 3,
-    /// The program does not parse or does not fit the machine (nothing moved).
-    InvalidProgram = 4,
-    /// The last run ended in an error: acknowledge it first.
-    ErrorPending = 5,
-    /// Abort without a running measurement.
-    NotBusy = 6,
-    /// Flags with unknown bits, or a parameter that is not a finite number.
-    BadRequest = 7,
-    /// The machine is not up.
-    MachineNotReady = 8,
-    /// The run's `running` row could not be written (nothing moved).
-    HistoryUnavailable = 9,
-}
-
-impl Refusal {
-    /// The reason in words, as the README's reason table says it.
-    pub fn describe(self) -> &'static str {
-        match self {
-            Refusal::Busy => "a measurement is running",
-            Refusal::UnknownCode => "unknown request code",
-            Refusal::UnknownProgram => "no such program in the program folder",
-            Refusal::InvalidProgram => "the program does not parse or does not fit the machine",
-            Refusal::ErrorPending => "the last run ended in an error: acknowledge it first",
-            Refusal::NotBusy => "no measurement is running",
-            Refusal::BadRequest => "a parameter is not a finite number",
-            Refusal::MachineNotReady => "the machine is not up",
-            Refusal::HistoryUnavailable => "the run could not be recorded in the history",
-        }
-    }
-}
-
-/// Why a running measurement was aborted (the error kind register).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u8)]
-pub enum AbortReason {
-    Request = 1,
-    PlcHeartbeat = 2,
-    Shutdown = 3,
-}
-
-impl AbortReason {
-    pub fn from_u8(v: u8) -> Option<Self> {
-        match v {
-            1 => Some(Self::Request),
-            2 => Some(Self::PlcHeartbeat),
-            3 => Some(Self::Shutdown),
-            _ => None,
-        }
-    }
-    pub fn describe(self) -> &'static str {
-        match self {
-            AbortReason::Request => "abort requested by the PLC",
-            AbortReason::PlcHeartbeat => "PLC heartbeat lost",
-            AbortReason::Shutdown => "gateway shutting down",
-        }
-    }
-    /// The error kind register value.
-    pub fn error_kind(self) -> u16 {
-        match self {
-            AbortReason::Request => ERROR_KIND_ABORT_REQUEST,
-            AbortReason::PlcHeartbeat => ERROR_KIND_PLC_HEARTBEAT,
-            AbortReason::Shutdown => ERROR_KIND_SHUTDOWN,
-        }
-    }
-}
-
-/// Error kind register values: 1..=10 are the machine's `hal::ErrorKind`s (see
-/// [`machine_error_kind`]), these are the gateway's.
-pub const ERROR_KIND_ABORT_REQUEST: u16 = 20;
-pub const ERROR_KIND_PLC_HEARTBEAT: u16 = 21;
-pub const ERROR_KIND_SHUTDOWN: u16 = 22;
-/// The run ended but its end could be kept neither in the history nor in the spool:
-/// its results are not shown.
-pub const ERROR_KIND_NOT_KEPT: u16 = 23;
-/// A cycle failed without a machine error (its own checks, tolerance stop, Q309).
-pub const ERROR_KIND_CYCLE: u16 = 30;
-/// The program stopped itself with `FN 14: ERROR = n`; the error code register holds n.
-pub const ERROR_KIND_PROGRAM: u16 = 31;
-
-pub fn machine_error_kind(k: hal::ErrorKind) -> u16 {
-    use hal::ErrorKind::*;
-    match k {
-        NotTriggered => 1,
-        AlreadyDeflected => 2,
-        ProbeCollision => 3,
-        DriveFault => 4,
-        NodeLost => 5,
-        Timeout => 6,
-        SoftwareLimit => 7,
-        Bus => 8,
-        InvalidRequest => 9,
-        _ => 10,
-    }
-}
-
 /// What the gateway must do after a request.
 #[derive(Clone, Debug, PartialEq)]
-pub enum Action<P> {
-    Start { seq: u16, program: P, confirm: bool },
+pub enum Action {
+    /// A start passed the handshake's checks: the program, the machine's state and the
+    /// history row are prepared off the faces' lock (on the machine thread), and
+    /// [`Handshake::prepared`] answers it. Meanwhile the start is "starting": other
+    /// starts are refused as busy, and the PLC's acknowledge registers wait.
+    Prepare(Start),
     Abort,
 }
 
-/// How a run ended.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Outcome {
-    Done,
-    Error { kind: u16, code: u16 },
-    Aborted(AbortReason),
+/// What a face asks: the PLC's request codes 1, 2, 3, and OPC UA's methods.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Command {
+    Start {
+        program: u16,
+        params: [f32; super::register_map::REQ_PARAM_COUNT],
+        /// Go on where a cycle asks for confirmation.
+        confirm: bool,
+    },
+    Abort,
+    Acknowledge,
+}
+
+/// A start as the handshake took it, from either face.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Start {
+    /// The sequence its results carry: the PLC's request sequence, or for another
+    /// face one the PLC's current request does not have ([`Handshake::command`]).
+    pub seq: u16,
+    pub program: u16,
+    pub params: [f32; super::register_map::REQ_PARAM_COUNT],
+    /// Go on where a cycle asks for confirmation.
+    pub confirm: bool,
+    pub face: Face,
 }
 
 #[derive(Debug)]
@@ -181,6 +103,8 @@ pub struct Handshake {
     not_recorded: bool,
     busy_seq: u16,
     busy_face: Face,
+    /// The start being prepared (off the faces' lock), not yet answered.
+    starting: Option<Start>,
     plc_heartbeat: u16,
     heartbeat_seen: Instant,
     heartbeat_timeout: Option<Duration>,
@@ -196,6 +120,7 @@ impl Handshake {
             not_recorded: false,
             busy_seq: 0,
             busy_face: Face::Plc,
+            starting: None,
             plc_heartbeat: 0,
             heartbeat_seen: now,
             heartbeat_timeout,
@@ -251,14 +176,10 @@ impl Handshake {
         self.view.bits = b;
     }
 
-    /// Looks at the request block: a new sequence runs its code. `resolve` finds the
-    /// program of a start (or says why not). Returns what the gateway must do.
-    pub fn on_request<P>(
-        &mut self,
-        req: &Request,
-        now: Instant,
-        resolve: impl FnOnce(u16) -> Result<P, Refusal>,
-    ) -> Option<Action<P>> {
+    /// Looks at the request block: a new sequence runs its code. Returns what the
+    /// gateway must do. A start that passes the checks here is acknowledged only once
+    /// it is prepared ([`Handshake::prepared`]): the PLC waits for register 32.
+    pub fn on_request(&mut self, req: &Request, now: Instant) -> Option<Action> {
         if req.plc_heartbeat != self.plc_heartbeat {
             self.plc_heartbeat = req.plc_heartbeat;
             self.heartbeat_seen = now;
@@ -267,65 +188,83 @@ impl Handshake {
             return None;
         }
         self.last_seq = req.seq;
-        let (answer, action) = self.decide(req, resolve);
-        self.view.ack_seq = req.seq;
+        let answer = match req.code {
+            CODE_START => {
+                let cmd = Command::Start {
+                    program: req.program,
+                    params: req.params,
+                    confirm: req.flags & super::register_map::FLAG_CONFIRM != 0,
+                };
+                self.decide(cmd, Face::Plc, req.seq, req.flags & !FLAGS_KNOWN == 0)
+            }
+            CODE_ABORT => self.decide(Command::Abort, Face::Plc, req.seq, true),
+            CODE_ACKNOWLEDGE => self.decide(Command::Acknowledge, Face::Plc, req.seq, true),
+            _ => Err(Refusal::UnknownCode),
+        };
+        match &answer {
+            Ok(Some(Action::Prepare(_))) => {}
+            Ok(_) => self.acknowledge(req.seq, req.code, Ok(())),
+            Err(r) => self.acknowledge(req.seq, req.code, Err(*r)),
+        }
+        self.refresh_bits();
+        answer.ok().flatten()
+    }
+
+    fn acknowledge(&mut self, seq: u16, code: u16, answer: Result<(), Refusal>) {
+        self.view.ack_seq = seq;
         match answer {
             Ok(()) => {
-                self.view.ack_code = req.code;
+                self.view.ack_code = code;
                 self.view.reason = 0;
             }
             Err(r) => {
-                self.view.ack_code = req.code | REFUSED;
+                self.view.ack_code = code | REFUSED;
                 self.view.reason = r as u16;
             }
         }
-        if let Some(Action::Start { seq, .. }) = &action {
-            self.begin(*seq, req.program, Face::Plc, now);
-        }
-        self.refresh_bits();
-        action
     }
 
     /// A command of a face that has no request block (OPC UA's methods): decided by
     /// the same rules as the PLC's requests, answered to the caller; the PLC's
-    /// acknowledge registers stay the PLC's. A run started so has a result sequence
-    /// the PLC's current request does not have, so its results never pass for the
-    /// PLC's own.
-    pub fn command<P>(
-        &mut self,
-        code: u16,
-        program: u16,
-        params: [f32; super::register_map::REQ_PARAM_COUNT],
-        confirm: bool,
-        now: Instant,
-        resolve: impl FnOnce(u16) -> Result<P, Refusal>,
-    ) -> Result<Option<Action<P>>, Refusal> {
-        let req = Request {
-            code,
-            seq: self.last_seq.wrapping_sub(1),
-            program,
-            flags: if confirm {
-                super::register_map::FLAG_CONFIRM
-            } else {
-                0
-            },
-            params,
-            plc_heartbeat: self.plc_heartbeat,
-        };
-        let (answer, action) = self.decide(&req, resolve);
-        if let Some(Action::Start { seq, .. }) = &action {
-            self.begin(*seq, program, Face::OpcUa, now);
-        }
+    /// acknowledge registers stay the PLC's. A run started so gets a result sequence
+    /// the PLC's current request does not have (the one before it), so its results
+    /// never pass for the PLC's own.
+    pub fn command(&mut self, cmd: Command, face: Face) -> Result<Option<Action>, Refusal> {
+        let answer = self.decide(cmd, face, self.last_seq.wrapping_sub(1), true);
         self.refresh_bits();
-        answer.map(|()| action)
+        answer
     }
 
-    fn begin(&mut self, seq: u16, program: u16, face: Face, now: Instant) {
+    /// The start being prepared is taken (`Ok`: the state is busy) or refused; the
+    /// PLC's start is acknowledged now, unless the PLC has sent a newer request since.
+    /// Whether the run is now under way (not for a start that is not the one being
+    /// prepared).
+    pub fn prepared(&mut self, start: &Start, answer: Result<(), Refusal>, now: Instant) -> bool {
+        if self.starting.as_ref() != Some(start) {
+            return false;
+        }
+        self.starting = None;
+        if start.face == Face::Plc && self.last_seq == start.seq {
+            self.acknowledge(start.seq, CODE_START, answer);
+        }
+        if answer.is_ok() {
+            self.begin(start, now);
+        }
+        self.refresh_bits();
+        answer.is_ok()
+    }
+
+    /// The start being prepared, if one is.
+    pub fn starting(&self) -> Option<&Start> {
+        self.starting.as_ref()
+    }
+
+    fn begin(&mut self, start: &Start, now: Instant) {
         self.state = State::Busy;
-        self.busy_seq = seq;
-        self.busy_face = face;
+        self.busy_seq = start.seq;
+        self.busy_face = start.face;
         self.heartbeat_seen = now;
-        self.view.program = program;
+        self.view.program = start.program;
         self.view.progress_permille = 0;
         self.view.point = 0;
         self.view.error_kind = 0;
@@ -338,47 +277,50 @@ impl Handshake {
         self.busy_face
     }
 
-    fn decide<P>(
+    /// One measurement at a time, the first start wins: a start while one runs or is
+    /// being prepared is refused as busy, never queued. `seq`: the sequence a start's
+    /// results carry; `flags_known`: the request's flags have no unknown bits.
+    fn decide(
         &mut self,
-        req: &Request,
-        resolve: impl FnOnce(u16) -> Result<P, Refusal>,
-    ) -> (Result<(), Refusal>, Option<Action<P>>) {
-        match req.code {
-            CODE_START => {
-                let check = if self.state == State::Busy {
-                    Err(Refusal::Busy)
-                } else if self.state == State::Error {
-                    Err(Refusal::ErrorPending)
-                } else if !self.machine_ok {
-                    Err(Refusal::MachineNotReady)
-                } else if req.flags & !FLAGS_KNOWN != 0 || req.params.iter().any(|p| !p.is_finite())
-                {
-                    Err(Refusal::BadRequest)
-                } else {
-                    resolve(req.program)
-                };
-                match check {
-                    Ok(program) => (
-                        Ok(()),
-                        Some(Action::Start {
-                            seq: req.seq,
-                            program,
-                            confirm: req.flags & super::register_map::FLAG_CONFIRM != 0,
-                        }),
-                    ),
-                    Err(r) => (Err(r), None),
-                }
+        cmd: Command,
+        face: Face,
+        seq: u16,
+        flags_known: bool,
+    ) -> Result<Option<Action>, Refusal> {
+        let busy = self.state == State::Busy || self.starting.is_some();
+        match cmd {
+            Command::Start { .. } if busy => Err(Refusal::Busy),
+            Command::Start { .. } if self.state == State::Error => Err(Refusal::ErrorPending),
+            Command::Start { .. } if !self.machine_ok => Err(Refusal::MachineNotReady),
+            Command::Start { params, .. }
+                if !flags_known || params.iter().any(|p| !p.is_finite()) =>
+            {
+                Err(Refusal::BadRequest)
             }
-            CODE_ABORT if self.state == State::Busy => (Ok(()), Some(Action::Abort)),
-            CODE_ABORT => (Err(Refusal::NotBusy), None),
-            CODE_ACKNOWLEDGE if self.state == State::Busy => (Err(Refusal::Busy), None),
-            CODE_ACKNOWLEDGE => {
+            Command::Start {
+                program,
+                params,
+                confirm,
+            } => {
+                let start = Start {
+                    seq,
+                    program,
+                    params,
+                    confirm,
+                    face,
+                };
+                self.starting = Some(start);
+                Ok(Some(Action::Prepare(start)))
+            }
+            Command::Abort if busy => Ok(Some(Action::Abort)),
+            Command::Abort => Err(Refusal::NotBusy),
+            Command::Acknowledge if busy => Err(Refusal::Busy),
+            Command::Acknowledge => {
                 self.state = State::Idle;
                 self.view.error_kind = 0;
                 self.view.error_code = 0;
-                (Ok(()), None)
+                Ok(None)
             }
-            _ => (Err(Refusal::UnknownCode), None),
         }
     }
 
@@ -440,6 +382,14 @@ mod tests {
         }
     }
 
+    fn start_cmd(params: [f32; 8], confirm: bool) -> Command {
+        Command::Start {
+            program: 431,
+            params,
+            confirm,
+        }
+    }
+
     fn ready() -> (Handshake, Instant) {
         let now = Instant::now();
         let mut h = Handshake::new(Some(Duration::from_secs(1)), now);
@@ -447,29 +397,42 @@ mod tests {
         (h, now)
     }
 
+    /// The PLC's request, and a start prepared with `answer`: what the gateway does.
+    fn request(
+        h: &mut Handshake,
+        r: &Request,
+        now: Instant,
+        answer: Result<(), Refusal>,
+    ) -> Option<Action> {
+        let action = h.on_request(r, now);
+        if let Some(Action::Prepare(start)) = &action {
+            h.prepared(start, answer, now);
+        }
+        action
+    }
+
     #[test]
     fn start_runs_once_per_sequence_and_refuses_while_busy() {
         let (mut h, now) = ready();
-        let a = h.on_request(&req(CODE_START, 1, 0), now, Ok::<_, Refusal>);
+        let a = h.on_request(&req(CODE_START, 1, 0), now);
+        let Some(Action::Prepare(start)) = a else {
+            panic!("{a:?}")
+        };
+        assert_eq!((start.seq, start.program, start.confirm), (1, 431, false));
+        // Being prepared: not yet acknowledged, another start is busy.
+        assert_eq!(h.view().ack_seq, 0);
+        assert_eq!(h.starting(), Some(&start));
         assert_eq!(
-            a,
-            Some(Action::Start {
-                seq: 1,
-                program: 431,
-                confirm: false
-            })
+            h.command(start_cmd([0.0; 8], false), Face::OpcUa),
+            Err(Refusal::Busy)
         );
+        h.prepared(&start, Ok(()), now);
+        assert_eq!((h.view().ack_seq, h.view().ack_code), (1, CODE_START));
         assert_eq!(h.view().bits & BIT_BUSY, BIT_BUSY);
         // The same level again: nothing.
-        assert_eq!(
-            h.on_request(&req(CODE_START, 1, 0), now, Ok::<_, Refusal>),
-            None
-        );
+        assert_eq!(h.on_request(&req(CODE_START, 1, 0), now), None);
         // A new start while busy: refused, never queued.
-        assert_eq!(
-            h.on_request(&req(CODE_START, 2, 0), now, Ok::<_, Refusal>),
-            None
-        );
+        assert_eq!(h.on_request(&req(CODE_START, 2, 0), now), None);
         assert_eq!(h.view().ack_seq, 2);
         assert_eq!(h.view().ack_code, CODE_START | REFUSED);
         assert_eq!(h.view().reason, Refusal::Busy as u16);
@@ -479,53 +442,85 @@ mod tests {
     }
 
     #[test]
+    fn a_start_refused_while_prepared_is_acknowledged_refused_and_nothing_runs() {
+        let (mut h, now) = ready();
+        request(&mut h, &req(CODE_START, 1, 0), now, Ok(()));
+        h.finish(Outcome::Done, 431);
+        request(
+            &mut h,
+            &req(CODE_START, 2, 0),
+            now,
+            Err(Refusal::HistoryUnavailable),
+        );
+        assert_eq!(h.view().ack_seq, 2);
+        assert_eq!(h.view().ack_code, CODE_START | REFUSED);
+        assert_eq!(h.view().reason, Refusal::HistoryUnavailable as u16);
+        assert_eq!(h.state(), State::Done, "the last run's state stays");
+        assert_eq!(h.starting(), None);
+        // An abort while a start is prepared is taken; a newer request of the PLC
+        // keeps its own acknowledge when the start is answered after it.
+        let Some(Action::Prepare(start)) = h.on_request(&req(CODE_START, 3, 0), now) else {
+            panic!()
+        };
+        assert_eq!(
+            h.on_request(&req(CODE_ABORT, 4, 0), now),
+            Some(Action::Abort)
+        );
+        h.prepared(&start, Ok(()), now);
+        assert_eq!((h.view().ack_seq, h.view().ack_code), (4, CODE_ABORT));
+        assert_eq!(h.state(), State::Busy);
+    }
+
+    #[test]
     fn error_must_be_acknowledged_before_the_next_start() {
         let (mut h, now) = ready();
-        h.on_request(&req(CODE_START, 1, 0), now, Ok::<_, Refusal>);
+        request(&mut h, &req(CODE_START, 1, 0), now, Ok(()));
         h.finish(Outcome::Error { kind: 1, code: 0 }, 0);
-        assert_eq!(
-            h.on_request(&req(CODE_START, 2, 0), now, Ok::<_, Refusal>),
-            None
-        );
+        assert_eq!(h.on_request(&req(CODE_START, 2, 0), now), None);
         assert_eq!(h.view().reason, Refusal::ErrorPending as u16);
-        assert_eq!(
-            h.on_request(&req(CODE_ACKNOWLEDGE, 3, 0), now, Ok::<_, Refusal>),
-            None
-        );
+        assert_eq!(h.on_request(&req(CODE_ACKNOWLEDGE, 3, 0), now), None);
         assert_eq!(h.view().ack_code, CODE_ACKNOWLEDGE);
         assert_eq!(h.state(), State::Idle);
         assert_eq!(h.view().error_kind, 0);
-        assert!(h
-            .on_request(&req(CODE_START, 4, 0), now, Ok::<_, Refusal>)
-            .is_some());
+        assert!(h.on_request(&req(CODE_START, 4, 0), now).is_some());
     }
 
     #[test]
     fn refusals_go_into_the_acknowledge_code() {
         let (mut h, now) = ready();
-        h.on_request(&req(CODE_START, 1, 0), now, |_| {
-            Err::<u16, _>(Refusal::UnknownProgram)
-        });
+        request(
+            &mut h,
+            &req(CODE_START, 1, 0),
+            now,
+            Err(Refusal::UnknownProgram),
+        );
         assert_eq!(h.view().reason, Refusal::UnknownProgram as u16);
         assert_eq!(h.state(), State::Idle);
-        h.on_request(&req(CODE_ABORT, 2, 0), now, Ok::<_, Refusal>);
+        h.on_request(&req(CODE_ABORT, 2, 0), now);
         assert_eq!(h.view().reason, Refusal::NotBusy as u16);
-        h.on_request(&req(9, 3, 0), now, Ok::<_, Refusal>);
+        h.on_request(&req(9, 3, 0), now);
         assert_eq!(h.view().ack_code, 9 | REFUSED);
         assert_eq!(h.view().reason, Refusal::UnknownCode as u16);
         let mut bad = req(CODE_START, 4, 0);
         bad.params[3] = f32::NAN;
-        h.on_request(&bad, now, Ok::<_, Refusal>);
+        h.on_request(&bad, now);
         assert_eq!(h.view().reason, Refusal::BadRequest as u16);
     }
 
     #[test]
     fn a_command_follows_the_same_rules_and_leaves_the_plc_acknowledge_alone() {
         let (mut h, now) = ready();
-        h.on_request(&req(CODE_ACKNOWLEDGE, 7, 0), now, Ok::<_, Refusal>);
+        h.on_request(&req(CODE_ACKNOWLEDGE, 7, 0), now);
         let before = h.view().clone();
-        let a = h.command(CODE_START, 431, [0.0; 8], true, now, Ok::<_, Refusal>);
-        assert!(matches!(a, Ok(Some(Action::Start { seq: 6, .. }))), "{a:?}");
+        let a = h.command(start_cmd([0.0; 8], true), Face::OpcUa);
+        let Ok(Some(Action::Prepare(start))) = a else {
+            panic!("{a:?}")
+        };
+        assert_eq!(
+            (start.seq, start.face, start.confirm),
+            (6, Face::OpcUa, true)
+        );
+        h.prepared(&start, Ok(()), now);
         assert_eq!(h.state(), State::Busy);
         assert_eq!(h.busy_face(), Face::OpcUa);
         assert_eq!(
@@ -533,28 +528,28 @@ mod tests {
             (before.ack_seq, before.ack_code, before.reason)
         );
         // The PLC's start while it runs: busy, in the PLC's registers.
-        h.on_request(&req(CODE_START, 8, 0), now, Ok::<_, Refusal>);
+        h.on_request(&req(CODE_START, 8, 0), now);
         assert_eq!(h.view().reason, Refusal::Busy as u16);
         // A second start of the face: busy, to the caller.
         assert_eq!(
-            h.command(CODE_START, 431, [0.0; 8], false, now, Ok::<_, Refusal>),
+            h.command(start_cmd([0.0; 8], false), Face::OpcUa),
             Err(Refusal::Busy)
         );
         // The PLC's heartbeat does not supervise the face's run.
         assert!(!h.heartbeat_lost(now + Duration::from_secs(5)));
         assert_eq!(
-            h.command(CODE_ABORT, 0, [0.0; 8], false, now, Ok::<_, Refusal>),
+            h.command(Command::Abort, Face::OpcUa),
             Ok(Some(Action::Abort))
         );
         h.finish(Outcome::Aborted(AbortReason::Request), 0);
         assert_eq!(
-            h.command(CODE_ABORT, 0, [0.0; 8], false, now, Ok::<_, Refusal>),
+            h.command(Command::Abort, Face::OpcUa),
             Err(Refusal::NotBusy)
         );
         let mut nan = [0.0; 8];
         nan[2] = f32::INFINITY;
         assert_eq!(
-            h.command(CODE_START, 431, nan, false, now, Ok::<_, Refusal>),
+            h.command(start_cmd(nan, false), Face::OpcUa),
             Err(Refusal::BadRequest)
         );
     }
@@ -566,9 +561,9 @@ mod tests {
             !h.heartbeat_lost(now + Duration::from_secs(5)),
             "idle: no check"
         );
-        h.on_request(&req(CODE_START, 1, 0), now, Ok::<_, Refusal>);
+        request(&mut h, &req(CODE_START, 1, 0), now, Ok(()));
         let later = now + Duration::from_millis(900);
-        h.on_request(&req(CODE_START, 1, 1), later, Ok::<_, Refusal>);
+        h.on_request(&req(CODE_START, 1, 1), later);
         assert!(!h.heartbeat_lost(later + Duration::from_millis(900)));
         assert!(h.heartbeat_lost(later + Duration::from_millis(1100)));
         h.finish(Outcome::Aborted(AbortReason::PlcHeartbeat), 0);

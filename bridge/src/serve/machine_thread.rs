@@ -3,20 +3,20 @@
 //! `cycles::runner::run_program` as `probebridge run`.
 
 use super::config::GatewayConfig;
-use super::gateway::{lock, Job, Shared, ToMachine};
+use super::gateway::{lock, Shared, StartRequest, ToMachine};
 use super::handshake::{
-    machine_error_kind, Outcome, ERROR_KIND_CYCLE, ERROR_KIND_NOT_KEPT, ERROR_KIND_PROGRAM,
+    machine_error_kind, Outcome, Refusal, ERROR_KIND_CYCLE, ERROR_KIND_NOT_KEPT, ERROR_KIND_PROGRAM,
 };
 use super::machine_link::MachineLink;
-use super::register_map::uncertainty_key;
+use super::prepare::{Job, Preparer};
+use super::results::{last_results, of_cycle};
 use crate::history::recorder::{Kept, Recorder};
 use crate::ipc::{EstimatorChild, IpcEstimator};
 use crate::session::Session;
 use cycles::progress::ProgressEvent;
-use cycles::results::{CycleResult, ProgramReport, Status};
+use cycles::results::Status;
 use cycles::runner::{run_program, RunOptions};
 use hal::{AxisPositions, Contact, Machine, MachineError, ProbeMove};
-use std::collections::BTreeMap;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
 use std::time::Duration;
 
@@ -24,14 +24,35 @@ const ESTIMATOR_TIMEOUT: Duration = Duration::from_secs(10);
 /// How often the machine's health is asked between measurements.
 const HEALTH_PERIOD: Duration = Duration::from_millis(500);
 
+/// What the machine thread says when it has opened the machine: its notes, or why not.
+pub type Ready = Result<Vec<String>, String>;
+
+/// Starts [`run`] on a thread of its own: its handle, and where it says whether the
+/// machine came up.
+pub fn spawn(
+    cfg: GatewayConfig,
+    cycles: cycles::CyclesConfig,
+    shared: Shared,
+    jobs: Receiver<ToMachine>,
+    history: Option<Recorder>,
+) -> Result<(std::thread::JoinHandle<()>, Receiver<Ready>), String> {
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+    let handle = std::thread::Builder::new()
+        .name("probebridge-machine".into())
+        .spawn(move || run(&cfg, &cycles, &shared, &jobs, &ready_tx, history.as_ref()))
+        .map_err(|e| e.to_string())?;
+    Ok((handle, ready_rx))
+}
+
 /// Runs on its own thread until `Quit` (or the sender goes away). Says on `ready`
-/// whether the machine came up. Ends of runs go to `history` (their starts were
-/// recorded when the PLC's start was taken).
+/// whether the machine came up. Prepares each start (the faces' lock is not held
+/// meanwhile; see [`super::prepare`]), then runs it; ends of runs go to `history`.
 pub fn run(
     cfg: &GatewayConfig,
+    cycles: &cycles::CyclesConfig,
     shared: &Shared,
     jobs: &Receiver<ToMachine>,
-    ready: &Sender<Result<Vec<String>, String>>,
+    ready: &Sender<Ready>,
     history: Option<&Recorder>,
 ) {
     let mut opts = cfg.machine_options();
@@ -49,36 +70,19 @@ pub fn run(
     let mut link = MachineLink::Up(Box::new(session));
     loop {
         match jobs.recv_timeout(HEALTH_PERIOD) {
-            Ok(ToMachine::Run(job)) => {
+            Ok(ToMachine::Start(request)) => {
                 supervise(&mut estimator, &opts.service, cfg.estimator.armed_receive);
-                match link.session() {
-                    Some(session) => {
-                        let ctx = Measure {
-                            cfg,
-                            shared,
-                            history,
-                        };
-                        measure(ctx, session, estimator.as_ref(), &job);
-                    }
-                    // Lost between the start and here: the run ends at once.
-                    None => {
-                        if let (Some(h), Some(id)) = (history, job.record) {
-                            let report = ProgramReport {
-                                stopped: Some("the machine was lost before the run began".into()),
-                                ..ProgramReport::default()
-                            };
-                            let _ = h.finish(id, "error", &report);
-                        }
-                        lock(shared).finish(
-                            Outcome::Error {
-                                kind: machine_error_kind(hal::ErrorKind::Bus),
-                                code: 0,
-                            },
-                            0,
-                            &BTreeMap::new(),
-                        );
-                    }
-                }
+                let preparer = Preparer {
+                    programs: &cfg.programs.folder,
+                    cycles,
+                    history,
+                };
+                let ctx = Measure {
+                    cfg,
+                    shared,
+                    history,
+                };
+                start(ctx, &preparer, &mut link, &estimator, &request);
                 link.supervise(shared, &opts);
             }
             Ok(ToMachine::Quit) | Err(RecvTimeoutError::Disconnected) => break,
@@ -89,6 +93,31 @@ pub fn run(
         }
     }
     tracing::info!("machine thread: closing the machine");
+}
+
+/// Prepares a start and, once taken, runs it; a machine lost since the start was
+/// asked refuses it ("machine not ok", nothing written).
+fn start(
+    ctx: Measure,
+    preparer: &Preparer,
+    link: &mut MachineLink,
+    estimator: &Option<EstimatorChild>,
+    request: &StartRequest,
+) {
+    let Some(session) = link.session() else {
+        lock(ctx.shared).prepared(request, Err(Refusal::MachineNotReady));
+        return;
+    };
+    match preparer.prepare(&request.start) {
+        Ok(job) => {
+            if lock(ctx.shared).prepared(request, Ok(())) {
+                measure(ctx, session, estimator.as_ref(), &job);
+            }
+        }
+        Err(r) => {
+            lock(ctx.shared).prepared(request, Err(r));
+        }
+    }
 }
 
 struct Measure<'a> {
@@ -159,7 +188,7 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
         let permille = (started.saturating_sub(1) * 1000 / total) as u16;
         lock(shared).progress(permille, points);
     };
-    let confirm_all = job.confirm;
+    let confirm_all = job.start.confirm;
     let mut confirm = |text: &str| {
         // The rotary axes at 0 deg before a 451 on a machine whose PLC positions them
         // (mStrobeRotAxPos): the PLC's start request is that confirmation.
@@ -214,28 +243,23 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
     };
     let (cycle, values) = last_results(&report);
     tracing::info!(
-        seq = job.seq,
-        program = job.number,
+        seq = job.start.seq,
+        program = job.start.program,
         outcome = ?outcome,
         stopped = report.stopped.as_deref().unwrap_or(""),
         "measurement finished"
     );
     // The PLC hears of the end only once it is kept: in the history, or in the spool.
     if let (Some(h), Some(id)) = (history, job.record) {
-        let status = match outcome {
-            Outcome::Done => "done",
-            Outcome::Error { .. } => "error",
-            Outcome::Aborted(_) => "aborted",
-        };
-        match h.finish(id, status, &report) {
+        match h.finish(id, outcome.history_status(), &report) {
             Kept::Recorded => {}
             Kept::Spooled => tracing::warn!(
-                seq = job.seq,
+                seq = job.start.seq,
                 "results not yet recorded: the end of the run is in the spool"
             ),
             Kept::NotKept(e) => {
                 tracing::error!(
-                    seq = job.seq,
+                    seq = job.start.seq,
                     "the end of the run could not be kept ({e}): reported as an error, without results"
                 );
                 outcome = Outcome::Error {
@@ -252,40 +276,11 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
                 .cycles
                 .iter()
                 .filter(|c| c.status == Status::Ok)
-                .map(|c| (c.cycle, result_values(c)))
+                .map(|c| (c.cycle, of_cycle(c)))
                 .collect(),
         );
     }
     core.finish(outcome, cycle, &values);
-}
-
-/// The results the registers show: the last cycle's Q parameters, and for 451 the
-/// errors before and after by ISO name; with their standard uncertainties
-/// ([`uncertainty_key`]).
-pub fn last_results(report: &ProgramReport) -> (u16, BTreeMap<String, f64>) {
-    let Some(last) = report.cycles.iter().rev().find(|c| c.status == Status::Ok) else {
-        return (0, BTreeMap::new());
-    };
-    (last.cycle, result_values(last))
-}
-
-pub fn result_values(c: &CycleResult) -> BTreeMap<String, f64> {
-    let mut v = c.q.clone();
-    for (name, u) in &c.u {
-        v.insert(uncertainty_key(name), *u);
-    }
-    if let Some(k) = &c.kinematics {
-        for (name, e) in &k.errors_before {
-            v.insert(format!("before.{name}"), *e);
-        }
-        for (name, e) in &k.errors_after {
-            v.insert(format!("after.{name}"), *e);
-        }
-        for (name, u) in &k.errors_u {
-            v.insert(uncertainty_key(&format!("after.{name}")), *u);
-        }
-    }
-    v
 }
 
 /// The machine as the cycles drive it, remembering the last error a motion returned

@@ -13,9 +13,12 @@ pub mod machine_link;
 pub mod machine_thread;
 pub mod modbus_face;
 pub mod opcua;
+pub mod outcome;
 pub mod ownership;
 pub mod peer_allow;
+pub mod prepare;
 pub mod register_map;
+pub mod results;
 pub mod sd_notify;
 pub mod web_face;
 
@@ -164,8 +167,6 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
         RegisterMap::new(order, cfg.plc.int_scale),
         Handshake::new(cfg.heartbeat_timeout(), Instant::now()),
         ownership::Ownership::new(cfg.owner_timeout()),
-        cfg.programs.folder.clone(),
-        cycles.clone(),
         jobs_tx.clone(),
     );
     let history = open_history(&cfg, &cycles)?;
@@ -175,17 +176,13 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     }
     let _ = ABORT.set(core.abort_flag());
     let shared = Arc::new(Mutex::new(core));
-    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
-    let machine = {
-        let (cfg, shared) = (cfg.clone(), shared.clone());
-        let history = history.clone();
-        std::thread::Builder::new()
-            .name("probebridge-machine".into())
-            .spawn(move || {
-                machine_thread::run(&cfg, &shared, &jobs_rx, &ready_tx, history.as_ref());
-            })
-            .map_err(|e| e.to_string())?
-    };
+    let (machine, ready_rx) = machine_thread::spawn(
+        cfg.clone(),
+        cycles.clone(),
+        shared.clone(),
+        jobs_rx,
+        history.clone(),
+    )?;
     let notes = match ready_rx.recv() {
         Ok(Ok(notes)) => notes,
         Ok(Err(e)) => {

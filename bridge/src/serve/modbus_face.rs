@@ -21,7 +21,7 @@
 //!   that stalls or ends stops the service, so systemd restarts it.
 
 use super::face_log::{Event, FaceLog, SUMMARY_EVERY};
-use super::face_thread::{FaceHealth, FaceThread, Heartbeat};
+use super::face_thread::{FaceHealth, FaceThread, Flavour, Heartbeat};
 use super::gateway::{lock, Shared, WriteRefusal};
 use super::peer_allow::AllowList;
 use super::register_map::MapException;
@@ -92,9 +92,11 @@ impl PlcFace {
     ) -> io::Result<Self> {
         let local_addr = listener.local_addr()?;
         let fault = std::env::var(FAULT_ENV).unwrap_or_default();
-        let thread = FaceThread::spawn("probebridge-plc-face", move |heartbeat, stop| {
-            serve(listener, shared, opts, (heartbeat, stop), fault)
-        })?;
+        let thread = FaceThread::spawn(
+            "probebridge-plc-face",
+            Flavour::CurrentThread,
+            move |heartbeat, stop| serve(listener, shared, opts, (heartbeat, stop), fault),
+        )?;
         Ok(Self { local_addr, thread })
     }
 

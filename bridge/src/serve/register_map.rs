@@ -21,9 +21,7 @@
 //!
 //! Reads and writes must lie inside one block; writes only inside the request block.
 
-use cycles::iso230_7::error_names;
-use hal::Axis;
-use std::collections::BTreeMap;
+use super::results::{slots, Quantity, ResultKey, ResultValues};
 
 pub const REQUEST_BASE: u16 = 0;
 pub const REQ_CODE: u16 = 0;
@@ -55,7 +53,7 @@ pub const STATE_LEN: u16 = 16;
 pub const RESULT_BASE: u16 = 64;
 pub const RES_SEQ_HEAD: u16 = 64;
 pub const RES_REAL: u16 = 65;
-/// Result slots (see [`slot_names`]).
+/// Result slots (see [`super::results::slots`]).
 pub const SLOTS: usize = 66;
 pub const RES_DINT: u16 = RES_REAL + 2 * SLOTS as u16;
 pub const RES_SEQ_TAIL: u16 = RES_DINT + 2 * SLOTS as u16;
@@ -75,12 +73,6 @@ pub const CAL_REAL: u16 = CAL_SEQ_HEAD + 1;
 pub const CAL_UNC: u16 = CAL_REAL + 2 * CAL_COLUMNS.len() as u16;
 pub const CAL_SEQ_TAIL: u16 = CAL_UNC + 2 * CAL_COLUMNS.len() as u16;
 pub const CALIB_LEN: u16 = CAL_SEQ_TAIL - CALIB_BASE + 1;
-
-/// The key of a slot's standard uncertainty in the values of
-/// [`RegisterMap::set_results`]: `u.` and the slot's name (`u.Q158`, `u.after.EX0C`).
-pub fn uncertainty_key(slot: &str) -> String {
-    format!("u.{slot}")
-}
 
 /// Register counts a single request may carry (Modbus application protocol 6.3/6.12).
 pub const MAX_READ: u16 = 125;
@@ -127,21 +119,6 @@ pub enum MapException {
     IllegalDataValue,
 }
 
-/// The names of the result slots, in register order: Q141..Q149, Q150..Q175, Q183,
-/// then the ISO 230-7 errors of A, B and C before optimisation (`before.EY0A` ...) and
-/// after (`after.EY0A` ...).
-pub fn slot_names() -> Vec<String> {
-    let mut v: Vec<String> = (141..=175).map(|n| format!("Q{n}")).collect();
-    v.push("Q183".into());
-    for when in ["before", "after"] {
-        for axis in [Axis::A, Axis::B, Axis::C] {
-            v.extend(error_names(axis).iter().map(|n| format!("{when}.{n}")));
-        }
-    }
-    debug_assert_eq!(v.len(), SLOTS);
-    v
-}
-
 /// What the PLC asks for (the request block decoded).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Request {
@@ -185,7 +162,7 @@ impl RegisterMap {
             order,
             int_scale,
         };
-        m.set_results(0, &BTreeMap::new());
+        m.set_results(0, &ResultValues::new());
         m
     }
 
@@ -277,18 +254,17 @@ impl RegisterMap {
     }
 
     /// Writes the results of the run of request `seq` (the cycle they come from is in
-    /// the state block) (`values` by slot name; missing
-    /// slots read NaN and [`DINT_MISSING`]) and their uncertainties (by
-    /// [`uncertainty_key`]; missing: NaN), the result sequence last at both ends of
-    /// both blocks.
-    pub fn set_results(&mut self, seq: u16, values: &BTreeMap<String, f64>) {
-        for (i, name) in slot_names().iter().enumerate() {
-            let u = values.get(&uncertainty_key(name)).copied();
+    /// the state block) (missing slots read NaN and [`DINT_MISSING`]) and their
+    /// uncertainties (missing: NaN), the result sequence last at both ends of both
+    /// blocks.
+    pub fn set_results(&mut self, seq: u16, values: &ResultValues) {
+        for (i, q) in slots().into_iter().enumerate() {
+            let u = values.get(&ResultKey::Uncertainty(q.clone())).copied();
             let [a, b] = self.order.split(u.map_or(f32::NAN, |u| u as f32).to_bits());
             let r = usize::from(UNC_REAL) + 2 * i;
             self.regs[r] = a;
             self.regs[r + 1] = b;
-            let v = values.get(name).copied();
+            let v = values.get(&ResultKey::Value(q)).copied();
             let real = v.map_or(f32::NAN, |v| v as f32);
             let dint = v.map_or(DINT_MISSING, |v| self.scaled(v));
             let [a, b] = self.order.split(real.to_bits());
@@ -302,8 +278,8 @@ impl RegisterMap {
         }
         for (i, name) in CAL_COLUMNS.iter().enumerate() {
             for (base, key) in [
-                (CAL_REAL, name.to_string()),
-                (CAL_UNC, uncertainty_key(name)),
+                (CAL_REAL, ResultKey::Value(Quantity::named(name))),
+                (CAL_UNC, ResultKey::Uncertainty(Quantity::named(name))),
             ] {
                 let v = values.get(&key).map_or(f32::NAN, |v| *v as f32);
                 let [a, b] = self.order.split(v.to_bits());
@@ -348,7 +324,7 @@ mod tests {
         assert_eq!(RES_DINT, 197);
         assert_eq!(RES_SEQ_TAIL, 329);
         assert_eq!(RESULT_LEN, 266);
-        let names = slot_names();
+        let names: Vec<String> = slots().iter().map(ToString::to_string).collect();
         assert_eq!(names.len(), SLOTS);
         assert_eq!(names[0], "Q141");
         assert_eq!(names[9], "Q150");
@@ -371,11 +347,12 @@ mod tests {
 
     #[test]
     fn golden_calibration_block() {
-        let values: BTreeMap<String, f64> = [
-            ("R".to_string(), 2.5),
-            (uncertainty_key("R"), 0.5),
-            ("CAL_OF1".into(), 0.25),
-            ("L".into(), -2.0),
+        let v = |n: &str| ResultKey::Value(Quantity::named(n));
+        let values: ResultValues = [
+            (v("R"), 2.5),
+            (ResultKey::Uncertainty(Quantity::named("R")), 0.5),
+            (v("CAL_OF1"), 0.25),
+            (v("L"), -2.0),
         ]
         .into_iter()
         .collect();
@@ -393,9 +370,9 @@ mod tests {
             ]
         );
         // Not in any result slot, and not readable across the blocks' border.
-        assert!(slot_names()
+        assert!(slots()
             .iter()
-            .all(|n| !CAL_COLUMNS.contains(&n.as_str())));
+            .all(|n| !CAL_COLUMNS.contains(&n.to_string().as_str())));
         assert_eq!(
             m.read(UNC_SEQ_TAIL, 2),
             Err(MapException::IllegalDataAddress)
@@ -405,18 +382,19 @@ mod tests {
             Err(MapException::IllegalDataAddress)
         );
         // A run without 460: every column NaN.
-        m.set_results(6, &BTreeMap::new());
+        m.set_results(6, &ResultValues::new());
         assert_eq!(m.read(CAL_REAL, 2).unwrap(), vec![0, 0x7FC0]);
         assert_eq!((m.get(CAL_SEQ_HEAD), m.get(CAL_SEQ_TAIL)), (6, 6));
     }
 
     #[test]
     fn golden_uncertainties_in_the_slot_order() {
-        let values: BTreeMap<String, f64> = [
-            ("Q158".to_string(), 5.0),
-            (uncertainty_key("Q158"), 0.5),
-            ("after.EX0C".into(), 0.012),
-            (uncertainty_key("after.EX0C"), 0.25),
+        let after = Quantity::ErrorAfter("EX0C".into());
+        let values: ResultValues = [
+            (ResultKey::Value(Quantity::named("Q158")), 5.0),
+            (ResultKey::Uncertainty(Quantity::named("Q158")), 0.5),
+            (ResultKey::Value(after.clone()), 0.012),
+            (ResultKey::Uncertainty(after), 0.25),
         ]
         .into_iter()
         .collect();
@@ -456,9 +434,12 @@ mod tests {
 
     #[test]
     fn golden_results_in_both_word_orders() {
-        let values: BTreeMap<String, f64> = [("Q158".to_string(), 5.0), ("Q183".into(), -2.0)]
-            .into_iter()
-            .collect();
+        let values: ResultValues = [
+            (ResultKey::Value(Quantity::named("Q158")), 5.0),
+            (ResultKey::Value(Quantity::named("Q183")), -2.0),
+        ]
+        .into_iter()
+        .collect();
         let mut m = RegisterMap::new(WordOrder::HighFirst, 10_000.0);
         m.set_results(42, &values);
         let q158 = RES_REAL + 2 * 17;

@@ -61,9 +61,18 @@ class Plc:
         block = [code, self.seq, program, flags] + words + [self.hb]
         r = self.c.write_registers(REQ, block)
         check(not r.isError(), f"request write: {r}")
-        st = self.read(ACK_SEQ, 9)
-        check(st[0] == self.seq, f"acknowledge of seq {self.seq}: {st}")
-        return st
+        # The handshake: wait until register 32 equals the sequence (a start is
+        # answered once the gateway has prepared it: program, state, history row).
+        return self.acknowledged(self.seq)
+
+    def acknowledged(self, seq):
+        deadline = time.monotonic() + TIMEOUT
+        while time.monotonic() < deadline:
+            st = self.read(ACK_SEQ, 9)
+            if st[0] == seq:
+                return st
+            time.sleep(0.005)
+        check(False, f"acknowledge of seq {seq}")
 
     def state(self):
         return self.read(ACK_SEQ, 9)

@@ -7,7 +7,8 @@
 //! Node ids are strings `Machine.<path>` (stable, whatever the machine's name); the
 //! browse names carry the names a client browses by.
 
-use super::super::register_map::{uncertainty_key, CAL_COLUMNS};
+use super::super::register_map::CAL_COLUMNS;
+use super::super::results::{slots, Quantity, ResultKey};
 use super::auth::{ABORT, ACKNOWLEDGE, START_PROGRAM};
 use opcua::nodes::{MethodBuilder, ObjectBuilder, VariableBuilder};
 use opcua::server::address_space::AddressSpace;
@@ -32,12 +33,17 @@ pub fn cycle_result_names() -> Vec<(u16, Vec<String>)> {
     c444.push("Q183".into());
     let mut c451 = q(141..=149);
     c451.extend(
-        super::super::register_map::slot_names()
+        slots()
             .into_iter()
-            .filter(|n| n.contains('.')),
+            .filter(|q| !matches!(q, Quantity::Named(_)))
+            .map(|q| q.to_string()),
     );
     let mut c460: Vec<String> = CAL_COLUMNS.iter().map(|c| c.to_string()).collect();
-    c460.extend(CAL_COLUMNS.iter().map(|c| uncertainty_key(c)));
+    c460.extend(
+        CAL_COLUMNS
+            .iter()
+            .map(|c| ResultKey::Uncertainty(Quantity::named(c)).to_string()),
+    );
     vec![(431, c431), (444, c444), (451, c451), (460, c460)]
 }
 

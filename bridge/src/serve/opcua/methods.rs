@@ -6,34 +6,38 @@
 
 use super::auth::{ABORT, ACKNOWLEDGE, START_PROGRAM};
 use crate::serve::gateway::{lock, FaceCommand, Shared};
-use crate::serve::handshake::{CODE_ABORT, CODE_ACKNOWLEDGE, CODE_START};
+use crate::serve::handshake::Command;
 use crate::serve::register_map::REQ_PARAM_COUNT;
 use opcua::server::node_manager::memory::SimpleNodeManager;
 use opcua::types::{NodeId, StatusCode, Variant, VariantScalarTypeId};
 
 /// Registers the three methods' callbacks.
 pub fn register(manager: &SimpleNodeManager, ns: u16, shared: &Shared) {
-    for (name, code) in [
-        (START_PROGRAM, CODE_START),
-        (ABORT, CODE_ABORT),
-        (ACKNOWLEDGE, CODE_ACKNOWLEDGE),
+    for (name, command) in [
+        (START_PROGRAM, None),
+        (ABORT, Some(Command::Abort)),
+        (ACKNOWLEDGE, Some(Command::Acknowledge)),
     ] {
         let shared = shared.clone();
         manager.inner().add_method_callback(
             NodeId::new(ns, format!("Machine.Production.{name}")),
             move |args| {
-                let cmd = if code == CODE_START {
-                    start_arguments(args)?
-                } else {
-                    FaceCommand {
-                        code,
-                        program: 0,
-                        params: [0.0; REQ_PARAM_COUNT],
-                        confirm: false,
-                        who: "OPC UA".into(),
-                    }
+                let cmd = FaceCommand {
+                    command: match command {
+                        Some(c) => c,
+                        None => start_arguments(args)?,
+                    },
+                    who: "OPC UA".into(),
                 };
+                // The lock is released before a start is waited for: it is prepared
+                // (program, machine state, history row) on the machine thread, while
+                // the face's other tasks go on on its other worker.
                 let answer = lock(&shared).command(&cmd);
+                let answer = match answer {
+                    Ok(Some(pending)) => tokio::task::block_in_place(|| pending.wait()),
+                    Ok(None) => Ok(()),
+                    Err(r) => Err(r),
+                };
                 Ok(match answer {
                     Ok(()) => vec![Variant::from(0u16), Variant::from("taken")],
                     Err(r) => vec![Variant::from(r as u16), Variant::from(r.describe())],
@@ -48,7 +52,7 @@ pub fn register(manager: &SimpleNodeManager, ns: u16, shared: &Shared) {
 /// BadTypeMismatch (OPC 10000-4 §5.11.2: the stack does not check them against the
 /// declaration), more than 8 parameters with BadInvalidArgument: the caller's errors,
 /// not refusals of the gateway. Parameters and Confirm may be left out (0, false).
-fn start_arguments(args: &[Variant]) -> Result<FaceCommand, StatusCode> {
+fn start_arguments(args: &[Variant]) -> Result<Command, StatusCode> {
     if args.len() > 3 {
         return Err(StatusCode::BadTooManyArguments);
     }
@@ -80,12 +84,10 @@ fn start_arguments(args: &[Variant]) -> Result<FaceCommand, StatusCode> {
         Some(Variant::Boolean(b)) => *b,
         Some(_) => return Err(StatusCode::BadTypeMismatch),
     };
-    Ok(FaceCommand {
-        code: CODE_START,
+    Ok(Command::Start {
         program: number,
         params,
         confirm,
-        who: "OPC UA".into(),
     })
 }
 
@@ -97,9 +99,17 @@ mod tests {
     fn start_arguments_are_checked() {
         let params = Variant::from(vec![1.5f32, -2.25]);
         let cmd = start_arguments(&[Variant::from(431u16), params, Variant::from(true)]).unwrap();
-        assert_eq!(cmd.program, 431);
-        assert_eq!(&cmd.params[..3], &[1.5, -2.25, 0.0]);
-        assert!(cmd.confirm);
+        let Command::Start {
+            program,
+            params,
+            confirm,
+        } = cmd
+        else {
+            panic!("{cmd:?}")
+        };
+        assert_eq!(program, 431);
+        assert_eq!(&params[..3], &[1.5, -2.25, 0.0]);
+        assert!(confirm);
         assert_eq!(
             start_arguments(&[Variant::from(431u16), Variant::from(vec![0.0f32; 9])]),
             Err(StatusCode::BadInvalidArgument)

@@ -24,7 +24,7 @@ pub mod methods;
 pub mod users;
 pub mod values;
 
-use super::face_thread::{FaceHealth, FaceThread, Heartbeat};
+use super::face_thread::{FaceHealth, FaceThread, Flavour, Heartbeat};
 use super::gateway::Shared;
 use opcua::crypto::SecurityPolicy;
 use opcua::server::diagnostics::NamespaceMetadata;
@@ -359,9 +359,11 @@ impl OpcuaFace {
     ) -> Result<Self, String> {
         let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
         let fault = std::env::var(FAULT_ENV).unwrap_or_default();
-        let thread = FaceThread::spawn("probebridge-opcua-face", move |heartbeat, stop| {
-            serve(setup, ready_tx, stop, heartbeat, fault)
-        })
+        let thread = FaceThread::spawn(
+            "probebridge-opcua-face",
+            Flavour::MultiThread,
+            move |heartbeat, stop| serve(setup, ready_tx, stop, heartbeat, fault),
+        )
         .map_err(|e| e.to_string())?;
         let certificate = pki.join(OWN_CERT);
         let mut face = Self {

@@ -7,10 +7,11 @@ use super::address_space::{Nodes, RUN_FIELDS};
 use crate::history::{Filter, History, HistoryTarget, RunRow};
 use crate::serve::gateway::{lock, RunInfo, Shared};
 use crate::serve::handshake::{Face, Outcome, State, BIT_NOT_RECORDED};
+use crate::serve::results::Quantity;
 use opcua::server::node_manager::memory::SimpleNodeManager;
 use opcua::server::SubscriptionCache;
 use opcua::types::{DataValue, DateTime, NodeId, Variant};
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::str::FromStr;
 use std::sync::Arc;
 use std::time::SystemTime;
@@ -143,13 +144,18 @@ impl Publisher {
                 continue;
             };
             out.push((nodes.time.clone(), date_time(res.at)));
-            let names: Vec<String> = res.values.keys().cloned().collect();
-            let values: Vec<f64> = res.values.values().copied().collect();
+            // By the names the faces show, in their order.
+            let named: BTreeMap<String, f64> = res
+                .values
+                .iter()
+                .map(|(k, v)| (k.to_string(), *v))
+                .collect();
+            let names: Vec<String> = named.keys().cloned().collect();
+            let values: Vec<f64> = named.values().copied().collect();
             out.push((nodes.names.clone(), Variant::from(names)));
             out.push((nodes.values.clone(), Variant::from(values)));
             for (name, id) in &nodes.by_name {
-                let value = res
-                    .values
+                let value = named
                     .get(name)
                     .map_or(Variant::Empty, |&x| Variant::from(x));
                 out.push((id.clone(), value));
@@ -280,8 +286,9 @@ fn run_field(r: &RunRow, name: &str) -> Variant {
                 .map(|x| (format!("{}.{}", x.cycle, x.name), x.value))
                 .collect();
             for e in &r.iso_errors {
-                pairs.push((format!("before.{}", e.name), e.before));
-                pairs.push((format!("after.{}", e.name), e.after));
+                let name = |when: fn(String) -> Quantity| when(e.name.clone()).to_string();
+                pairs.push((name(Quantity::ErrorBefore), e.before));
+                pairs.push((name(Quantity::ErrorAfter), e.after));
             }
             if name == "ResultNames" {
                 Variant::from(pairs.into_iter().map(|p| p.0).collect::<Vec<_>>())
