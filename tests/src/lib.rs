@@ -103,17 +103,43 @@ pub fn cycles_config(sc: &Scenario) -> cycles::CyclesConfig {
     cfg
 }
 
-/// A fresh folder per call for a preset table the test may write.
+/// A fresh folder per call for a preset table the test may write, inside
+/// [`process_temp_dir`].
 fn temp_presets_path(shipped: &Path) -> PathBuf {
     use std::sync::atomic::{AtomicU32, Ordering};
     static N: AtomicU32 = AtomicU32::new(0);
-    let dir = std::env::temp_dir().join(format!(
-        "pbtest-presets-{}-{}",
-        std::process::id(),
-        N.fetch_add(1, Ordering::Relaxed)
-    ));
+    let dir = process_temp_dir().join(format!("presets-{}", N.fetch_add(1, Ordering::Relaxed)));
     std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
     dir.join(shipped.file_name().unwrap_or_default())
+}
+
+/// This test process's folder for the files its tests write:
+/// `pbtest-<pid>/` in [`std::env::temp_dir`] (the test root under
+/// `scripts/with-test-root`). The first call removes the folders of test processes
+/// that no longer run, so a run that cannot clean up after itself (a test binary
+/// ends without a hook) is cleaned up by the next one at the latest.
+pub fn process_temp_dir() -> &'static Path {
+    static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    DIR.get_or_init(|| {
+        let tmp = std::env::temp_dir();
+        remove_dead_process_dirs(&tmp, "pbtest-");
+        let dir = tmp.join(format!("pbtest-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+        dir
+    })
+}
+
+/// Removes the folders `<prefix><pid>` in `tmp` whose process no longer runs.
+pub fn remove_dead_process_dirs(tmp: &Path, prefix: &str) {
+    for entry in std::fs::read_dir(tmp).into_iter().flatten().flatten() {
+        let name = entry.file_name();
+        let Some(pid) = name.to_str().and_then(|n| n.strip_prefix(prefix)) else {
+            continue;
+        };
+        if pid.parse::<u32>().is_ok() && !Path::new("/proc").join(pid).exists() {
+            let _ = std::fs::remove_dir_all(entry.path());
+        }
+    }
 }
 
 /// A unique name per test (and process) for iceoryx2 services.
@@ -125,4 +151,12 @@ pub fn unique_service(test: &str) -> String {
         std::process::id(),
         N.fetch_add(1, Ordering::Relaxed)
     )
+}
+
+/// A progress line of a long test on the terminal, also when libtest captures the
+/// test's output (it captures `println!`/`eprintln!`, not writes to the stderr handle):
+/// `scripts/test` is never silent for a minute. `file` names the test file.
+pub fn progress(file: &str, line: std::fmt::Arguments<'_>) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stderr().lock(), "    [{file}] {line}");
 }
