@@ -66,11 +66,27 @@ pub fn run_shipped_program(
     let _ = std::fs::remove_dir_all(&out);
     std::fs::create_dir_all(&out).unwrap();
     let mut confirm = |_: &str| true;
-    let mut progress = |_| {};
+    // A long run (451 on a lossy bus: minutes) says where it is every PROGRESS_EVERY.
+    let (name, mut said, mut probes) = (program_name(&path), std::time::Instant::now(), 0u32);
+    let mut on_event = |ev: cycles::progress::ProgressEvent| {
+        use cycles::progress::ProgressEvent;
+        probes += u32::from(matches!(ev, ProgressEvent::Probe { .. }));
+        if said.elapsed() >= PROGRESS_EVERY {
+            said = std::time::Instant::now();
+            let at = match ev {
+                ProgressEvent::Note { text, .. } => text,
+                _ => "running".into(),
+            };
+            progress(
+                "run_shipped_program",
+                format_args!("{name} ({tag}): {probes} probing moves so far; {at}"),
+            );
+        }
+    };
     let mut opts = cycles::runner::RunOptions {
         out_dir: out.clone(),
         confirm: &mut confirm,
-        progress: &mut progress,
+        progress: &mut on_event,
         kinematics: Some(out.join("kinematics.toml")),
         estimator: None,
     };
@@ -151,6 +167,16 @@ pub fn unique_service(test: &str) -> String {
         std::process::id(),
         N.fetch_add(1, Ordering::Relaxed)
     )
+}
+
+/// How often [`run_shipped_program`] says where a long run is.
+const PROGRESS_EVERY: std::time::Duration = std::time::Duration::from_secs(20);
+
+fn program_name(path: &Path) -> String {
+    path.file_name()
+        .unwrap_or_default()
+        .to_string_lossy()
+        .into_owned()
 }
 
 /// A progress line of a long test on the terminal, also when libtest captures the
