@@ -103,6 +103,13 @@ enum Cmd {
     Demo {
         #[command(flatten)]
         machine: MachineArgs,
+        /// Keep the demo's temporary folder (its 451 program, kinematics copy, protocol
+        /// and the estimator's log) and say where; without it the folder is removed.
+        #[arg(long)]
+        keep: bool,
+        /// Also print the estimator process's own lines and the drives' start-up detail.
+        #[arg(long)]
+        verbose: bool,
     },
     /// Run every measuring cycle of an NC program (.h) on the machine.
     Run {
@@ -309,9 +316,13 @@ fn main() -> ExitCode {
             })
         }),
         Cmd::Check(c) => c.run(),
-        Cmd::Demo { machine } => machine
+        Cmd::Demo {
+            machine,
+            keep,
+            verbose,
+        } => machine
             .moving_options()
-            .and_then(|m| commands::demo::run(&m))
+            .and_then(|m| commands::demo::run(&m, commands::demo::DemoOutput { keep, verbose }))
             .map(|()| 0),
         Cmd::Sim {
             scenario,

@@ -114,12 +114,17 @@ fn bad_arguments_and_scenarios_are_refused_before_anything_moves() {
     assert!(err.contains("bad.toml") && err.contains("noize"), "{err}");
 }
 
-/// The README's first command: contacts printed and the estimator's sphere within 1 µm.
+/// The README's first command, with `--keep`: contacts printed and the estimator's
+/// sphere within 1 µm, the 451 errors with their u, no estimator detail, and the
+/// temporary folder kept where it says. (Without `--keep` the folder is removed:
+/// docs_check runs the README's line in a temporary folder of its own and finds it
+/// empty afterwards.)
 #[test]
 fn demo_fits_the_sphere_within_a_micrometre() {
-    let out = run(bin().arg("demo"));
+    let out = run(bin().args(["demo", "--keep"]));
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
+    let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(
         text.matches("X+").count() + text.matches("X-").count(),
         5,
@@ -137,7 +142,7 @@ fn demo_fits_the_sphere_within_a_micrometre() {
     assert_eq!(nums.len(), 2, "{line}");
     assert!(nums[0] < 1e-3 && nums[1] < 1e-3, "{line}");
     // Then cycle 451 mode 1 on A and C: EX0C (injected 0.012 mm) corrected in a
-    // temporary kinematics file, the protocol written.
+    // temporary kinematics file, with its standard uncertainty, the protocol written.
     assert!(
         text.contains("cycle 451 MEASURE KINEMATICS, mode 1"),
         "{text}"
@@ -146,23 +151,37 @@ fn demo_fits_the_sphere_within_a_micrometre() {
         .lines()
         .find(|l| l.trim_start().starts_with("EX0C"))
         .unwrap_or_else(|| panic!("no EX0C in:\n{text}"));
-    let v: Vec<f64> = ex0c
-        .split_whitespace()
-        .skip(1)
-        .take(3)
-        .map(|x| x.parse().unwrap())
-        .collect();
+    let v: Vec<&str> = ex0c.split_whitespace().skip(1).take(5).collect();
+    let num = |i: usize| -> f64 { v[i].parse().unwrap_or_else(|e| panic!("{ex0c}: {e}")) };
+    assert_eq!(v[2], "±", "{ex0c}");
     assert!(
-        v[0] == 0.0 && (v[1] - 0.012).abs() < 1e-4 && v[2] == 0.012,
+        num(0) == 0.0 && (num(1) - 0.012).abs() < 1e-4 && num(3) > 0.0 && num(4) == 0.012,
         "{ex0c}"
     );
+    // The estimator's own lines and the QS strings only with --verbose.
+    for detail in ["estimator:", "armed windows", "QS14"] {
+        assert!(
+            !text.contains(detail) && !err.contains(detail),
+            "{detail} without --verbose:\n{text}\n{err}"
+        );
+    }
     let protocol = text
         .lines()
         .find_map(|l| l.trim().strip_prefix("protocol: "))
         .unwrap_or_else(|| panic!("no protocol in:\n{text}"));
     assert!(protocol.ends_with("TCHPRAUTO.html") && !protocol.contains("configs/"));
-    assert!(Path::new(protocol).exists());
     assert!(text.contains("corrected errors written"), "{text}");
+    let kept = text
+        .lines()
+        .find_map(|l| l.strip_prefix("the demo's files are kept in "))
+        .and_then(|l| l.strip_suffix(" (--keep)"))
+        .unwrap_or_else(|| panic!("no kept folder in:\n{text}"));
+    assert!(
+        Path::new(protocol).starts_with(kept),
+        "{protocol} in {kept}"
+    );
+    assert!(Path::new(protocol).exists(), "{protocol}");
+    std::fs::remove_dir_all(kept).unwrap();
 }
 
 fn q(v: &serde_json::Value, cycle: usize, key: &str) -> f64 {

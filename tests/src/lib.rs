@@ -66,11 +66,27 @@ pub fn run_shipped_program(
     let _ = std::fs::remove_dir_all(&out);
     std::fs::create_dir_all(&out).unwrap();
     let mut confirm = |_: &str| true;
-    let mut progress = |_| {};
+    // A long run (451 on a lossy bus: minutes) says where it is every PROGRESS_EVERY.
+    let (name, mut said, mut probes) = (program_name(&path), std::time::Instant::now(), 0u32);
+    let mut on_event = |ev: cycles::progress::ProgressEvent| {
+        use cycles::progress::ProgressEvent;
+        probes += u32::from(matches!(ev, ProgressEvent::Probe { .. }));
+        if said.elapsed() >= PROGRESS_EVERY {
+            said = std::time::Instant::now();
+            let at = match ev {
+                ProgressEvent::Note { text, .. } => text,
+                _ => "running".into(),
+            };
+            progress(
+                "run_shipped_program",
+                format_args!("{name} ({tag}): {probes} probing moves so far; {at}"),
+            );
+        }
+    };
     let mut opts = cycles::runner::RunOptions {
         out_dir: out.clone(),
         confirm: &mut confirm,
-        progress: &mut progress,
+        progress: &mut on_event,
         kinematics: Some(out.join("kinematics.toml")),
         estimator: None,
     };
@@ -103,17 +119,43 @@ pub fn cycles_config(sc: &Scenario) -> cycles::CyclesConfig {
     cfg
 }
 
-/// A fresh folder per call for a preset table the test may write.
+/// A fresh folder per call for a preset table the test may write, inside
+/// [`process_temp_dir`].
 fn temp_presets_path(shipped: &Path) -> PathBuf {
     use std::sync::atomic::{AtomicU32, Ordering};
     static N: AtomicU32 = AtomicU32::new(0);
-    let dir = std::env::temp_dir().join(format!(
-        "pbtest-presets-{}-{}",
-        std::process::id(),
-        N.fetch_add(1, Ordering::Relaxed)
-    ));
+    let dir = process_temp_dir().join(format!("presets-{}", N.fetch_add(1, Ordering::Relaxed)));
     std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
     dir.join(shipped.file_name().unwrap_or_default())
+}
+
+/// This test process's folder for the files its tests write:
+/// `pbtest-<pid>/` in [`std::env::temp_dir`] (the test root under
+/// `scripts/with-test-root`). The first call removes the folders of test processes
+/// that no longer run, so a run that cannot clean up after itself (a test binary
+/// ends without a hook) is cleaned up by the next one at the latest.
+pub fn process_temp_dir() -> &'static Path {
+    static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    DIR.get_or_init(|| {
+        let tmp = std::env::temp_dir();
+        remove_dead_process_dirs(&tmp, "pbtest-");
+        let dir = tmp.join(format!("pbtest-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+        dir
+    })
+}
+
+/// Removes the folders `<prefix><pid>` in `tmp` whose process no longer runs.
+pub fn remove_dead_process_dirs(tmp: &Path, prefix: &str) {
+    for entry in std::fs::read_dir(tmp).into_iter().flatten().flatten() {
+        let name = entry.file_name();
+        let Some(pid) = name.to_str().and_then(|n| n.strip_prefix(prefix)) else {
+            continue;
+        };
+        if pid.parse::<u32>().is_ok() && !Path::new("/proc").join(pid).exists() {
+            let _ = std::fs::remove_dir_all(entry.path());
+        }
+    }
 }
 
 /// A unique name per test (and process) for iceoryx2 services.
@@ -125,4 +167,22 @@ pub fn unique_service(test: &str) -> String {
         std::process::id(),
         N.fetch_add(1, Ordering::Relaxed)
     )
+}
+
+/// How often [`run_shipped_program`] says where a long run is.
+const PROGRESS_EVERY: std::time::Duration = std::time::Duration::from_secs(20);
+
+fn program_name(path: &Path) -> String {
+    path.file_name()
+        .unwrap_or_default()
+        .to_string_lossy()
+        .into_owned()
+}
+
+/// A progress line of a long test on the terminal, also when libtest captures the
+/// test's output (it captures `println!`/`eprintln!`, not writes to the stderr handle):
+/// `scripts/test` is never silent for a minute. `file` names the test file.
+pub fn progress(file: &str, line: std::fmt::Arguments<'_>) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stderr().lock(), "    [{file}] {line}");
 }

@@ -11,7 +11,9 @@ use hal::can::TransportErrorKind;
 use hal::master::{CanMachine, MasterOptions, Pacing};
 use hal::{Axis, AxisPositions, ContactSample, ErrorKind, Machine, SampleSink, SinkError};
 use probebridge_tests::conformance::Held;
-use probebridge_tests::{configs_dir, machine_config, run_shipped_program, table_ac_plane};
+use probebridge_tests::{
+    configs_dir, machine_config, progress, run_shipped_program, table_ac_plane,
+};
 use sim::machine::{SimMachine, SimRunner};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -166,8 +168,16 @@ fn under_faults(
     heartbeat_timeout_ms: Option<u16>,
 ) -> Vec<(u64, Outcome)> {
     let sc = load(scenario);
+    let t0 = std::time::Instant::now();
     let mut clean = open_with(&sc, BusFaults::new(0), heartbeat_timeout_ms).unwrap();
     let reference = run_shipped_program(&mut clean.machine, program, &sc, "clean");
+    progress(
+        "bus_faults",
+        format_args!(
+            "{program} on {scenario} without faults: the reference ({:.1} s)",
+            t0.elapsed().as_secs_f64()
+        ),
+    );
     assert!(
         reference.completed(),
         "fault-free {program}: {}",
@@ -177,6 +187,7 @@ fn under_faults(
     let mut outcomes = Vec::new();
     for seed in seeds {
         let what = format!("{program} on {scenario}, seed {seed}");
+        let t0 = std::time::Instant::now();
         let outcome = match open_with(&sc, BusFaults::both(seed, rates), heartbeat_timeout_ms) {
             Ok(mut f) => {
                 let report = run_shipped_program(&mut f.machine, program, &sc, &format!("s{seed}"));
@@ -190,6 +201,10 @@ fn under_faults(
                 Outcome::Failed(e.to_string())
             }
         };
+        progress(
+            "bus_faults",
+            format_args!("{what}: {outcome:?} ({:.1} s)", t0.elapsed().as_secs_f64()),
+        );
         if let Outcome::Failed(why) = &outcome {
             assert!(is_clear(why), "{what}: unclear failure: {why}");
         }
@@ -431,9 +446,12 @@ fn lost_latch_frames_are_probed_again() {
         let report = run_shipped_program(&mut m, "431-plane.h", &sc, &format!("latch{seed}"));
         let o = judge(&reference, &report, &format!("lost latches, seed {seed}"));
         let n = f.control.counts();
-        println!(
-            "lost touch probe frames, seed {seed}: {o:?}; {} dropped, {} contact(s) lost and probed again",
-            n.dropped, m.lost
+        progress(
+            "bus_faults",
+            format_args!(
+                "lost touch probe frames, seed {seed}: {o:?}; {} dropped, {} contact(s) lost and probed again",
+                n.dropped, m.lost
+            ),
         );
         match &o {
             Outcome::Failed(why) => assert!(why.contains("latch frame of node"), "{why}"),

@@ -17,10 +17,82 @@ use cycles::progress::ProgressEvent;
 use cycles::runner::{run_program, RunOptions};
 use cycles::CyclesConfig;
 use hal::{Axis, AxisPositions, Machine, ProbeMove};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-pub fn run(machine: &MachineOptions) -> Result<(), String> {
+/// What the demo keeps and prints besides its results.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct DemoOutput {
+    /// Keep the temporary folder (`--keep`) and say where it is.
+    pub keep: bool,
+    /// Also print the estimator process's own lines and the drives' start-up detail
+    /// (`--verbose`).
+    pub verbose: bool,
+}
+
+/// The demo's temporary folder, `probebridge-demo-<pid>` in the temporary folder: its
+/// 451 program, the copies it writes, the protocol and the estimator's log. Removed
+/// when dropped (at the end, after an error, after a stop signal), unless kept.
+struct Scratch {
+    dir: PathBuf,
+    keep: bool,
+}
+
+impl Scratch {
+    fn create(keep: bool) -> Result<Self, String> {
+        let dir = std::env::temp_dir().join(format!("probebridge-demo-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        Ok(Self { dir, keep })
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        if self.keep {
+            say!(
+                "the demo's files are kept in {} (--keep)",
+                self.dir.display()
+            );
+        } else {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+    }
+}
+
+pub fn run(machine: &MachineOptions, output: DemoOutput) -> Result<(), String> {
+    let scratch = Scratch::create(output.keep)?;
+    let log = scratch.dir.join("estimator.log");
+    let result = demo(machine, output, &scratch.dir, &log);
+    if result.is_err() && !output.verbose {
+        // What the estimator said goes with the error (its log is removed with the folder).
+        for line in std::fs::read_to_string(&log).unwrap_or_default().lines() {
+            crate::tell!("  {line}");
+        }
+    }
+    result
+}
+
+/// The estimator process; its own lines (run ids, its fits, its armed windows) go to
+/// `log` unless `verbose`.
+fn start_estimator(service: &str, verbose: bool, log: &Path) -> Result<EstimatorChild, String> {
+    let exe = std::env::current_exe().map_err(|e| format!("cannot start the estimator: {e}"))?;
+    let mut command = std::process::Command::new(exe);
+    command.args(["estimator", "--service", service]);
+    if !verbose {
+        let file = std::fs::File::create(log).map_err(|e| format!("{}: {e}", log.display()))?;
+        command.stderr(file);
+    }
+    EstimatorChild::spawn_command(command, service, crate::ipc::START_TIMEOUT)
+        .map_err(|e| format!("cannot start the estimator: {e}"))
+}
+
+fn demo(
+    machine: &MachineOptions,
+    output: DemoOutput,
+    dir: &Path,
+    log: &Path,
+) -> Result<(), String> {
     let mut opts = machine.clone();
     opts.realtime = true;
     if opts.service == super::default_service() {
@@ -28,8 +100,7 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
         opts.service = format!("probebridge-demo-{}", std::process::id());
     }
     say!("probebridge demo: starting the estimator process ...");
-    let estimator = EstimatorChild::spawn(&opts.service, crate::ipc::START_TIMEOUT)
-        .map_err(|e| format!("cannot start the estimator: {e}"))?;
+    let estimator = start_estimator(&opts.service, output.verbose, log)?;
     if opts.modbus.is_some() {
         say!("starting the simulated machine behind a PLC and connecting over Modbus ...");
     } else {
@@ -37,7 +108,7 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
     }
     let mut s = Session::open(&opts).map_err(|e| e.to_string())?;
     say!("  machine {}: {}", s.config.name, s.config.description);
-    if let Some(startup) = &s.startup {
+    if let Some(startup) = s.startup.as_ref().filter(|_| output.verbose) {
         for d in &startup.drives {
             say!("  {d}");
         }
@@ -122,7 +193,7 @@ pub fn run(machine: &MachineOptions) -> Result<(), String> {
     }
     report_sphere(&estimator, run_id, sphere, probe.radius)?;
     s.close()?;
-    kinematics(&opts, &estimator)
+    kinematics(&opts, &estimator, output, dir)
 }
 
 /// The sphere the estimator process fitted from run `run_id`'s contacts, against the
@@ -226,12 +297,10 @@ fn demo_range(axis: Axis, cfg: &hal::config::MachineConfig) -> Option<(f64, f64,
     (end > start).then_some((start, end, n))
 }
 
-/// A temporary folder for the demo's 451 run, with copies of what it writes: the
-/// preset table (Q431 = 1 sets the preset; `cfg` is pointed at the copy) and the
-/// machine's kinematics file (returned). Nothing under `configs/` changes.
-fn scratch_files(cfg: &mut CyclesConfig) -> Result<(PathBuf, PathBuf), String> {
-    let dir = std::env::temp_dir().join(format!("probebridge-demo-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+/// Copies in the demo's folder `dir` of what its 451 run writes: the preset table
+/// (Q431 = 1 sets the preset; `cfg` is pointed at the copy) and the machine's
+/// kinematics file (returned). Nothing under `configs/` changes.
+fn scratch_files(cfg: &mut CyclesConfig, dir: &Path) -> Result<PathBuf, String> {
     cfg.presets.path = dir.join(
         cfg.presets
             .path
@@ -240,12 +309,10 @@ fn scratch_files(cfg: &mut CyclesConfig) -> Result<(PathBuf, PathBuf), String> {
     );
     let shipped = ActiveKinematics::default_path(&cfg.machine);
     let kin = dir.join(shipped.file_name().unwrap_or_default());
-    let _ = std::fs::remove_file(&kin);
-    let _ = std::fs::remove_file(kin.with_extension("toml.prev"));
     if shipped.exists() {
         std::fs::copy(&shipped, &kin).map_err(|e| format!("{}: {e}", shipped.display()))?;
     }
-    Ok((dir, kin))
+    Ok(kin)
 }
 
 /// What mode 1 can and cannot correct, with this scenario's injected errors: it
@@ -276,7 +343,12 @@ fn mode1_line(measured: &[Axis], scenario: &sim::scenario::Scenario) -> String {
 }
 
 /// Cycle 451 mode 1 on the scenario's rotary axes; see the module doc.
-fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), String> {
+fn kinematics(
+    opts: &MachineOptions,
+    estimator: &EstimatorChild,
+    output: DemoOutput,
+    dir: &Path,
+) -> Result<(), String> {
     let mut opts = opts.clone();
     opts.realtime = false;
     let mut s = Session::open(&opts).map_err(|e| e.to_string())?;
@@ -287,7 +359,7 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
     let sphere = scenario.spheres[0];
     let mut cfg = cycles_config(&s.config, Some(&scenario)).map_err(|e| e.to_string())?;
     let probe = cfg.probes[0].clone();
-    let (dir, kin) = scratch_files(&mut cfg)?;
+    let kin = scratch_files(&mut cfg, dir)?;
     let before = ActiveKinematics::load(&kin, &cfg.machine).map_err(|e| e.to_string())?;
 
     let above = sphere.center[2] + sphere.radius + probe.radius + probe.set_up + 5.0;
@@ -304,8 +376,15 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
             .collect::<Vec<_>>()
             .join(" and ")
     );
-    say!("  program {}", program_path.display());
-    say!("  kinematics: a temporary copy, {}", kin.display());
+    say!(
+        "  its program, a copy of the kinematics file and the protocol go into {} ({})",
+        dir.display(),
+        if output.keep {
+            "kept at the end: --keep"
+        } else {
+            "removed at the end; --keep keeps it"
+        }
+    );
     let mut spheres = 0usize;
     let mut progress = |ev: ProgressEvent| {
         if let ProgressEvent::Note { text, .. } = ev {
@@ -319,7 +398,7 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
     let mut ipc = IpcEstimator::new(estimator.client(), Duration::from_secs(10));
     let t0 = std::time::Instant::now();
     let mut run = RunOptions {
-        out_dir: dir.clone(),
+        out_dir: dir.to_path_buf(),
         confirm: &mut confirm,
         progress: &mut progress,
         kinematics: Some(kin.clone()),
@@ -344,18 +423,23 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
         t0.elapsed().as_secs_f64(),
         k.estimator
     );
-    say!("  error       before       after    injected (scenario truth)");
+    say!("  error       before   after ± u (k = 1)       injected (scenario truth)");
     for a in &measured {
         for name in cycles::iso230_7::error_names(*a) {
             let b = before.error(name);
             let after = k.errors_after.get(*name).copied().unwrap_or(b);
+            let u = k
+                .errors_u
+                .get(*name)
+                .map_or_else(|| " ".repeat(11), |u| format!(" ± {u:.6}"));
             let truth = scenario.truth.get(name).unwrap_or(0.0);
             say!(
-                "  {name}  {b:+10.6}  {after:+10.6}  {truth:+10.6}{}",
+                "  {name}  {b:+10.6}  {after:+10.6}{u}  {truth:+10.6}{}",
                 if after != b { "  corrected" } else { "" }
             );
         }
     }
+    say!("  (mm and degrees; u: the standard uncertainty the probe's scatter puts into the result, k = 1; an error without one was not identified)");
     for a in &k.axes {
         say!(
             "  axis {}: dispersion {:.6} -> {:.6} mm (Q14x), max deviation {:.6} -> {:.6} mm",
@@ -366,8 +450,10 @@ fn kinematics(opts: &MachineOptions, estimator: &EstimatorChild) -> Result<(), S
             a.max_after
         );
     }
-    for (name, v) in &result.qs {
-        say!("  {name} = \"{v}\"");
+    if output.verbose {
+        for (name, v) in &result.qs {
+            say!("  {name} = \"{v}\"");
+        }
     }
     say!("{}", mode1_line(&measured, &scenario));
     say!(

@@ -6,15 +6,28 @@ use std::process::{Command, Output};
 
 /// The binary, with a state directory of its own for each command (a fresh folder:
 /// the machine's state seeded from `configs/` as on a first run), so that tests never
-/// share state with each other or with the user's `~/.local/state`.
+/// share state with each other or with the user's `~/.local/state`. The folders live
+/// in `pb-cli-state-<pid>/` in the temporary folder (the test root under
+/// `scripts/with-test-root`); a test process removes the ones of processes that no
+/// longer run, so they do not pile up even outside a test root.
 pub fn bin() -> Command {
     use std::sync::atomic::{AtomicUsize, Ordering};
     static N: AtomicUsize = AtomicUsize::new(0);
-    let state = std::env::temp_dir().join(format!(
-        "pb-cli-state-{}-{}",
-        std::process::id(),
-        N.fetch_add(1, Ordering::Relaxed)
-    ));
+    static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    let dir = DIR.get_or_init(|| {
+        let tmp = std::env::temp_dir();
+        for entry in std::fs::read_dir(&tmp).into_iter().flatten().flatten() {
+            let name = entry.file_name();
+            let Some(pid) = name.to_str().and_then(|n| n.strip_prefix("pb-cli-state-")) else {
+                continue;
+            };
+            if pid.parse::<u32>().is_ok() && !Path::new("/proc").join(pid).exists() {
+                let _ = std::fs::remove_dir_all(entry.path());
+            }
+        }
+        tmp.join(format!("pb-cli-state-{}", std::process::id()))
+    });
+    let state = dir.join(N.fetch_add(1, Ordering::Relaxed).to_string());
     let _ = std::fs::remove_dir_all(&state);
     let mut c = Command::new(env!("CARGO_BIN_EXE_probebridge"));
     c.env("XDG_STATE_HOME", &state)
