@@ -139,6 +139,36 @@ fn a_contact_beyond_q407_and_the_reach_names_q407_r_and_the_preset_or_the_start(
     }
 }
 
+/// Cycle 460's case of the same kind (case 2092 of seed 3407, the 20 000 cases of issue
+/// 34's figures): Q407 3.3 mm small and the start 1.47 x the reach off the centre on
+/// the horizontal X machine; a locating point's move to its start met the sphere and
+/// the message named nothing. It names Q407, the probe table's R and where to start.
+#[test]
+fn a_460_contact_beyond_q407_and_the_reach_names_q407_r_and_the_start() {
+    let case = Case {
+        machine: 2.0,
+        cycle: 460.0,
+        off: 1.47,
+        off_dir: 81.3,
+        rise: -0.218,
+        q407_err: -0.2678,
+        ..Case::nominal()
+    };
+    let t = operator_trials::trial(&case);
+    assert_eq!(t.violations, vec![], "{:?}", t.message);
+    assert_ne!(t.outcome, Outcome::Ok);
+    let m = t.message.unwrap_or_default();
+    if t.outcome == Outcome::Contact {
+        for named in [
+            "check Q407 (typed",
+            "the probe table's R",
+            "position the probe over the sphere centre",
+        ] {
+            assert!(m.contains(named), "{named:?} not in {m}");
+        }
+    }
+}
+
 /// `--jobs`: the cases on two threads give the summary of the sequential run (the
 /// same outcomes per cycle, backends and findings), case for case in order.
 #[test]
