@@ -41,18 +41,31 @@ impl Leg {
 
     /// This move's error: a contact names the route and what to check.
     fn error<E: hal::machine::Error>(&self, e: &E) -> CycleError {
-        match CycleError::machine(&self.step, e) {
-            CycleError::Machine {
-                step,
-                kind: kind @ (ErrorKind::ProbeCollision | ErrorKind::AlreadyDeflected),
-                message,
-            } => CycleError::Machine {
-                step: format!("{step}, {}", self.route),
-                kind,
-                message: format!("{message}; {}", self.check),
-            },
-            other => other,
-        }
+        contact_names(CycleError::machine(&self.step, e), &self.route, || {
+            self.check.clone()
+        })
+    }
+}
+
+/// A positioning move's error `e`: a contact (the probe deflected on the way, or
+/// already before it) gets `route` added to its step and what to check (`check`,
+/// made only then) added to its message; any other error is returned as it is.
+pub(crate) fn contact_names(
+    e: CycleError,
+    route: &str,
+    check: impl FnOnce() -> String,
+) -> CycleError {
+    match e {
+        CycleError::Machine {
+            step,
+            kind: kind @ (ErrorKind::ProbeCollision | ErrorKind::AlreadyDeflected),
+            message,
+        } => CycleError::Machine {
+            step: format!("{step}, {route}"),
+            kind,
+            message: format!("{message}; {}", check()),
+        },
+        other => other,
     }
 }
 

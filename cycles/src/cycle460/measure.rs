@@ -112,6 +112,10 @@ pub(super) struct Probing<'a, 'c, M: Machine> {
     pub rs: f64,
     /// SET_UP + Q320.
     pub clear: f64,
+    /// Whether the sphere has been located (its radius checked against Q407 and the
+    /// table's R, its centre against the reach): what a contact while positioning
+    /// tells the operator to check ([`Probing::contact_check`]).
+    pub located: bool,
 }
 
 impl<M: Machine> Probing<'_, '_, M> {
@@ -127,9 +131,40 @@ impl<M: Machine> Probing<'_, '_, M> {
             target,
             feed: probe.fmax,
         });
-        self.machine
-            .move_to(&target, probe.fmax)
-            .map_err(|e| CycleError::machine(step, &e))
+        let done = self.machine.move_to(&target, probe.fmax);
+        done.map_err(|e| match CycleError::machine(step, &e) {
+            // The planner's refusal: nothing moved, and it says what to check.
+            e @ CycleError::Machine { .. } if e.to_string().ends_with("nothing moved") => e,
+            e => crate::positioning::contact_names(
+                e,
+                &format!("positioning to {target} (machine coordinates)"),
+                || self.contact_check(),
+            ),
+        })
+    }
+
+    /// What a contact during a positioning move tells the operator to check. Until the
+    /// sphere is located every move is planned with Q407 + the table's R (up to
+    /// maxDevCalBall + [`MAX_STYLUS_CHANGE`] larger) about where the start puts it: a
+    /// larger sphere, or one further off than 1.5 x the reach, is met on the way, so
+    /// the message names Q407, the probe table's R and where to start. Located, its
+    /// size and place are measured, and every move follows them.
+    fn contact_check(&self) -> String {
+        if self.located {
+            return format!(
+                "the sphere was located and measured, so it moved or is larger than measured: check that the sphere is clamped firmly and the stylus is tight, and Q320 = {:.4} mm (the clearance of every approach)",
+                self.p.clearance
+            );
+        }
+        let r = self.call.tool.probe.calibration().r;
+        format!(
+            "the sphere is larger than Q407 + R = {:.4} mm (+ {:.4} mm), or further off, than this move was planned for: check Q407 (typed {:.4} mm, the sphere's radius), the probe table's R ({r:.4} mm, left from another stylus?), and where the probe stood before the cycle: position the probe over the sphere centre (at most {:.3} mm off it), about SET_UP + Q320 = {:.3} mm above the sphere",
+            self.p.sphere_radius + r,
+            self.radius_planned(),
+            self.p.sphere_radius,
+            START_REACH * (self.p.sphere_radius + r),
+            self.clear
+        )
     }
 
     /// Probes along `dir` from where the probe is, up to `max` mm; the latched ball
@@ -460,6 +495,7 @@ impl<M: Machine> Probing<'_, '_, M> {
             )));
         }
         self.rs = s;
+        self.located = true;
         let block = self.block();
         (self.ctx.progress)(ProgressEvent::Note {
             block,

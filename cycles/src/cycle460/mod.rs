@@ -134,6 +134,7 @@ impl MeasuringCycle for CalibrationParams {
         let probed = Probing {
             rs: self.sphere_radius + old.r,
             clear: probe.set_up + self.clearance,
+            located: false,
             machine,
             ctx: &mut *ctx,
             call,

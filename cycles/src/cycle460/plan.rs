@@ -70,6 +70,7 @@ pub fn plan_moves(
             Probing {
                 rs,
                 clear,
+                located: false,
                 machine: &mut machine,
                 ctx: &mut ctx,
                 call,

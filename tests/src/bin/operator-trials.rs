@@ -28,10 +28,11 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.iter().any(|a| a == "--help" || a == "-h") {
         println!(
-            "operator-trials [--cases N] [--seed S] [--can F] [--modbus F] [--shrink K] [--budget B] [--verbose]\n\
+            "operator-trials [--cases N] [--seed S] [--can F] [--modbus F] [--shrink K] [--budget B] [--jobs J] [--verbose]\n\
              operator-trials --seed S --case I | --genes name=value,... | --nominal\n\
              N cases (default 200) of seed S (default 1); fractions F of them over CANopen and Modbus\n\
-             (default 0.03 each); K violations of each kind shrunk (default 1) with at most B trials each (default 150)."
+             (default 0.03 each); K violations of each kind shrunk (default 1) with at most B trials each (default 150);\n\
+             the cases on J threads (default 1; the summary is the same but for its duration)."
         );
         return;
     }
@@ -43,9 +44,10 @@ fn main() {
             arg(&args, "--modbus", 0.03)?,
             arg(&args, "--shrink", 1.0)? as usize,
             arg(&args, "--budget", 150.0)? as usize,
+            arg(&args, "--jobs", 1.0)? as usize,
         ))
     })();
-    let (cases, seed, can, modbus, per_kind, budget) = match parsed {
+    let (cases, seed, can, modbus, per_kind, budget, jobs) = match parsed {
         Ok(p) => p,
         Err(e) => {
             eprintln!("operator-trials: {e}");
@@ -111,23 +113,24 @@ fn main() {
     }
     let shares = Shares { can, modbus };
     let policy = ShrinkPolicy { per_kind, budget };
-    let summary = operator_trials::run(seed, cases, &shares, &policy, |i, case, t| {
-        if verbose || !t.violations.is_empty() {
-            eprintln!(
-                "case {i}: cycle {} machine {} backend {}: {} {}{}",
-                case.cycle,
-                case.machine,
-                case.backend,
-                t.outcome.name(),
-                t.message.as_deref().unwrap_or(""),
-                if t.violations.is_empty() {
-                    String::new()
-                } else {
-                    format!(" [{} violations]", t.violations.len())
-                }
-            );
-        }
-    });
+    let summary =
+        operator_trials::run_on_threads(seed, cases, &shares, &policy, jobs, |i, case, t| {
+            if verbose || !t.violations.is_empty() {
+                eprintln!(
+                    "case {i}: cycle {} machine {} backend {}: {} {}{}",
+                    case.cycle,
+                    case.machine,
+                    case.backend,
+                    t.outcome.name(),
+                    t.message.as_deref().unwrap_or(""),
+                    if t.violations.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" [{} violations]", t.violations.len())
+                    }
+                );
+            }
+        });
     print!("{}", summary.report());
     println!("{}", summary.line());
     if !summary.findings.is_empty() {

@@ -62,10 +62,7 @@ pub fn names_what_to_check(msg: &str) -> bool {
         .split(" (the program's coordinates were relative to")
         .next()
         .unwrap_or(msg);
-    let msg = msg
-        .split("touched while positioning to")
-        .next()
-        .unwrap_or(msg);
+    let msg = without_where_it_went(msg);
     let b = msg.as_bytes();
     let parameter = b.windows(2).any(|w| w[0] == b'Q' && w[1].is_ascii_digit());
     let position = b.windows(3).any(|w| {
@@ -83,6 +80,20 @@ pub fn names_what_to_check(msg: &str) -> bool {
         ]
         .iter()
         .any(|k| msg.contains(k))
+}
+
+/// `msg` without the world machine's words on where a positioning move went (`the
+/// probe touched while positioning to [x, y, z]`, tests/src/world_machine.rs): they
+/// name the move, not what to check. What the cycle adds after them stays.
+fn without_where_it_went(msg: &str) -> String {
+    const WENT: &str = "touched while positioning to [";
+    match msg.split_once(WENT) {
+        Some((before, after)) => {
+            let rest = after.split_once(']').map_or("", |(_, r)| r);
+            format!("{before}{rest}")
+        }
+        None => msg.to_string(),
+    }
 }
 
 fn is_contact(a: &Act) -> bool {

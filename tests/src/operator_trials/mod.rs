@@ -295,6 +295,25 @@ pub fn run(
     cases: u64,
     shares: &draw::Shares,
     policy: &ShrinkPolicy,
+    progress: impl FnMut(u64, &Case, &Trial),
+) -> Summary {
+    run_on_threads(seed, cases, shares, policy, 1, progress)
+}
+
+/// How many cases the threads of [`run_on_threads`] try before their trials are
+/// taken in order.
+const BATCH: u64 = 64;
+
+/// [`run`] with the trials on `jobs` threads (each case is independent: case `i` of
+/// `seed` is always the same case). The trials are taken in the order of their index,
+/// and shrinking runs on the caller's thread, so the summary is the sequential one
+/// (but for its duration) and `progress` sees the cases in order.
+pub fn run_on_threads(
+    seed: u64,
+    cases: u64,
+    shares: &draw::Shares,
+    policy: &ShrinkPolicy,
+    jobs: usize,
     mut progress: impl FnMut(u64, &Case, &Trial),
 ) -> Summary {
     let start = Instant::now();
@@ -303,9 +322,55 @@ pub fn run(
         ..Summary::default()
     };
     let mut shrunk_kinds: BTreeMap<String, usize> = BTreeMap::new();
-    for i in 0..cases {
-        let case = draw::draw(seed, i, shares);
-        let t = trial(&case);
+    let jobs = jobs.max(1) as u64;
+    let mut first = 0;
+    while first < cases {
+        let end = cases.min(first + BATCH * jobs);
+        // Every `jobs`-th case of the batch from its `k`-th.
+        let stride = move |k: u64| {
+            (first + k..end)
+                .step_by(jobs as usize)
+                .map(|i| {
+                    let case = draw::draw(seed, i, shares);
+                    let t = trial(&case);
+                    (i, case, t)
+                })
+                .collect::<Vec<_>>()
+        };
+        let mut tried: Vec<(u64, Case, Trial)> = if jobs == 1 {
+            stride(0)
+        } else {
+            std::thread::scope(|scope| {
+                let threads: Vec<_> = (0..jobs).map(|k| scope.spawn(move || stride(k))).collect();
+                threads
+                    .into_iter()
+                    .flat_map(|h| h.join().expect("a trial thread panicked"))
+                    .collect()
+            })
+        };
+        tried.sort_by_key(|(i, ..)| *i);
+        first = end;
+        for (i, case, t) in tried {
+            sum.add(i, case, t, policy, &mut shrunk_kinds, &mut progress);
+        }
+    }
+    sum.seconds = start.elapsed().as_secs_f64();
+    sum
+}
+
+impl Summary {
+    /// Counts case `i`'s trial `t` and its violations, the first of each kind
+    /// (invariant, cycle, class) shrunk as `policy` allows.
+    fn add(
+        &mut self,
+        i: u64,
+        case: Case,
+        t: Trial,
+        policy: &ShrinkPolicy,
+        shrunk_kinds: &mut BTreeMap<String, usize>,
+        progress: &mut impl FnMut(u64, &Case, &Trial),
+    ) {
+        let sum = self;
         progress(i, &case, &t);
         sum.cases += 1;
         sum.backends[(case.backend as usize).min(2)] += 1;
@@ -329,8 +394,6 @@ pub fn run(
             });
         }
     }
-    sum.seconds = start.elapsed().as_secs_f64();
-    sum
 }
 
 /// Whether the trial's cycle results all passed (for callers that count).

@@ -40,6 +40,7 @@ impl<M: Machine> Measure<'_, '_, M> {
             .map_err(|e| self.not_found(e))?;
         let touch = Vector3::from(first.positions.xyz());
         let rough = self.first_pass(&start, run, first)?;
+        self.checked = true;
         let n = self.frame(&start)[0];
         self.note(format!(
             "locating the sphere (first pass): the sphere centre is about {:.4} mm from below the start position; measuring it again around that centre",
@@ -105,7 +106,6 @@ impl<M: Machine> Measure<'_, '_, M> {
     /// the preset; 1/3: where to pre-position, and the rotary axes when they stood
     /// off 0).
     fn not_found(&self, e: CycleError) -> CycleError {
-        let rs = self.plan.params.sphere_radius + self.probe.radius;
         match e {
             e if self.at_datum() => self.not_at_preset(e),
             CycleError::Machine {
@@ -115,15 +115,61 @@ impl<M: Machine> Measure<'_, '_, M> {
             } if kind == hal::ErrorKind::NotTriggered => CycleError::Machine {
                 step,
                 kind,
-                message: format!(
-                    "{message}; before cycle 451 position the probe over the sphere centre (at most {:.3} mm off it in the working plane), about Q320 + SET_UP = {:.3} mm above the sphere{}",
-                    LOCATE_REACH * rs,
-                    self.clearance(),
-                    turned_table(&self.start)
-                ),
+                message: format!("{message}; before cycle 451 {}", self.where_to_start()),
             },
             e => e,
         }
+    }
+
+    /// Where the docs ask the probe to stand before a 451 with Q431 = 1/3 (and the
+    /// rotary axes, when they stood off 0).
+    fn where_to_start(&self) -> String {
+        let rs = self.plan.params.sphere_radius + self.probe.radius;
+        format!(
+            "position the probe over the sphere centre (at most {:.3} mm off it in the working plane), about Q320 + SET_UP = {:.3} mm above the sphere{}",
+            LOCATE_REACH * rs,
+            self.clearance(),
+            turned_table(&self.start)
+        )
+    }
+
+    /// What a contact during a positioning move of the cycle tells the operator to
+    /// check. Until the first locating pass has checked the radius, every move is
+    /// planned with Q407 + R around where the preset (Q431 = 0/2) or the start
+    /// (Q431 = 1/3) puts the sphere: a sphere larger than that, or further off than
+    /// the documented reach, is met on the way, so the message names Q407, the probe
+    /// table's R and the preset or the start. Once checked, the sphere's size is known
+    /// and every move follows where the active kinematics put it.
+    pub(super) fn contact_check(&self) -> String {
+        let p = &self.plan.params;
+        if self.checked {
+            return format!(
+                "the sphere's radius was checked when it was located, so at these angles it stands elsewhere than the active kinematics ({}) put it: check that the sphere is fixed on the table, the active kinematics, and Q320 = {:.4} mm (the clearance of every approach)",
+                self.ctx.kinematics.display(),
+                p.clearance
+            );
+        }
+        let place = if self.at_datum() {
+            format!(
+                "the preset X{:+.4} Y{:+.4} Z{:+.4} (with Q431={} the sphere centre is taken at the preset, with the rotary axes at 0, within {:.3} mm): set the preset at the sphere centre, or use Q431=1 with the probe over the sphere",
+                self.preset.x,
+                self.preset.y,
+                self.preset.z,
+                p.preset,
+                DATUM_REACH * (p.sphere_radius + self.probe.radius)
+            )
+        } else {
+            format!(
+                "where the probe stood before the cycle: {}",
+                self.where_to_start()
+            )
+        };
+        format!(
+            "the sphere is larger than Q407 + R = {:.4} mm, or further off, than this move was planned for: check Q407 (typed {:.4} mm, the sphere's radius), the probe table's R ({:.4} mm, the stylus's ball radius: calibrate it with cycle 460), and {place}",
+            p.sphere_radius + self.probe.radius,
+            p.sphere_radius,
+            self.probe.radius
+        )
     }
 
     /// Q431 = 0/2: the sphere is taken at the active preset.
@@ -368,6 +414,7 @@ impl<M: Machine> Measure<'_, '_, M> {
                 datum.z
             )));
         }
+        self.checked = true;
         self.note(format!(
             "Q431={q431}: the sphere centre is {off:.4} mm from the preset (within {tolerance:.2} mm)"
         ));

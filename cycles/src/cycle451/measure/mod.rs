@@ -109,6 +109,10 @@ pub(super) struct Measure<'a, 'c, M: Machine> {
     /// The locating measurement (Q431 = 1/3), taken as the first reference when the
     /// axes have not moved since.
     located: Option<Sphere>,
+    /// Whether the first locating pass has checked the sphere's radius (and, with
+    /// Q431 = 0/2, its distance from the preset): what a contact while positioning
+    /// tells the operator to check ([`Measure::contact_check`]).
+    checked: bool,
     /// Spheres measured so far (a sphere probed twice counts once).
     pub spheres: usize,
     /// With `mStrobeRotAxPos`: Q120..Q122 as the last strobe of the M function left
@@ -146,6 +150,7 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
             preset,
             notes: Vec::new(),
             located: None,
+            checked: false,
             spheres: 0,
             rotary_targets: BTreeMap::new(),
         })
@@ -165,7 +170,18 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
             feed,
         });
         let done = self.machine.move_to(&target, feed);
-        done.map_err(|e| self.at_rotary(CycleError::machine(step, &e)))
+        done.map_err(|e| {
+            let e = self.at_rotary(CycleError::machine(step, &e));
+            match e {
+                // The planner's refusal: nothing moved, and it says what to check.
+                CycleError::Machine { ref message, .. } if message.ends_with("nothing moved") => e,
+                e => crate::positioning::contact_names(
+                    e,
+                    &format!("positioning to {target} (machine coordinates)"),
+                    || self.contact_check(),
+                ),
+            }
+        })
     }
 
     /// A software-limit refusal names where the rotary axes stand: on a swivel head
