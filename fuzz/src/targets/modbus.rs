@@ -15,6 +15,7 @@ use hal::modbus::mailbox::{
 use hal::modbus::word_order::WordOrder;
 use probebridge::serve::handshake::{AbortReason, Action, Handshake, Outcome, Refusal, State};
 use probebridge::serve::register_map::{self as map, RegisterMap, StateView};
+use probebridge::serve::results::{self, Quantity, ResultKey};
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
@@ -259,7 +260,7 @@ fn register_map_ops(u: &mut Unstructured<'_>, sig: &mut Sig) -> Result<()> {
     // int_scale as the gateway configuration admits it: 1..1e9.
     let scale = *u.choose(&[1.0, 10_000.0, 1e9, 3.5])?;
     let mut m = RegisterMap::new(map_order(u)?, scale);
-    let names = map::slot_names();
+    let slots = results::slots();
     while !u.is_empty() {
         match u.int_in_range(0..=5)? {
             0 => {
@@ -313,12 +314,17 @@ fn register_map_ops(u: &mut Unstructured<'_>, sig: &mut Sig) -> Result<()> {
                 let seq: u16 = u.arbitrary()?;
                 let mut values = BTreeMap::new();
                 for _ in 0..u.int_in_range(0..=8)? {
-                    let name = if u.ratio(7u8, 8u8)? {
-                        u.choose(&names)?.clone()
+                    let quantity = if u.ratio(7u8, 8u8)? {
+                        u.choose(&slots)?.clone()
                     } else {
-                        String::from_utf8_lossy(u.bytes(4)?).into_owned()
+                        Quantity::Named(String::from_utf8_lossy(u.bytes(4)?).into_owned())
                     };
-                    values.insert(name, result_value(u)?);
+                    let key = if u.arbitrary()? {
+                        ResultKey::Value(quantity)
+                    } else {
+                        ResultKey::Uncertainty(quantity)
+                    };
+                    values.insert(key, result_value(u)?);
                 }
                 m.set_results(seq, &values);
                 assert_eq!(
@@ -359,16 +365,28 @@ fn handshake_ops(u: &mut Unstructured<'_>, sig: &mut Sig) -> Result<()> {
                 let req = m.request();
                 let was = h.state();
                 let refuse = u.arbitrary::<u8>()? % 4 == 0;
-                let action = h.on_request(&req, now, |p| {
-                    if refuse {
+                let action = h.on_request(&req, now);
+                if let Some(Action::Prepare(start)) = &action {
+                    assert!(was != State::Busy, "a start while busy was not refused");
+                    assert_eq!(h.starting(), Some(start), "a start not held as starting");
+                    assert_eq!(start.seq, req.seq);
+                    // Prepared off the lock (the machine thread): taken or refused.
+                    let answer = if refuse {
                         Err(Refusal::UnknownProgram)
                     } else {
-                        Ok(p)
+                        Ok(())
+                    };
+                    let taken = h.prepared(start, answer, now);
+                    assert_eq!(taken, !refuse);
+                    assert_eq!(h.starting(), None);
+                    if taken {
+                        assert_eq!(h.state(), State::Busy);
                     }
-                });
-                if let Some(Action::Start { seq, .. }) = &action {
-                    assert!(was != State::Busy, "a start while busy was not refused");
-                    assert_eq!((h.state(), *seq), (State::Busy, req.seq));
+                    assert_eq!(
+                        h.view().ack_seq,
+                        req.seq,
+                        "a prepared start not acknowledged"
+                    );
                 }
                 if matches!(action, Some(Action::Abort)) {
                     assert_eq!(was, State::Busy, "abort without a running measurement");
