@@ -13,6 +13,7 @@ mod common;
 
 use common::configs;
 use std::collections::BTreeMap;
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -88,6 +89,11 @@ fn every_shipped_example_runs_twice_in_a_row_and_the_tree_stays_as_it_was() {
     for (i, (program, scenario)) in EXAMPLES.iter().enumerate() {
         let mut results = Vec::new();
         for pass in 1..=2 {
+            // Three minutes in all: say where it is, past libtest's capture.
+            let _ = writeln!(
+                std::io::stderr().lock(),
+                "    [cli_rerun] {program} on {scenario}, run {pass} of 2"
+            );
             let json = tmp.join(format!("{program}.{pass}.json"));
             let out = common::run(
                 probebridge(&state)

@@ -9,7 +9,7 @@ use cycles::results::{ProgramReport, Status};
 use cycles::runner::{preflight_program, run_program, RunOptions};
 use probebridge_tests::conformance::{Backend, CanInproc};
 use probebridge_tests::spec451::errors_of;
-use probebridge_tests::{configs_dir, cycles_config};
+use probebridge_tests::{configs_dir, cycles_config, progress};
 use std::path::PathBuf;
 
 /// Per rotary axis: (start, end, incidence, points).
@@ -229,6 +229,11 @@ fn inaccurate_pre_positions_give_the_centred_result() {
         ),
     ];
     for (name, axis, centre, p, starts) in cases {
+        // A minute or more in all: say which machine, past libtest's capture.
+        progress(
+            "cycle451_operator",
+            format_args!("{name}: centred and off-centre starts"),
+        );
         let sc = load(name);
         let cfg = cycles_config(&sc);
         let t = "XYZ".find(axis).unwrap();
