@@ -261,20 +261,24 @@ fn cycle_451_with_one_percent_frame_loss_is_exact_or_fails_clearly() {
 /// A machine configured for a lossy bus (a heartbeat timeout of 8 producer periods):
 /// the lost SDO transfers, setpoints, SYNCs, answers, touch probe frames and latches of
 /// a whole 451 run are retried, repeated or tolerated, and it completes exactly.
+///
+/// One seed: every lost answer costs the 10 ms answer timeout, and a run took 156 s
+/// (9 s without faults); a second seed (12) also completed bit-identically and added
+/// as much to every run of the test suite.
 #[test]
 fn cycle_451_with_one_percent_frame_loss_and_lenient_heartbeats_completes_exactly() {
     let outcomes = under_faults(
         "451-check.h",
         "demo-sphere.toml",
         FaultRates::loss(0.01),
-        11..=12,
+        11..=11,
         Some(400),
     );
     let completed = outcomes
         .iter()
         .filter(|(_, o)| !matches!(o, Outcome::Failed(_)))
         .count();
-    assert!(completed >= 1, "{outcomes:?}");
+    assert_eq!(completed, 1, "{outcomes:?}");
 }
 
 #[test]
