@@ -18,7 +18,6 @@ use super::wire_time::Arbitration;
 use super::{CanFrame, CanTransport, TransportError, TransportErrorKind};
 use crate::clock::monotonic_ns;
 use core::time::Duration;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 
 /// Frames one endpoint can hold before the oldest unread are lost (reported as an
@@ -51,19 +50,6 @@ struct Slot {
     /// Virtual clock: this endpoint's now; what it sends is ready then.
     clock_ns: u64,
     ready: Arc<Condvar>,
-    /// The endpoint's receiver sleeps on `ready`. A sender wakes it only then, and once
-    /// per sleep: std's notify is a system call even with nobody waiting, and one per
-    /// frame per receiver was most of a simulated run's time.
-    waiting: bool,
-}
-
-impl Slot {
-    fn wake(&mut self) {
-        if self.waiting {
-            self.waiting = false;
-            self.ready.notify_one();
-        }
-    }
 }
 
 struct BusState {
@@ -76,15 +62,7 @@ struct BusState {
 struct Shared {
     state: Mutex<BusState>,
     clock: WireClock,
-    /// Counts the sends, so that a receiver can watch for one without the lock.
-    sends: AtomicU64,
 }
-
-/// How long a receiver with nothing queued watches for a send before it sleeps. In a
-/// simulation the peer answers within microseconds; waking a sleeping thread cost more
-/// than the work of a whole SYNC cycle (two thirds of a simulated run was the kernel
-/// putting threads to sleep and waking them).
-const SPIN_NS: u64 = 20_000;
 
 /// The bus; clone it freely, all clones are the same bus.
 #[derive(Clone)]
@@ -122,7 +100,6 @@ impl InprocBus {
                     wire,
                 }),
                 clock,
-                sends: AtomicU64::new(0),
             }),
         }
     }
@@ -157,7 +134,6 @@ impl InprocBus {
             overrun: false,
             clock_ns: 0,
             ready: ready.clone(),
-            waiting: false,
         });
         InprocEndpoint {
             bus: self.shared.clone(),
@@ -177,19 +153,7 @@ fn deliver(slots: &mut [Slot], sender: usize, frame: &CanFrame, arrival_ns: u64)
         }
         // Cannot fail: room was made above.
         let _ = s.frames.push_back((*frame, arrival_ns));
-        s.wake();
-    }
-}
-
-/// Returns when `sends` moves on from `seen` or the monotonic clock reaches `until_ns`.
-fn watch_for_send(sends: &AtomicU64, seen: u64, until_ns: u64) {
-    loop {
-        if sends.load(Ordering::Acquire) != seen || monotonic_ns() >= until_ns {
-            return;
-        }
-        // Not a bare spin: with more runnable threads than cores (tests in parallel)
-        // the peer may be the one waiting for this core.
-        std::thread::yield_now();
+        s.ready.notify_one();
     }
 }
 
@@ -238,7 +202,6 @@ impl CanTransport for InprocEndpoint {
             .slot(&mut st)
             .map_or((false, 0), |s| (s.per_node, s.clock_ns));
         let BusState { slots, wire, .. } = &mut *st;
-        self.bus.sends.fetch_add(1, Ordering::Release);
         let Some(arbitration) = wire else {
             for f in frames {
                 deliver(slots, self.id, f, 0);
@@ -266,8 +229,8 @@ impl CanTransport for InprocEndpoint {
         // to free and is scheduled by whoever looks then.
         advance(&mut st, horizon);
         // Every receiver recomputes when its next frame can arrive.
-        for s in st.slots.iter_mut().filter(|s| s.id != self.id) {
-            s.wake();
+        for s in st.slots.iter().filter(|s| s.id != self.id) {
+            s.ready.notify_one();
         }
         Ok(())
     }
@@ -276,7 +239,6 @@ impl CanTransport for InprocEndpoint {
         let clock = self.bus.clock;
         let deadline = monotonic_ns().saturating_add(timeout.as_nanos() as u64);
         let mut st = lock(&self.bus);
-        let mut may_spin = true;
         loop {
             let now = monotonic_ns();
             let horizon = match clock {
@@ -312,16 +274,6 @@ impl CanTransport for InprocEndpoint {
             if now >= deadline {
                 return Ok(None);
             }
-            // Nothing queued and nothing to wait for on a real-time wire: what comes
-            // next is a peer's send, usually within microseconds.
-            if may_spin && head.is_none() && (!timed || clock == WireClock::Virtual) {
-                may_spin = false;
-                let seen = self.bus.sends.load(Ordering::Acquire);
-                drop(st);
-                watch_for_send(&self.bus.sends, seen, deadline.min(now + SPIN_NS));
-                st = lock(&self.bus);
-                continue;
-            }
             // Wake when the next frame can arrive or be scheduled, a sender notifies,
             // or the timeout ends.
             let mut wake = deadline;
@@ -329,8 +281,6 @@ impl CanTransport for InprocEndpoint {
                 wake = wake.min(head.unwrap_or(u64::MAX));
                 wake = wake.min(next_start.unwrap_or(u64::MAX));
             }
-            // Set under the lock the senders take: none can miss this sleep.
-            slot.waiting = true;
             st = self
                 .ready
                 .wait_timeout(st, Duration::from_nanos(wake.saturating_sub(now).max(1)))
