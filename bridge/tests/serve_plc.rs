@@ -571,6 +571,30 @@ fn sighup_mid_cycle_is_a_stop_like_sigterm() {
     assert_eq!(serve.history()[0]["status"], "aborted");
 }
 
+/// A package upgrade's restart: SIGUSR1 mid-cycle lets the measurement end as it would
+/// (recorded done, not aborted), then the service exits 75 for systemd to start it
+/// again (`RestartForceExitStatus=75`).
+#[test]
+fn sigusr1_mid_cycle_restarts_after_the_measurement() {
+    let Some(py) = python() else { return };
+    let mut serve = Serve::start(
+        "sigusr1",
+        "demo-sphere.toml",
+        &[(451, "451-check.h")],
+        "heartbeat_timeout_ms = 0\n",
+    );
+    serve.plc(&py, &["start_busy", "451"]);
+    let status = serve.signal(libc::SIGUSR1);
+    assert_eq!(status.code(), Some(75), "{status:?}\n{}", serve.log());
+    let log = serve.log();
+    assert!(log.contains("after the running measurement"), "{log}");
+    assert!(log.contains("restarting as asked (SIGUSR1)"), "{log}");
+    assert!(!log.contains("Aborted("), "{log}");
+    let h = serve.history();
+    assert_eq!(h.len(), 1, "{h:?}");
+    assert_eq!(h[0]["status"], "done", "{h:?}");
+}
+
 /// Waits (polling the log, up to 60 s) until it holds `text`.
 fn wait_for_log(serve: &Serve, text: &str) {
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);

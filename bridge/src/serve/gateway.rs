@@ -446,4 +446,10 @@ impl Core {
     pub fn machine_ok(&self) -> bool {
         self.hs.machine_ok()
     }
+
+    /// No measurement runs and none is being prepared: the service may stop without
+    /// cutting one short (a restart for an upgrade waits for this).
+    pub fn between_measurements(&self) -> bool {
+        self.hs.state() != State::Busy && self.hs.starting().is_none()
+    }
 }

@@ -2,7 +2,8 @@
 //! estimator process running, and runs measurements the PLC or HMI asks for over its
 //! Modbus TCP face, one at a time. SIGTERM, SIGINT or SIGHUP abort a running
 //! measurement (the axes stop, the run ends "aborted") and the service exits 0; a
-//! second one during a slow stop exits at once (128 + signal), as `run` does.
+//! second one during a slow stop exits at once (128 + signal), as `run` does. SIGUSR1
+//! restarts it between measurements (exit 75, see [`RESTART_EXIT`]).
 
 pub mod config;
 pub mod face_log;
@@ -30,7 +31,7 @@ use handshake::{AbortReason, Handshake, State};
 use register_map::RegisterMap;
 use std::io::Write;
 use std::path::Path;
-use std::sync::atomic::{AtomicI32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 use tracing_subscriber::layer::SubscriberExt;
@@ -44,6 +45,18 @@ static ABORT: OnceLock<AbortFlag> = OnceLock::new();
 /// The signals that stop the service: SIGHUP too (a closed terminal, a stray
 /// `kill -HUP`), so it never ends with the axes moving and the run left `running`.
 const SIGNALS: [libc::c_int; 3] = [libc::SIGTERM, libc::SIGINT, libc::SIGHUP];
+
+/// SIGUSR1: restart between measurements (a package upgrade asks for it). The service
+/// ends with [`RESTART_EXIT`] once no measurement runs or is being prepared; the unit's
+/// `RestartForceExitStatus=` starts it again, on the upgraded binary.
+static RESTART_WHEN_IDLE: AtomicBool = AtomicBool::new(false);
+
+/// The exit status of a restart between measurements (EX_TEMPFAIL).
+pub const RESTART_EXIT: u8 = 75;
+
+extern "C" fn on_restart_signal(_: libc::c_int) {
+    RESTART_WHEN_IDLE.store(true, Ordering::Release);
+}
 
 extern "C" fn on_signal(sig: libc::c_int) {
     if STOP_SIGNAL
@@ -63,11 +76,18 @@ extern "C" fn on_signal(sig: libc::c_int) {
 }
 
 fn install_signal_handlers() {
-    for sig in SIGNALS {
-        // SAFETY: the handler only touches atomics and calls _exit (async-signal-safe).
+    let handlers = SIGNALS
+        .map(|sig| (sig, on_signal as extern "C" fn(libc::c_int)))
+        .into_iter()
+        .chain([(
+            libc::SIGUSR1,
+            on_restart_signal as extern "C" fn(libc::c_int),
+        )]);
+    for (sig, handler) in handlers {
+        // SAFETY: the handlers only touch atomics and call _exit (async-signal-safe).
         unsafe {
             let mut act: libc::sigaction = std::mem::zeroed();
-            act.sa_sigaction = on_signal as extern "C" fn(libc::c_int) as usize;
+            act.sa_sigaction = handler as usize;
             libc::sigemptyset(&mut act.sa_mask);
             libc::sigaction(sig, &act, std::ptr::null_mut());
         }
@@ -130,7 +150,8 @@ const TICK: Duration = Duration::from_millis(50);
 /// the moment the stall is seen).
 const FACE_DEAD: Duration = Duration::from_secs(5);
 
-/// Runs the service until SIGTERM, SIGINT or SIGHUP. Exit status 0 after a clean stop.
+/// Runs the service until SIGTERM, SIGINT or SIGHUP (exit status 0 after a clean stop),
+/// or, after SIGUSR1, until no measurement runs ([`RESTART_EXIT`]).
 pub fn run(config_path: &Path) -> Result<u8, String> {
     let mut cfg = GatewayConfig::load(config_path).map_err(|e| e.to_string())?;
     init_logging();
@@ -234,7 +255,7 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
                 o.abandon();
             }
         }
-        End::Signal(_) => {
+        End::Signal(_) | End::Restart => {
             drop(face);
             drop(opcua);
         }
@@ -246,6 +267,7 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     tracing::info!(state = lock(&shared).state().name(), "stopped");
     match end {
         End::Signal(_) => Ok(0),
+        End::Restart => Ok(RESTART_EXIT),
         End::FaceDied(name, why) => Err(format!("the {name} is dead: {why}")),
     }
 }
@@ -326,6 +348,8 @@ fn open_history(
 /// Why the service loop ended.
 enum End {
     Signal(i32),
+    /// SIGUSR1, and no measurement runs: starts are refused from here on.
+    Restart,
     /// A face (its name) ended or stalled: the service must not live on deaf.
     FaceDied(&'static str, String),
 }
@@ -337,6 +361,9 @@ impl End {
                 signal,
                 "stopping on {}: aborting a running measurement, closing the machine",
                 signal_name(*signal)
+            ),
+            End::Restart => tracing::info!(
+                "restarting as asked (SIGUSR1): no measurement runs, starts are refused"
             ),
             End::FaceDied(name, why) => tracing::error!(
                 "the {name} is dead ({why}): stopping, for systemd to restart the service"
@@ -357,6 +384,7 @@ fn supervise(
     let mut last_watchdog = Instant::now();
     let mut last = (State::Idle, true);
     let mut stall_said = [false; 2];
+    let mut restart_said = false;
     loop {
         let sig = STOP_SIGNAL.load(Ordering::Acquire);
         if sig != 0 {
@@ -391,6 +419,18 @@ fn supervise(
         let (state, machine_ok) = {
             let mut core = lock(shared);
             core.tick(now);
+            // Checked and refused under one lock: no start slips in between.
+            if RESTART_WHEN_IDLE.load(Ordering::Acquire) {
+                if core.between_measurements() {
+                    core.set_machine_ok(false);
+                    return End::Restart;
+                }
+                if !restart_said {
+                    tracing::info!("restart asked (SIGUSR1): after the running measurement");
+                    notifier.notify("STATUS=busy, restarting after this measurement");
+                    restart_said = true;
+                }
+            }
             (core.state(), core.machine_ok())
         };
         if (state, machine_ok) != last {
