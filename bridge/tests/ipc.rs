@@ -360,6 +360,83 @@ fn the_estimator_fits_a_sphere_and_answers_over_ipc() {
     assert!(log.contains("estimator: stopped"), "{log}");
 }
 
+/// A log that blocks, as a full pipe or a stalled file system does, at the first write
+/// holding `stall_at`, until `release` says go.
+struct StallingLog {
+    stall_at: &'static str,
+    release: std::sync::mpsc::Receiver<()>,
+    stalled: Arc<AtomicBool>,
+    text: Vec<u8>,
+}
+
+impl std::io::Write for StallingLog {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if !self.stalled.load(Ordering::Acquire)
+            && String::from_utf8_lossy(buf).contains(self.stall_at)
+        {
+            self.stalled.store(true, Ordering::Release);
+            let _ = self.release.recv();
+        }
+        self.text.extend_from_slice(buf);
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// The reply goes out before the estimator logs the fit: a log that blocks (the vcan
+/// VM's shared folder once held a line for over 10 s) does not time the cycle out.
+#[test]
+fn a_log_that_blocks_does_not_hold_up_the_reply() {
+    let prefix = unique_prefix("stalled-log");
+    let stop = Arc::new(AtomicBool::new(false));
+    let stalled = Arc::new(AtomicBool::new(false));
+    let (go, release) = std::sync::mpsc::channel();
+    let handle = {
+        let (stop, stalled, prefix) = (stop.clone(), stalled.clone(), prefix.clone());
+        std::thread::spawn(move || {
+            let mut log = StallingLog {
+                stall_at: "ball-centre sphere",
+                release,
+                stalled,
+                text: Vec::new(),
+            };
+            let options = EstimatorOptions {
+                handle_signals: false,
+                ..EstimatorOptions::default()
+            };
+            let result = run_estimator_with(&prefix, &options, &stop, &mut log);
+            (result.map_err(|e| e.to_string()), log.text)
+        })
+    };
+    let client = EstimatorClient::connect(&prefix, T).unwrap();
+    let mut publisher = ContactPublisher::new(&prefix).unwrap();
+    publisher.update_connections().unwrap();
+    let run = 4512;
+    let points = sphere_points([10.0, 20.0, 30.0], 14.0, 9);
+    for (i, p) in points.iter().enumerate() {
+        let mut s = sample(i as u64 + 1, run, *p);
+        if i + 1 == points.len() {
+            s.flags |= FLAG_END_OF_RUN;
+        }
+        publisher.publish(&s).unwrap();
+    }
+    let r = client.fit_sphere(run, T);
+    let was_stalled = stalled.load(Ordering::Acquire);
+    go.send(()).unwrap();
+    let r = r.unwrap();
+    assert!(r.ok && (r.radius - 14.0).abs() < 1e-9, "{r:?}");
+    assert!(was_stalled, "the fit's log line was not being written");
+    stop.store(true, Ordering::Relaxed);
+    drop(publisher);
+    drop(client);
+    let (result, text) = handle.join().unwrap();
+    result.unwrap();
+    let text = String::from_utf8(text).unwrap();
+    assert!(text.contains("run 4512 ball-centre sphere"), "{text}");
+}
+
 #[test]
 fn unknown_runs_and_bad_requests_get_error_replies_not_hangs() {
     let prefix = unique_prefix("unknown");

@@ -42,5 +42,8 @@ pub fn run(args: EstimatorArgs) -> Result<(), String> {
         armed_receive: args.armed_receive,
         avoid_cpu: args.avoid_cpu,
     };
-    run_estimator_with(&args.service, &options, &stop, std::io::stderr()).map_err(|e| e.to_string())
+    // One write per line: the bridge writes to the same stderr, and an unbuffered
+    // writeln! is several writes that its lines could land between.
+    let log = std::io::LineWriter::new(std::io::stderr());
+    run_estimator_with(&args.service, &options, &stop, log).map_err(|e| e.to_string())
 }

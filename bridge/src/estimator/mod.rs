@@ -304,10 +304,13 @@ fn serve(
 }
 
 /// Answers every pending request; true when one asked the estimator to shut down.
+/// What it has to say of a request is written after the reply is sent: a log that
+/// blocks (a full pipe, a stalled file system: a VM's shared folder once held a line
+/// for over 10 s) must not hold up the answer a cycle waits for.
 fn serve_requests(
     ports: &Ports,
     intake: &mut Intake,
-    mut log: &mut dyn Write,
+    log: &mut dyn Write,
 ) -> Result<bool, EstimatorError> {
     let mut shutdown = false;
     while let Some(active) = ports
@@ -316,9 +319,13 @@ fn serve_requests(
         .map_err(|e| IpcError::iox("receive request", e))?
     {
         let request = *active.payload();
+        let mut said: Vec<u8> = Vec::new();
         // A request that was sent before the samples it is about were drained.
-        intake.drain(ports.contacts, &mut *log)?;
-        let mut reply = intake.store.answer(&request, &mut log);
+        if let Err(e) = intake.drain(ports.contacts, &mut said) {
+            let _ = log.write_all(&said);
+            return Err(e.into());
+        }
+        let mut reply = intake.store.answer(&request, &mut said);
         reply.server_pid = std::process::id();
         shutdown |= request.request_kind() == Some(RequestKind::Shutdown);
         let sent = active
@@ -330,10 +337,12 @@ fn serve_requests(
                     .map_err(|e| IpcError::iox("send reply", e))
             });
         if let Err(e) = sent {
-            let _ = writeln!(log, "estimator: {e}");
+            let _ = writeln!(said, "estimator: {e}");
         }
         drop(active);
-        notify(ports.result_notifier, &mut log);
+        notify(ports.result_notifier, &mut said);
+        let _ = log.write_all(&said);
+        let _ = log.flush();
     }
     Ok(shutdown)
 }
