@@ -1,6 +1,6 @@
 //! The `probebridge` command line.
 
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, CommandFactory, Parser, Subcommand};
 use probebridge::commands::{self, parse_vec3};
 use probebridge::session::options::MachineOptions;
 use probebridge::tell;
@@ -226,6 +226,10 @@ enum Cmd {
     /// Benchmarks.
     #[command(subcommand)]
     Bench(BenchCmd),
+    /// Writes the manual pages (roff, section 1: probebridge.1 and one per command) from
+    /// these definitions into DIR; scripts/package ships them.
+    #[command(hide = true)]
+    Manpage { dir: PathBuf },
 }
 
 #[derive(Subcommand)]
@@ -264,6 +268,13 @@ impl CheckArgs {
             self.state_dir.as_deref(),
         )
     }
+}
+
+/// `manpage DIR`: probebridge.1 and a page per command, from the CLI's definitions.
+fn man_pages(dir: &std::path::Path) -> Result<u8, String> {
+    clap_mangen::generate_to(Cli::command(), dir)
+        .map(|()| 0)
+        .map_err(|e| format!("cannot write the manual pages to {}: {e}", dir.display()))
 }
 
 fn main() -> ExitCode {
@@ -374,6 +385,7 @@ fn main() -> ExitCode {
             commands::opcua_certificate::run(&config, renew).map(|()| 0)
         }
         Cmd::Bench(BenchCmd::Trigger(args)) => commands::bench::trigger::run(&args).map(|()| 0),
+        Cmd::Manpage { dir } => man_pages(&dir),
     };
     // After a stop signal the session is closed (axes braked, drives disabled) and
     // the results written: exit as the signal says.
