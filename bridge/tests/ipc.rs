@@ -361,20 +361,20 @@ fn the_estimator_fits_a_sphere_and_answers_over_ipc() {
 }
 
 /// A log that blocks, as a full pipe or a stalled file system does, at the first write
-/// holding `stall_at`, until `release` says go.
+/// holding `stall_at` (it says so on `stalled`), until `release` says go.
 struct StallingLog {
     stall_at: &'static str,
     release: std::sync::mpsc::Receiver<()>,
-    stalled: Arc<AtomicBool>,
+    stalled: Option<std::sync::mpsc::Sender<()>>,
     text: Vec<u8>,
 }
 
 impl std::io::Write for StallingLog {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        if !self.stalled.load(Ordering::Acquire)
-            && String::from_utf8_lossy(buf).contains(self.stall_at)
-        {
-            self.stalled.store(true, Ordering::Release);
+        if self.stalled.is_some() && String::from_utf8_lossy(buf).contains(self.stall_at) {
+            if let Some(said) = self.stalled.take() {
+                let _ = said.send(());
+            }
             let _ = self.release.recv();
         }
         self.text.extend_from_slice(buf);
@@ -391,15 +391,15 @@ impl std::io::Write for StallingLog {
 fn a_log_that_blocks_does_not_hold_up_the_reply() {
     let prefix = unique_prefix("stalled-log");
     let stop = Arc::new(AtomicBool::new(false));
-    let stalled = Arc::new(AtomicBool::new(false));
+    let (stalled_tx, stalled) = std::sync::mpsc::channel();
     let (go, release) = std::sync::mpsc::channel();
     let handle = {
-        let (stop, stalled, prefix) = (stop.clone(), stalled.clone(), prefix.clone());
+        let (stop, prefix) = (stop.clone(), prefix.clone());
         std::thread::spawn(move || {
             let mut log = StallingLog {
                 stall_at: "ball-centre sphere",
                 release,
-                stalled,
+                stalled: Some(stalled_tx),
                 text: Vec::new(),
             };
             let options = EstimatorOptions {
@@ -422,12 +422,14 @@ fn a_log_that_blocks_does_not_hold_up_the_reply() {
         }
         publisher.publish(&s).unwrap();
     }
+    // The log is released only after the reply is in: the reply cannot have waited
+    // for it. Then the estimator does write the fit's line (and blocks there).
     let r = client.fit_sphere(run, T);
-    let was_stalled = stalled.load(Ordering::Acquire);
+    let stalled = stalled.recv_timeout(T);
     go.send(()).unwrap();
     let r = r.unwrap();
     assert!(r.ok && (r.radius - 14.0).abs() < 1e-9, "{r:?}");
-    assert!(was_stalled, "the fit's log line was not being written");
+    assert!(stalled.is_ok(), "the fit's log line was never written");
     stop.store(true, Ordering::Relaxed);
     drop(publisher);
     drop(client);
