@@ -74,6 +74,7 @@ impl Gateway {
     /// `history`: the keys of the `[history]` section.
     fn start(py: &Path, dir: &Path, name: &str, history: &str) -> Self {
         copy_programs(dir, &[(431, "431-plane.h")]);
+        let scenario = slow_heartbeat_scenario(dir);
         let config = dir.join("gateway.toml");
         std::fs::write(
             &config,
@@ -82,10 +83,7 @@ impl Gateway {
                  [programs]\nfolder = \"programs\"\n\
                  [plc]\nlisten = \"127.0.0.1:0\"\nheartbeat_timeout_ms = 0\n\
                  [history]\nstatement_timeout_ms = 500\nconnect_timeout_ms = 1000\n{history}",
-                configs()
-                    .join("scenarios/tilted-plane.toml")
-                    .to_str()
-                    .unwrap(),
+                scenario.to_str().unwrap(),
                 std::process::id(),
             ),
         )
@@ -169,6 +167,39 @@ impl Drop for Gateway {
             let _ = self.child.wait();
         }
     }
+}
+
+/// The tilted plane on a copy of table-ac whose heartbeats may be seconds late. These
+/// tests run in real time (a run must be under way while the history breaks), and on
+/// a loaded CI machine the simulated drives' heartbeats were once late by more than the
+/// machine's 150 ms: the run ended "node lost" (error kind 5), as it should on a real
+/// bus, but it is the history that is under test here, not the bus.
+fn slow_heartbeat_scenario(dir: &Path) -> PathBuf {
+    let machine = std::fs::read_to_string(configs().join("machines/table-ac.toml")).unwrap();
+    let mut replaced = 0;
+    let machine: String = machine
+        .lines()
+        .map(|l| match l.split('=').next().map(str::trim) {
+            Some("heartbeat_timeout_ms") => {
+                replaced += 1;
+                "heartbeat_timeout_ms = 5000".to_string()
+            }
+            Some("master_heartbeat_ms") => {
+                replaced += 1;
+                "master_heartbeat_ms = 1000".to_string()
+            }
+            _ => l.to_string(),
+        })
+        .map(|l| l + "\n")
+        .collect();
+    assert_eq!(replaced, 2, "table-ac.toml's heartbeat keys changed");
+    for sub in ["machines", "scenarios"] {
+        std::fs::create_dir_all(dir.join(sub)).unwrap();
+    }
+    std::fs::write(dir.join("machines/table-ac.toml"), machine).unwrap();
+    let scenario = dir.join("scenarios/tilted-plane.toml");
+    std::fs::copy(configs().join("scenarios/tilted-plane.toml"), &scenario).unwrap();
+    scenario
 }
 
 /// A done run as the PLC saw it: results, and whether they wait in the spool.
