@@ -1,17 +1,19 @@
 #!/bin/bash
 # Runs inside the systemd VM of .ci/systemd/run (Debian 12, systemd as PID 1), as the
-# oneshot unit probebridge-ci.service, as root, with the clone at /root/probebridge
-# (its release binary built on the host). Writes its log to /root/ci/vm.log and one
+# oneshot unit probebridge-ci.service, as root, with the clone's tracked files at
+# /root/probebridge, the package to install in /root/packages and a package of a
+# higher version in /root/upgrade (both of the release binary built on the host, by
+# scripts/package --binary; their versions in /root/packages/versions). Writes its log to /root/ci/vm.log and one
 # line per check to /root/ci/checks ("ok NAME" or "FAIL NAME"), then "end"; the unit
 # then powers the VM off and the host reads both from the disk image.
 #
 # 1. A local user (mallory) squats the shared /tmp first: she holds the lock file the
 #    gateway used to take there and owns /tmp/iceoryx2.
 # 2. The "Deploy on a gateway" block of docs/deploy.md, extracted from it and run line
-#    by line as written (the block is the test: the docs cannot drift). Two lines
-#    cannot run as written in a VM without a toolchain or a terminal: `cargo build` is
-#    a shim that checks its arguments and that the host built target/release/
-#    probebridge of this clone (.ci/systemd/run), and `journalctl ... -f` runs for 10 s.
+#    by line as written, in /root/packages (the block is the test: the docs cannot
+#    drift): `apt install` of the package, ..., `systemctl enable --now`. One line
+#    cannot run as written without a terminal: `journalctl ... -f` runs for 10 s.
+#    Installed: nothing started or enabled by the package itself.
 # 3. `systemctl enable --now` returned after READY=1 (Type=notify): the unit is
 #    active, its STATUS is the gateway's, the lock and the iceoryx2 root are in
 #    /run/probebridge, gateway.toml is 640 root:probebridge.
@@ -26,8 +28,14 @@
 #    watchdog (WatchdogSec=) kills it and Restart= brings it back.
 #    A wedged PLC face (its thread blocked): the service ends itself, Restart= brings
 #    it back.
+# 6c. The upgrade to the higher version, its postinst run during a measurement. The service
+#    restarts after the measurement (SIGUSR1 from the postinst, exit 75): the run ends
+#    done, the new main process serves; the edited gateway.toml, machine file and
+#    program and the history are kept; a 431 runs after it.
 # 7. `systemctl stop` during a 431: the run ends "aborted" (Aborted(Shutdown)), exit 0.
 # 8. `systemd-analyze security probebridge`, printed.
+# 9. `apt remove` with the service running: stopped, the binary gone, /etc/probebridge,
+#    /var/lib/probebridge and the user kept. `apt purge`: those gone too.
 set -uo pipefail
 CLONE=/root/probebridge
 OUT=/root/ci
@@ -64,10 +72,17 @@ back_with_new_pid() {
     return 1
 }
 plc() { python3 "$PLC_PY" 127.0.0.1 5020 "$@"; }
-history_last_status() {
+history_json() {
     runuser -u probebridge -- probebridge history --config /etc/probebridge/gateway.toml \
-        --since 2000-01-01 --json | python3 -c 'import json,sys; print(json.load(sys.stdin)[-1]["status"])'
+        --since 2000-01-01 --json
 }
+history_last_status() {
+    history_json | python3 -c 'import json,sys; print(json.load(sys.stdin)[-1]["status"])'
+}
+history_count() {
+    history_json | python3 -c 'import json,sys; print(len(json.load(sys.stdin)))'
+}
+installed_version() { dpkg-query -W -f='${Status} ${Version}' probebridge 2>/dev/null; }
 finish() {
     say "the service's journal:"
     journalctl -u probebridge --no-pager | tail -n 80
@@ -88,14 +103,16 @@ runuser -u mallory -- flock /tmp/probebridge-service-probebridge.lock sleep 1000
 squatter=$!
 
 # 2. The deploy block of docs/deploy.md.
-cd "$CLONE"
+read -r VERSION UPGRADE_VERSION </root/packages/versions
+say "packages: $(ls /root/packages /root/upgrade | tr '\n' ' ')"
 block=$(awk '/^# Deploy on a gateway/ {s = 1; next}
     s && /^#/ {exit}
     s && /^    / {print substr($0, 5); b = 1; next}
-    s && b {exit}' docs/deploy.md)
+    s && b {exit}' "$CLONE/docs/deploy.md")
 say "the deploy block of docs/deploy.md:"
 printf '%s\n' "$block" | sed 's/^/    /'
 check "readme-block-found" grep -q 'systemctl enable --now probebridge' <<<"$block"
+cd /root/packages
 deploy_ok=true
 while IFS= read -r line; do
     say "\$ $line"
@@ -106,8 +123,19 @@ while IFS= read -r line; do
         [ "$rc" = 124 ] && rc=0
         ;;
     *)
-        bash -e -c "$line"
+        bash -e -c "$line" </dev/null
         rc=$?
+        ;;
+    esac
+    case "$line" in
+    "apt install "*)
+        # What the package alone did, before the plant enables it.
+        check "package-installed" test "$(installed_version)" = "install ok installed $VERSION"
+        check "package-not-started" test "$(systemctl is-active probebridge)" = inactive
+        check "package-not-enabled" test "$(systemctl is-enabled probebridge)" = disabled
+        check "package-user" getent passwd probebridge
+        check "package-documentation-resolves" test -f /usr/share/doc/probebridge/docs/deploy.md
+        check "package-man-page" test -f /usr/share/man/man1/probebridge-serve.1.gz
         ;;
     esac
     if [ "$rc" != 0 ]; then
@@ -139,7 +167,7 @@ ls -l /etc/probebridge/gateway.toml
 sed -i -e 's|^scenario = .*|scenario = "scenarios/tilted-plane.toml"\nrealtime = true|' \
     -e 's|^heartbeat_timeout_ms = .*|heartbeat_timeout_ms = 0|' /etc/probebridge/gateway.toml
 grep -E '^(scenario|realtime|heartbeat_timeout_ms) ' /etc/probebridge/gateway.toml
-cp configs/programs/431-plane.h /etc/probebridge/programs/431.h
+cp /etc/probebridge/programs/431-plane.h /etc/probebridge/programs/431.h
 # As in the vcan step: the emulated CPUs cannot hold a 2 ms SYNC with a 150 ms
 # heartbeat timeout in real time; the machine's timing is relaxed the same way (the
 # results do not depend on it).
@@ -164,7 +192,7 @@ check "history-done" test "$(history_last_status)" = done
 #     kept over a restart; the PLC's 431 still runs with it on.
 ua=/var/lib/probebridge/opcua
 install -d -m 700 -o probebridge -g probebridge "$ua"
-printf '%s\n' 'a long pass phrase' | /usr/local/bin/probebridge opcua-user mes \
+printf '%s\n' 'a long pass phrase' | probebridge opcua-user mes \
     | install -m 600 -o probebridge -g probebridge /dev/stdin "$ua/users"
 printf '\n[opcua]\nlisten = "opc.tcp://127.0.0.1:4840"\nmay_start = true\n' >>/etc/probebridge/gateway.toml
 systemctl restart probebridge
@@ -227,6 +255,41 @@ systemctl daemon-reload
 systemctl restart probebridge
 check "plc-runs-431-after-wedge" run431
 
+# 6c. The upgrade, during a measurement.
+sums() { sha256sum /etc/probebridge/gateway.toml /etc/probebridge/machines/table-ac.toml /etc/probebridge/programs/431.h; }
+sums_before=$(sums)
+runs_before=$(history_count)
+pid=$(prop MainPID)
+# The two halves of `apt install` (it runs dpkg --unpack, then dpkg --configure), with
+# a measurement started between them, 431 three times (program 432, a section repeat):
+# the postinst's restart lands during it (here `apt install` in one go took longer
+# than a 431, and `dpkg --configure` about 10 s).
+{
+    echo "0 BEGIN PGM 432 MM"
+    echo '1 TOOL CALL "TOUCH_PROBE" Z'
+    echo "2 L Z+100 R0 FMAX"
+    echo "3 LBL 1"
+    sed -n '/^6 TCH PROBE 431/,/Q281/p' /etc/probebridge/programs/431-plane.h | sed 's/^6 /4 /'
+    echo "5 L Z+100 R0 FMAX"
+    echo "6 CALL LBL 1 REP 2"
+    echo "7 M30"
+    echo "8 END PGM 432 MM"
+} >/etc/probebridge/programs/432.h
+say "\$ dpkg --unpack ./probebridge_${UPGRADE_VERSION}_amd64.deb"
+(cd /root/upgrade && dpkg --unpack "./probebridge_${UPGRADE_VERSION}_amd64.deb" </dev/null)
+check "upgrade-plc-start-busy" plc start_busy 432
+say "\$ dpkg --configure probebridge (during the measurement)"
+dpkg --configure probebridge </dev/null
+check "upgrade-installed" test "$(installed_version)" = "install ok installed $UPGRADE_VERSION"
+check "upgrade-restarted" back_with_new_pid 180 "$pid"
+journal=$(journalctl -u probebridge --no-pager)
+check "upgrade-restart-after-the-measurement" grep -q "restart asked (SIGUSR1): after the running measurement" <<<"$journal"
+check "upgrade-restart-asked" grep -q "restarting as asked (SIGUSR1)" <<<"$journal"
+check "upgrade-run-done" test "$(history_last_status)" = done
+check "upgrade-history-kept" test "$(history_count)" = $((runs_before + 1))
+check "upgrade-edits-kept" test "$(sums)" = "$sums_before"
+check "plc-runs-431-after-upgrade" run431
+
 # 7. systemctl stop mid-measurement.
 check "plc-start-busy" plc start_busy 431
 check "stop" systemctl stop probebridge
@@ -238,6 +301,25 @@ check "journal-aborted-by-shutdown" grep -q "Aborted(Shutdown)" <<<"$(journalctl
 
 # 8. The sandbox, as systemd rates it.
 systemd-analyze security --no-pager probebridge | tee "$OUT/security.txt"
+
+# 9. Remove, then purge.
+systemctl start probebridge
+check "running-before-remove" test "$(systemctl is-active probebridge)" = active
+say "\$ apt remove -y probebridge"
+apt remove -y probebridge </dev/null
+check "removed" test "$(installed_version)" = "deinstall ok config-files $UPGRADE_VERSION"
+check "removed-stopped" test "$(systemctl is-active probebridge)" != active
+check "removed-binary-gone" test ! -e /usr/bin/probebridge
+check "removed-keeps-config" test "$(sums)" = "$sums_before"
+check "removed-keeps-history" test -s /var/lib/probebridge/history.sqlite
+check "removed-keeps-user" getent passwd probebridge
+say "\$ apt purge -y probebridge"
+apt purge -y probebridge </dev/null
+check "purged" test -z "$(installed_version | grep -v 'not-installed')"
+check "purged-config-gone" test ! -e /etc/probebridge
+check "purged-state-gone" test ! -e /var/lib/probebridge
+check "purged-user-gone" bash -c '! getent passwd probebridge && ! getent group probebridge'
+ls -la /etc/probebridge /var/lib/probebridge 2>&1 | head -5
 
 kill "$squatter" 2>/dev/null
 finish

@@ -4,6 +4,7 @@
 
 use crate::session::load_scenario;
 use hal::can::socketcan::SocketCanTransport;
+use hal::master::MasterOptions;
 use sim::machine::{SimClock, SimMachine, SimRunner};
 use std::path::PathBuf;
 
@@ -25,7 +26,26 @@ pub fn run(scenario: Option<PathBuf>, iface: &str) -> Result<(), String> {
     // Drives standing for hardware: their heartbeats run on the wall clock.
     let mut machine = SimMachine::new(&sc);
     machine.set_clock(SimClock::Monotonic);
-    let runner = SimRunner::spawn(machine, transport);
+    // Hardware drives are never starved of CPU: just below a master's real-time loop
+    // (as the simulator of `run --realtime` and `bench trigger` runs them). At normal
+    // priority, an emulated CPU under load (CI's VM) served the master's SCHED_FIFO
+    // loop first, the SYNCs queued for the drives, and a probing move went on for every
+    // SYNC the master sent before the drives' latch reached it: 5 mm, and the probe
+    // broke.
+    let priority = MasterOptions::default().rt_priority - 1;
+    let (granted_tx, granted_rx) = std::sync::mpsc::channel();
+    let runner = SimRunner::spawn_with_init(machine, transport, move || {
+        let _ = granted_tx.send(hal::rt::set_fifo_priority(priority));
+    });
+    if granted_rx.recv().unwrap_or(false) {
+        tell!("probebridge sim: the drives run at SCHED_FIFO priority {priority}");
+    } else {
+        tell!(
+            "probebridge sim: the drives run at normal priority (SCHED_FIFO {priority} refused: \
+             needs root or CAP_SYS_NICE); on a loaded host their answers may queue behind a \
+             real-time master"
+        );
+    }
     // Runs until the transport fails or the process is stopped.
     runner
         .wait()
