@@ -28,10 +28,9 @@ pub fn run(scenario: Option<PathBuf>, iface: &str) -> Result<(), String> {
     machine.set_clock(SimClock::Monotonic);
     // Hardware drives are never starved of CPU: just below a master's real-time loop
     // (as the simulator of `run --realtime` and `bench trigger` runs them). At normal
-    // priority, an emulated CPU under load (CI's VM) served the master's SCHED_FIFO
-    // loop first, the SYNCs queued for the drives, and a probing move went on for every
-    // SYNC the master sent before the drives' latch reached it: 5 mm, and the probe
-    // broke.
+    // priority on a CPU a SCHED_FIFO master shares, the SYNCs queue for the drives,
+    // which then move for each in a burst: a probing move runs on past its contact
+    // before the latch can reach the master (in CI's VM, past the 5 mm overtravel).
     let priority = MasterOptions::default().rt_priority - 1;
     let (granted_tx, granted_rx) = std::sync::mpsc::channel();
     let runner = SimRunner::spawn_with_init(machine, transport, move || {
