@@ -79,7 +79,8 @@ while IFS='|' read -r name scenario args expect; do
     # With the master on the running one, it went on sending SYNCs the stalled drives
     # answered later in a burst, moving for each before their latch could reach it
     # (in CI, past the probe's 5 mm overtravel: EMCY 0xFF01). Hardware drives do not
-    # stall; on one CPU the two stall together, as the bus and the drives would not.
+    # stall; on one CPU the two stall together, and the master never runs ahead of
+    # drives that stand still.
     pin=()
     if [ -n "$IFACE" ]; then
         pin=(taskset -c "$(($(nproc) - 1))")
