@@ -271,12 +271,23 @@ fn window(i: u64) -> ProbeWindow {
 /// contact ends its window.
 #[test]
 fn the_publisher_is_one_hop_and_windows_are_not_contacts() {
-    let threads = || std::fs::read_dir("/proc/self/task").unwrap().count();
     let prefix = unique_prefix("onehop");
+    // Its threads are counted in a child process that runs nothing else: here the
+    // other tests' threads come and go meanwhile (they did, on a loaded CI machine).
+    let out = child_command("publisher-threads", &format!("{prefix}-threads"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let counts: Vec<usize> = stdout
+        .lines()
+        .find_map(|l| l.split_once("PB_THREADS ").map(|(_, counts)| counts))
+        .unwrap_or_else(|| panic!("no PB_THREADS line from the child: {stdout}"))
+        .split(' ')
+        .map(|n| n.parse().unwrap())
+        .collect();
+    assert_eq!(counts[1], counts[0], "the publisher started a thread");
     let subscriber = ContactSubscriber::new(&prefix).unwrap();
-    let before = threads();
     let mut publisher = ContactPublisher::new(&prefix).unwrap();
-    assert_eq!(threads(), before, "the publisher started a thread");
     publisher.probing_move(window(5));
     assert_eq!(
         subscriber.try_receive().unwrap(),
@@ -560,6 +571,15 @@ fn child_entry() {
             loop {
                 std::thread::park();
             }
+        }
+        "publisher-threads" => {
+            // The threads of this process (libtest's, with one test thread) before
+            // and after a publisher is made.
+            let threads = || std::fs::read_dir("/proc/self/task").unwrap().count();
+            let _subscriber = ContactSubscriber::new(prefix).unwrap();
+            let before = threads();
+            let _publisher = ContactPublisher::new(prefix).unwrap();
+            println!("PB_THREADS {before} {}", threads());
         }
         "parent" => {
             let estimator = format!("{prefix}/estimator");
