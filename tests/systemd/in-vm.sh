@@ -169,11 +169,12 @@ sed -i -e 's|^scenario = .*|scenario = "scenarios/tilted-plane.toml"\nrealtime =
 grep -E '^(scenario|realtime|heartbeat_timeout_ms) ' /etc/probebridge/gateway.toml
 cp /etc/probebridge/programs/431-plane.h /etc/probebridge/programs/431.h
 # As in the vcan step: the emulated CPUs cannot hold a 2 ms SYNC with a 150 ms
-# heartbeat timeout in real time; the machine's timing is relaxed the same way (the
-# results do not depend on it).
-sed -i -e 's/^sync_period_us *=.*/sync_period_us = 10000/' \
-    -e 's/^heartbeat_timeout_ms *=.*/heartbeat_timeout_ms = 2000/' \
-    -e 's/^master_heartbeat_ms *=.*/master_heartbeat_ms = 1000/' /etc/probebridge/machines/table-ac.toml
+# heartbeat timeout in real time; the machine's timing is relaxed to the same values
+# (.ci/lib/vm-timing.sh; the results do not depend on it).
+source "$CLONE/.ci/lib/vm-timing.sh"
+sed -i -e "s/^sync_period_us *=.*/sync_period_us = $VM_SYNC_US/" \
+    -e "s/^heartbeat_timeout_ms *=.*/heartbeat_timeout_ms = $VM_HEARTBEAT_TIMEOUT_MS/" \
+    -e "s/^master_heartbeat_ms *=.*/master_heartbeat_ms = $VM_MASTER_HEARTBEAT_MS/" /etc/probebridge/machines/table-ac.toml
 grep -E '^(sync_period_us|heartbeat_timeout_ms|master_heartbeat_ms) ' /etc/probebridge/machines/table-ac.toml
 systemctl restart probebridge
 check "restarted-active" test "$(systemctl is-active probebridge)" = active
