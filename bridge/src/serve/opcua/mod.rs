@@ -425,8 +425,10 @@ async fn serve(
             return Err(e);
         }
     };
-    let _ = ready.send(Ok(()));
+    // Alive from here: the bring-up (seconds on a slow gateway) is not a stall.
+    heartbeat.beat();
     let ticker = tokio::spawn(heartbeat.run());
+    let _ = ready.send(Ok(()));
     let faulty = async {
         if fault.is_empty() {
             std::future::pending::<()>().await;
