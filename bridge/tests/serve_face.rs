@@ -44,7 +44,7 @@ fn gateway_config(
         &config,
         format!(
             "[machine]\nscenario = {:?}\nservice = \"pbface-{name}-{}\"\nkinematics = {:?}\n\
-             [programs]\nfolder = \"programs\"\n[history]\nsqlite = {:?}\n[plc]\n{plc}",
+             [programs]\nfolder = \"programs\"\n[history]\nsqlite = {:?}\n{HISTORY_TIMEOUT}[plc]\n{plc}",
             configs().join("scenarios").join(scenario).to_str().unwrap(),
             std::process::id(),
             dir.join("kinematics.toml").to_str().unwrap(),

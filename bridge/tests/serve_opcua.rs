@@ -90,7 +90,7 @@ impl Serve {
             &config,
             format!(
                 "[machine]\nscenario = {:?}\nservice = \"pbua-{name}-{}\"\nkinematics = {:?}\n\
-                 [programs]\nfolder = \"programs\"\n[history]\nsqlite = {:?}\n\
+                 [programs]\nfolder = \"programs\"\n[history]\nsqlite = {:?}\n{HISTORY_TIMEOUT}\
                  [plc]\nlisten = \"127.0.0.1:0\"\nheartbeat_timeout_ms = 0\n\
                  [opcua]\nlisten = \"opc.tcp://127.0.0.1:0\"\npki = \"pki\"\nusers = \"users\"\n\
                  manufacturer = \"ACME Werkzeugmaschinen\"\nmodel = \"RT-5\"\n\

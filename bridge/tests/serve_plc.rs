@@ -75,7 +75,7 @@ impl Serve {
             &config,
             format!(
                 "[machine]\nscenario = {:?}\nservice = \"pbserve-{name}-{}\"\nkinematics = {:?}\n{machine}\
-                 [programs]\nfolder = \"programs\"\n[history]\nsqlite = {:?}\n\
+                 [programs]\nfolder = \"programs\"\n[history]\nsqlite = {:?}\n{HISTORY_TIMEOUT}\
                  [plc]\nlisten = \"127.0.0.1:0\"\n{plc}",
                 scenario.to_str().unwrap(),
                 std::process::id(),

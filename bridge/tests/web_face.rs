@@ -93,7 +93,7 @@ fn start(dir: PathBuf, web: &str) -> Serve {
         format!(
             "[machine]\nscenario = {:?}\nservice = \"pbweb-{}\"\nkinematics = {:?}\n\
              [programs]\nfolder = \"programs\"\nout = \"logs\"\n\
-             [history]\nsqlite = \"history.sqlite\"\nalarm_um = 5.0\n\
+             [history]\nsqlite = \"history.sqlite\"\nalarm_um = 5.0\n{HISTORY_TIMEOUT}\
              [plc]\nlisten = \"127.0.0.1:0\"\n[web]\n{web}",
             configs()
                 .join("scenarios/demo-sphere.toml")
