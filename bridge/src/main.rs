@@ -237,6 +237,9 @@ enum BenchCmd {
     /// Latency from the drives' latch to the contact sample in the estimator process,
     /// with the bare iceoryx2 hop between the same processes as the floor.
     Trigger(commands::bench::trigger::BenchArgs),
+    /// The machine time of the shipped examples: `check`'s prediction, `run`'s on the
+    /// simulator's clock and the plan's lower bound, per cycle (docs/cycles.md).
+    Cycles(commands::bench::cycles::CyclesBenchArgs),
 }
 
 /// `check`'s arguments.
@@ -256,6 +259,10 @@ struct CheckArgs {
     /// The state directory (see `run`); `check` only reads it.
     #[arg(long, value_name = "DIR")]
     state_dir: Option<PathBuf>,
+    /// Print the result as JSON on stdout: `ok`, the errors, or each cycle's
+    /// `predicted_machine_time_s` and `lower_bound_s` and the program's.
+    #[arg(long)]
+    json: bool,
 }
 
 impl CheckArgs {
@@ -266,6 +273,7 @@ impl CheckArgs {
             self.kinematics.as_deref(),
             self.presets.as_deref(),
             self.state_dir.as_deref(),
+            self.json,
         )
     }
 }
@@ -349,6 +357,7 @@ fn main() -> ExitCode {
         }
         .map(|()| 0),
         Cmd::Estimator(args) => commands::estimator::run(args).map(|()| 0),
+        Cmd::Bench(BenchCmd::Cycles(args)) => commands::bench::cycles::run(&args).map(|()| 0),
         Cmd::Bench(BenchCmd::Trigger(args)) if args.modbus => {
             commands::bench::modbus::run(&commands::bench::modbus::ModbusBenchArgs {
                 triggers: args.triggers,

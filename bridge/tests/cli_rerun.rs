@@ -4,6 +4,8 @@
 //! saves, protocols) lands in the state directory, and `configs/` is left byte for
 //! byte as it was (so `git status` of a clone stays clean). Also what the runs say:
 //! mode 0 with Q431 = 1 does not set the preset, 450's restore puts the file back.
+//! And the machine time: `check` predicts each cycle's within 5 % of what the run then
+//! reports on the simulator's clock.
 
 #[allow(
     dead_code,
@@ -12,10 +14,101 @@
 mod common;
 
 use common::configs;
+// (program, scenario) as the table of examples in docs/cycles.md lists them; `bench
+// cycles` runs the same.
+use probebridge::commands::bench::cycles::EXAMPLES;
 use std::collections::BTreeMap;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+
+/// `run PROGRAM --scenario SCENARIO --json JSON --yes` on the state `state`.
+fn run_example(
+    state: &Path,
+    program: &str,
+    scenario: &str,
+    json: &Path,
+    service: &str,
+) -> std::process::Output {
+    common::run(
+        probebridge(state)
+            .args([
+                "run",
+                configs().join("programs").join(program).to_str().unwrap(),
+            ])
+            .args([
+                "--scenario",
+                configs().join("scenarios").join(scenario).to_str().unwrap(),
+            ])
+            .args(["--json", json.to_str().unwrap(), "--yes"])
+            .args(["--service", service]),
+    )
+}
+
+/// `check --json`'s predicted machine time of each cycle, in order (s).
+fn predicted_times(state: &Path, program: &str, scenario: &str) -> Vec<f64> {
+    let out = common::run(
+        probebridge(state)
+            .args([
+                "check",
+                configs().join("programs").join(program).to_str().unwrap(),
+            ])
+            .args([
+                "--scenario",
+                configs().join("scenarios").join(scenario).to_str().unwrap(),
+            ])
+            .arg("--json"),
+    );
+    assert!(out.status.success(), "check {program}: {out:?}");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("check --json of {program}: {e}: {out:?}"));
+    assert_eq!(v["partial"], serde_json::Value::Null, "{v}");
+    let total: f64 = v["cycles"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["predicted_machine_time_s"].as_f64().unwrap())
+        .sum();
+    // The program's time is its cycles' and its L blocks' moves.
+    assert!(
+        v["predicted_machine_time_s"].as_f64().unwrap() >= total - 1e-9,
+        "{v}"
+    );
+    v["cycles"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["predicted_machine_time_s"].as_f64().unwrap())
+        .collect()
+}
+
+/// Each cycle's machine time in the run's JSON is within 5 % of `predicted` (50 ms
+/// for a cycle that moves nothing), its split adds up to it, and the numbers are said.
+fn machine_time_as_predicted(program: &str, pass: u32, predicted: &[f64], run: &serde_json::Value) {
+    let cycles = run["cycles"].as_array().unwrap();
+    assert_eq!(cycles.len(), predicted.len(), "{program}: {run}");
+    for (c, p) in cycles.iter().zip(predicted) {
+        let m = c["machine_time_s"]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{program}: no machine_time_s in {c}"));
+        let split: f64 = ["positioning", "rotary", "probing", "standing"]
+            .iter()
+            .map(|k| c["machine_time_split_s"][k].as_f64().unwrap())
+            .sum();
+        assert!((split - m).abs() < 1e-6, "{program}: split {split} of {m}");
+        let _ = writeln!(
+            std::io::stderr().lock(),
+            "    [cli_rerun] {program} run {pass} cycle {}: machine time {m:.2} s, predicted {p:.2} s ({:+.1} %)",
+            c["cycle"],
+            (p - m) / m.max(1e-9) * 100.0
+        );
+        assert!(
+            (p - m).abs() <= (0.05 * m).max(0.05),
+            "{program} run {pass}, cycle {}: predicted {p:.3} s, took {m:.3} s on the simulator's clock",
+            c["cycle"]
+        );
+    }
+}
 
 /// Every file under `dir` with its contents.
 fn tree(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
@@ -56,20 +149,6 @@ fn q_values(v: &serde_json::Value) -> Vec<BTreeMap<String, f64>> {
         .collect()
 }
 
-/// (program, scenario) as the table of examples in docs/cycles.md lists them.
-const EXAMPLES: [(&str, &str); 10] = [
-    ("431-plane.h", "tilted-plane.toml"),
-    ("431-plane-y.h", "tilted-plane-y.toml"),
-    ("444-freeform.h", "freeform.toml"),
-    ("444-seed.h", "seed-444.toml"),
-    ("451-optimise.h", "demo-sphere.toml"),
-    ("451-check.h", "demo-sphere.toml"),
-    ("451-preset-set.h", "demo-sphere.toml"),
-    ("451-preset-247.h", "demo-sphere.toml"),
-    ("450-save-restore.h", "demo-sphere.toml"),
-    ("460-calibrate.h", "demo-sphere.toml"),
-];
-
 #[test]
 fn every_shipped_example_runs_twice_in_a_row_and_the_tree_stays_as_it_was() {
     let before = tree(&configs());
@@ -89,28 +168,16 @@ fn every_shipped_example_runs_twice_in_a_row_and_the_tree_stays_as_it_was() {
     for (i, (program, scenario)) in EXAMPLES.iter().enumerate() {
         let mut results = Vec::new();
         for pass in 1..=2 {
+            // What `check` predicts from the state this run starts on.
+            let predicted = predicted_times(&state, program, scenario);
             // Three minutes in all: say where it is, past libtest's capture.
             let _ = writeln!(
                 std::io::stderr().lock(),
                 "    [cli_rerun] {program} on {scenario}, run {pass} of 2"
             );
             let json = tmp.join(format!("{program}.{pass}.json"));
-            let out = common::run(
-                probebridge(&state)
-                    .args([
-                        "run",
-                        configs().join("programs").join(program).to_str().unwrap(),
-                    ])
-                    .args([
-                        "--scenario",
-                        configs().join("scenarios").join(scenario).to_str().unwrap(),
-                    ])
-                    .args(["--json", json.to_str().unwrap(), "--yes"])
-                    .args([
-                        "--service",
-                        &format!("pb-rerun-{}-{i}-{pass}", std::process::id()),
-                    ]),
-            );
+            let service = format!("pb-rerun-{}-{i}-{pass}", std::process::id());
+            let out = run_example(&state, program, scenario, &json, &service);
             let text = format!(
                 "{}{}",
                 String::from_utf8_lossy(&out.stdout),
@@ -120,6 +187,7 @@ fn every_shipped_example_runs_twice_in_a_row_and_the_tree_stays_as_it_was() {
             let v: serde_json::Value =
                 serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
             results.push(q_values(&v));
+            machine_time_as_predicted(program, pass, &predicted, &v);
             said.insert((program.to_string(), pass), (text, v));
         }
         // The same results the second time. Mode 1 (451-optimise, 451-preset-set)
@@ -158,6 +226,13 @@ fn every_shipped_example_runs_twice_in_a_row_and_the_tree_stays_as_it_was() {
     assert!(machine.join("table-ac.kinematics.toml").is_file());
     assert!(machine.join("table-ac.kinematics.saved/1.toml").is_file());
     assert!(machine.join("protocols/TCHPRAUTO.html").is_file());
+    // The protocol says how long the cycle kept the machine.
+    let log = std::fs::read_to_string(machine.join("protocols/TCHPRAUTO.html")).unwrap();
+    assert!(
+        log.contains("<th class=\"l\">Machine time</th><td class=\"l\">4")
+            && log.contains("probing"),
+        "{log}"
+    );
     let (first, _) = &said[&("431-plane.h".to_string(), 1)];
     assert!(
         first.contains("seeded from") && first.contains("table-ac.presets.toml"),

@@ -480,6 +480,12 @@ fn the_431_as_the_plc(serve: &Serve, py: &Path) {
         (Some("opcua"), Some("done"))
     );
     assert_eq!(run01["Parameters"], row["parameters"]);
+    // How long the 431 kept the machine: the history's figure, about 7 s.
+    let t = row["machine_time_s"]
+        .as_f64()
+        .expect("a machine time in the history");
+    assert!((5.0..9.0).contains(&t), "{row}");
+    assert_eq!(run01["MachineTime"], row["machine_time_s"]);
     // Run01's results: every result of the history's row as `CYCLE.NAME`.
     let (names, values) = (
         run01["ResultNames"].as_array().unwrap(),

@@ -185,10 +185,31 @@ fn assert_same_calibration(plc: &serde_json::Value, run: &serde_json::Value) {
     assert!(plc["u"].as_object().unwrap().is_empty(), "{plc}");
 }
 
+/// The machine time block (a PLC's run of one cycle): its parts add up to the total,
+/// which is within 5 % of what `run` reported for the same cycle on the simulator.
+fn assert_same_machine_time(plc: &serde_json::Value, run: &serde_json::Value) {
+    let Some(t) = plc.get("time") else {
+        return;
+    };
+    let part = |k: &str| t[k].as_f64().unwrap_or_else(|| panic!("{k}: {t}"));
+    let total = part("total");
+    let sum: f64 = ["positioning", "rotary", "probing", "standing"]
+        .iter()
+        .map(|k| part(k))
+        .sum();
+    assert!((total - sum).abs() <= 1e-3 * total.max(1.0), "{t}");
+    let m = run["machine_time_s"].as_f64().unwrap();
+    assert!(
+        (total - m).abs() <= (0.05 * m).max(0.05),
+        "machine time: register {total} s, run {m} s"
+    );
+}
+
 /// Every Q result (and 451's errors by ISO name) equals the run's, to float32's
 /// precision and to the DINT's scale of 1e4.
 fn assert_same_results(plc: &serde_json::Value, run: &serde_json::Value) {
     assert_same_calibration(plc, run);
+    assert_same_machine_time(plc, run);
     if run["cycle"] == 460 {
         return;
     }

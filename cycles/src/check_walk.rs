@@ -42,6 +42,8 @@ pub struct CheckWalk<'p> {
     pending: Vec<CheckPath>,
     seen: std::collections::HashSet<u64>,
     paths: usize,
+    /// Which way is walked now: 0 the first, counted up as each other is taken up.
+    way: usize,
     /// Q120..Q122 that cycle 451 writes on this machine (`mStrobeRotAxPos`).
     rotary_targets: Vec<QName>,
 }
@@ -74,6 +76,7 @@ impl<'p> CheckWalk<'p> {
             pending: Vec::new(),
             seen: std::collections::HashSet::new(),
             paths: 0,
+            way: 0,
             rotary_targets,
         }
     }
@@ -87,6 +90,7 @@ impl<'p> CheckWalk<'p> {
                 match self.pending.pop() {
                     Some(p) => {
                         self.current = Some(p);
+                        self.way += 1;
                         continue;
                     }
                     None => return Ok(None),
@@ -148,6 +152,12 @@ impl<'p> CheckWalk<'p> {
                 }
             }
         }
+    }
+
+    /// Which way through the program the blocks come from: 0 the first (where no
+    /// condition on a measured value jumps), then one more for each other way.
+    pub fn path(&self) -> usize {
+        self.way
     }
 
     /// The datum, the parameters and the axes' positions of the path being walked.

@@ -6,6 +6,7 @@ use crate::cycles_config::CyclesConfig;
 use crate::datum::Datum;
 use crate::error::CycleError;
 use crate::kinematics::Estimator;
+use crate::machine_time::{TimeLedger, TimeSplit};
 use crate::measuring_log::probing3d::Probing3dRecord;
 use crate::progress::{ProgressEvent, ProgressSink};
 use crate::results::CycleOutput;
@@ -30,9 +31,17 @@ pub struct CycleContext<'a> {
     pub probing3d: Vec<Probing3dRecord>,
     /// The preset table as the program changed it, and the datum shift.
     pub datum: Datum,
+    /// The machine time of the cycle running now, as booked so far (`None` where
+    /// nothing times it: a plan).
+    pub machine_time: Option<TimeLedger>,
 }
 
 impl CycleContext<'_> {
+    /// The cycle's machine time up to `now_ns` on the machine's clock.
+    pub fn machine_time_at(&self, now_ns: u64) -> Option<TimeSplit> {
+        self.machine_time.as_ref().map(|l| l.split_at(now_ns))
+    }
+
     pub fn note(&mut self, block: u32, text: impl Into<String>) {
         (self.progress)(ProgressEvent::Note {
             block,

@@ -265,6 +265,8 @@ impl PlaneParams {
                     feed: probe.f,
                     max_distance: a.distance + probe.dist,
                 },
+                // The ball touches R before the nominal point: after SET_UP + Q320.
+                nominal: a.distance - probe.calibration().r,
             });
             moves.push(safe());
         }

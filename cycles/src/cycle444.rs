@@ -270,15 +270,16 @@ impl Probing3dParams {
                     feed: probe.f,
                     max_distance: a.max_distance,
                 },
+                // The ball touches R before the nominal point: after SET_UP + Q320.
+                nominal: a.max_distance - probe.dist - probe.calibration().r,
             },
-            position(
-                "retracting",
-                AxisPositions::linear((a.start + a.n * probe.mb).into()),
-            ),
-            position(
-                "retracting",
-                AxisPositions::linear((path_end + a.n * probe.mb).into()),
-            ),
+            PlannedMove::Retract {
+                step: "retracting".into(),
+                distance: probe.mb,
+                bounds: [a.start, path_end]
+                    .map(|p| AxisPositions::linear((p + a.n * probe.mb).into())),
+                feed: probe.fmax,
+            },
         ]
         .into_iter()
         .chain(under_material(a.n, axis).then(|| {

@@ -45,6 +45,7 @@ pub mod length_unit;
 pub mod linear;
 pub mod m_function;
 pub mod machine_parameters;
+pub mod machine_time;
 pub mod measuring_log;
 pub mod params;
 pub mod parser;

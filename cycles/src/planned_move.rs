@@ -16,11 +16,23 @@ pub enum PlannedMove {
         target: AxisPositions,
         feed: f64,
     },
-    /// A probing move starting at `from` (machine XYZ).
+    /// A probing move starting at `from` (machine XYZ), expected to touch after
+    /// `nominal` of its `mv.max_distance` (at the nominal point).
     Probe {
         step: String,
         from: [f64; 3],
         mv: ProbeMove,
+        nominal: f64,
+    },
+    /// The retraction after a probing move: `distance` back against its direction
+    /// from wherever the contact is, at `feed`. Where that is depends on the contact:
+    /// `bounds` are its targets for a contact at the start and at the end of the
+    /// probing path, both held against the machine.
+    Retract {
+        step: String,
+        distance: f64,
+        bounds: [AxisPositions; 2],
+        feed: f64,
     },
 }
 
@@ -31,7 +43,16 @@ pub fn check_planned(moves: &[PlannedMove], guard: &MotionGuard) -> Result<(), S
             PlannedMove::Position { step, target, feed } => guard
                 .check_move(target, *feed)
                 .map_err(|e| format!("{step}: {e}"))?,
-            PlannedMove::Probe { step, from, mv } => {
+            PlannedMove::Retract {
+                step, bounds, feed, ..
+            } => {
+                for target in bounds {
+                    guard
+                        .check_move(target, *feed)
+                        .map_err(|e| format!("{step}: {e}"))?;
+                }
+            }
+            PlannedMove::Probe { step, from, mv, .. } => {
                 guard
                     .check_target(&AxisPositions::linear(*from), "probing move start")
                     .map_err(|e| format!("{step}: {e}"))?;
@@ -77,6 +98,7 @@ mod tests {
                 feed: 100.0,
                 max_distance: 20.0,
             },
+            nominal: 10.0,
         };
         assert_eq!(
             check_planned(&[ok.clone(), probe([0.0, 0.0, 10.0])], &guard()),

@@ -4,6 +4,7 @@
 
 use crate::cycle451::report::KinematicsReport;
 use crate::cycle460::report::CalibrationReport;
+use crate::machine_time::TimeSplit;
 use crate::q_params::QValue;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -41,6 +42,13 @@ pub struct CycleResult {
     /// Cycle 460: the probe table row before and after, what was kept and why.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration: Option<Box<CalibrationReport>>,
+    /// How long the cycle kept the machine, s, on the machine's own clock
+    /// ([`hal::Machine::clock_ns`]), whatever its status.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub machine_time_s: Option<f64>,
+    /// Where that time went.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub machine_time_split_s: Option<TimeSplit>,
 }
 
 impl CycleResult {
@@ -63,6 +71,17 @@ impl CycleResult {
             u: BTreeMap::new(),
             kinematics: None,
             calibration: None,
+            machine_time_s: None,
+            machine_time_split_s: None,
+        }
+    }
+
+    /// With the machine time `split` measured.
+    pub fn timed(self, split: TimeSplit) -> Self {
+        CycleResult {
+            machine_time_s: Some(split.total()),
+            machine_time_split_s: Some(split),
+            ..self
         }
     }
 }
@@ -167,6 +186,9 @@ impl ProgramReport {
             if let Some(k) = &c.calibration {
                 out.push_str(&k.summary());
             }
+            if let Some(t) = &c.machine_time_split_s {
+                out.push_str(&format!("  machine time {t}\n"));
+            }
         }
         // The parameters the cycles above do not already show with their final value
         // (a cycle's results are parameters too: listing them again doubled them).
@@ -215,6 +237,8 @@ mod tests {
                 u: BTreeMap::new(),
                 kinematics: None,
                 calibration: None,
+                machine_time_s: None,
+                machine_time_split_s: None,
             }],
             ..Default::default()
         };

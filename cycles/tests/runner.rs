@@ -195,6 +195,8 @@ fn report_json_has_the_agreed_shape() {
         u: Default::default(),
         kinematics: None,
         calibration: None,
+        machine_time_s: None,
+        machine_time_split_s: None,
     });
     assert_eq!(
         serde_json::to_string(&one).unwrap(),

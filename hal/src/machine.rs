@@ -191,6 +191,13 @@ pub trait Machine {
         let _ = angle_deg;
         Ok(false)
     }
+
+    /// The machine's own clock, ns: what the cycles' machine time is read from. On
+    /// CANopen the time of the last SYNC (SYNCs times the period on a simulator's
+    /// virtual clock, so a lockstep run reports the time the machine would have
+    /// taken); CLOCK_MONOTONIC where the gateway has no clock of the machine's. No
+    /// default: a wrapper that forgot to forward it would report no time.
+    fn clock_ns(&mut self) -> u64;
 }
 
 /// Forwards every method to the machine behind a pointer (`**self`).
@@ -218,6 +225,9 @@ macro_rules! forward_machine {
             }
             fn orient_spindle(&mut self, angle_deg: f64) -> Result<bool, Self::Error> {
                 (**self).orient_spindle(angle_deg)
+            }
+            fn clock_ns(&mut self) -> u64 {
+                (**self).clock_ns()
             }
         }
     )*};

@@ -117,6 +117,25 @@ impl Profile {
         self.t_accel + self.t_cruise + self.t_decel
     }
 
+    /// The time at which the path has come `s` along (0 .. length; a start-stop
+    /// profile, not a stop): when a probing move along it reaches its contact.
+    pub fn time_at_distance(&self, s: f64) -> f64 {
+        let s = s.clamp(0.0, self.length);
+        let (a, v, ta, tc) = (self.a, self.v, self.t_accel, self.t_cruise);
+        if self.length <= 0.0 {
+            return 0.0;
+        }
+        let s_accel = 0.5 * a * ta * ta;
+        if s <= s_accel {
+            (2.0 * s / a).sqrt()
+        } else if s <= s_accel + v * tc {
+            ta + (s - s_accel) / v
+        } else {
+            let rest = s - s_accel - v * tc;
+            ta + tc + (v - (v * v - 2.0 * a * rest).max(0.0).sqrt()) / a
+        }
+    }
+
     pub fn is_done(&self, t: f64) -> bool {
         t >= self.duration()
     }
@@ -249,6 +268,20 @@ mod tests {
         // The limits are reached, not just respected: Y cruises at 80, accelerates at 1000.
         assert!((v_max[1] - 80.0).abs() < 1e-6, "{}", v_max[1]);
         assert!(a_max[1] > 990.0, "{}", a_max[1]);
+    }
+
+    #[test]
+    fn the_time_at_a_distance_is_where_the_profile_is_then() {
+        let l = limits();
+        for to in [100.0, 0.1, 5.0] {
+            let p = Profile::line([0.0; 6], [to, 0.0, 0.0, 0.0, 0.0, 0.0], 6000.0, &l);
+            for k in 0..=10 {
+                let s = to * f64::from(k) / 10.0;
+                let t = p.time_at_distance(s);
+                assert!((p.position(t)[0] - s).abs() < 1e-9, "{to}: {s} at {t}");
+            }
+            assert!((p.time_at_distance(to) - p.duration()).abs() < 1e-9);
+        }
     }
 
     #[test]

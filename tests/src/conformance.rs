@@ -49,6 +49,9 @@ impl<T> Machine for Held<T> {
     fn set_run(&mut self, run_id: u64) {
         self.machine.set_run(run_id)
     }
+    fn clock_ns(&mut self) -> u64 {
+        self.machine.clock_ns()
+    }
     fn health(&mut self) -> Result<(), MachineError> {
         self.machine.health()
     }
@@ -423,6 +426,31 @@ pub fn move_arrives_on_all_axes<B: Backend>() {
     }
 }
 
+/// The machine's clock ([`Machine::clock_ns`], what the cycles' machine time is read
+/// from) runs with the moves: a move advances it by what its profile takes, as
+/// `check` predicts it, and by no more than the wall clock saw (a real-time bus), or a
+/// few SYNC periods more (a virtual clock).
+pub fn clock_runs_with_the_moves<B: Backend>() {
+    let scenario = plane_scenario(-150.0, 3.0);
+    let mut m = B::open(&scenario);
+    let start = AxisPositions::linear([0.0, 0.0, 50.0]);
+    m.move_to(&start, 5000.0).unwrap();
+    let from = m.positions().unwrap();
+    let to = AxisPositions::linear([25.0, 0.0, 50.0]);
+    let model = cycles::machine_time::MotionModel::new(&crate::machine_config(&scenario));
+    let want = model.move_s(&from, &to, 1500.0);
+    let wall = std::time::Instant::now();
+    let t0 = m.clock_ns();
+    m.move_to(&to, 1500.0).unwrap();
+    let t1 = m.clock_ns();
+    let wall = wall.elapsed().as_secs_f64();
+    let got = t1.saturating_sub(t0) as f64 * 1e-9;
+    assert!(
+        got >= 0.95 * want && got <= wall.max(1.05 * want) + 0.05,
+        "the clock advanced {got:.4} s for a move of {want:.4} s (wall {wall:.4} s)"
+    );
+}
+
 /// Rotary axes are latched with the linear ones: probing with C at 30 deg reports 30.
 pub fn contact_latches_rotary_axes<B: Backend>() {
     let mut m = B::open(&plane_scenario(10.0, 3.0));
@@ -518,6 +546,7 @@ macro_rules! machine_conformance {
             move_arrives_on_all_axes,
             contact_latches_rotary_axes,
             abort_brakes_a_move_and_rearm_moves_again,
+            clock_runs_with_the_moves,
         );
     };
     (@tests $backend:ty: $($name:ident),* $(,)?) => {

@@ -39,6 +39,9 @@ impl Machine for PlcHeld {
     fn set_run(&mut self, run_id: u64) {
         self.machine.set_run(run_id)
     }
+    fn clock_ns(&mut self) -> u64 {
+        self.machine.clock_ns()
+    }
     fn health(&mut self) -> Result<(), MachineError> {
         self.machine.health()
     }

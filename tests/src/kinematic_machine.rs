@@ -99,4 +99,8 @@ impl Machine for KinematicMachine {
     }
 
     fn set_run(&mut self, _run_id: u64) {}
+
+    fn clock_ns(&mut self) -> u64 {
+        0
+    }
 }

@@ -122,6 +122,10 @@ impl Machine for WorldMachine {
 
     fn set_run(&mut self, _run_id: u64) {}
 
+    fn clock_ns(&mut self) -> u64 {
+        0
+    }
+
     fn orient_spindle(&mut self, angle_deg: f64) -> Result<bool, MachineError> {
         self.world.orient_spindle(angle_deg);
         Ok(true)

@@ -553,4 +553,8 @@ impl<M: Machine<Error = hal::MachineError>> Machine for CountLost<M> {
     fn set_run(&mut self, run_id: u64) {
         self.inner.set_run(run_id)
     }
+
+    fn clock_ns(&mut self) -> u64 {
+        self.inner.clock_ns()
+    }
 }

@@ -377,6 +377,10 @@ impl Machine for FixedSpindle {
     fn set_run(&mut self, run_id: u64) {
         self.0.set_run(run_id);
     }
+
+    fn clock_ns(&mut self) -> u64 {
+        self.0.clock_ns()
+    }
 }
 
 /// A machine whose spindle cannot be oriented: the offset cannot be separated from

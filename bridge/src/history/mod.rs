@@ -136,6 +136,10 @@ pub struct Rows {
     results: Vec<(i64, ResultRow)>,
     iso_errors: Vec<IsoErrorRow>,
     dispersion: Vec<DispersionRow>,
+    /// The cycles' machine time, s (`None`: no cycle ran; a spool written before
+    /// the column has none).
+    #[serde(default)]
+    machine_time_s: Option<f64>,
 }
 
 impl Rows {
@@ -153,6 +157,11 @@ impl Rows {
             results: Vec::new(),
             iso_errors: Vec::new(),
             dispersion: Vec::new(),
+            machine_time_s: report
+                .cycles
+                .iter()
+                .filter_map(|c| c.machine_time_s)
+                .reduce(|a, b| a + b),
         };
         for (position, c) in report.cycles.iter().enumerate() {
             for (name, value) in &c.q {
@@ -279,6 +288,9 @@ pub struct RunRow {
     pub results: Vec<ResultRow>,
     pub iso_errors: Vec<IsoErrorRow>,
     pub max_modification: Option<f64>,
+    /// How long the run's cycles kept the machine, s (`None`: unfinished, or
+    /// recorded before the machine time was).
+    pub machine_time_s: Option<f64>,
     pub dispersion: Vec<DispersionRow>,
     /// The request's parameters 1..8 (empty: not started by the PLC).
     pub parameters: Vec<f64>,
@@ -455,6 +467,9 @@ pub fn to_text(runs: &[RunRow]) -> String {
             printable(&r.status),
             r.results.len()
         ));
+        if let Some(t) = r.machine_time_s {
+            s.push_str(&format!("  {t:.1} s"));
+        }
         for e in &r.iso_errors {
             let name = printable(&e.name);
             s.push_str(&format!("  {name} {:+.4}->{:+.4}", e.before, e.after));
@@ -503,7 +518,15 @@ mod tests {
                 u: [("Q158".to_string(), 0.0002)].into_iter().collect(),
                 kinematics: None,
                 calibration: None,
-            }],
+                machine_time_s: None,
+                machine_time_split_s: None,
+            }
+            .timed(cycles::machine_time::TimeSplit {
+                positioning: 3.25,
+                rotary: 0.0,
+                probing: 3.5,
+                standing: 0.125,
+            })],
             stopped: None,
             aborted: false,
             protocols: vec![PathBuf::from("/tmp/TCHPR431.TXT")],
@@ -693,6 +716,11 @@ mod tests {
         let mut h = History::open(&HistoryTarget::Sqlite(path)).unwrap();
         let runs = h.list(&Filter::default()).unwrap();
         assert_eq!(runs[1].results[0].u, Some(0.0002));
+        // And its machine time; the run from before the column has none.
+        assert_eq!(
+            (runs[0].machine_time_s, runs[1].machine_time_s),
+            (None, Some(6.875))
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -26,7 +26,8 @@ CREATE TABLE IF NOT EXISTS runs (
     status TEXT NOT NULL,
     message TEXT,
     protocols TEXT NOT NULL DEFAULT '[]',
-    max_modification DOUBLE PRECISION
+    max_modification DOUBLE PRECISION,
+    machine_time_s DOUBLE PRECISION
 );
 CREATE INDEX IF NOT EXISTS runs_machine_started ON runs (machine, started);
 CREATE TABLE IF NOT EXISTS results (
@@ -61,6 +62,8 @@ CREATE TABLE IF NOT EXISTS axis_dispersion (
 -- Histories from before the standard uncertainties: the column added, NULL in old rows.
 ALTER TABLE results ADD COLUMN IF NOT EXISTS u DOUBLE PRECISION;
 ALTER TABLE iso_errors ADD COLUMN IF NOT EXISTS u DOUBLE PRECISION;
+-- And from before the machine time.
+ALTER TABLE runs ADD COLUMN IF NOT EXISTS machine_time_s DOUBLE PRECISION;
 ";
 
 /// Held while one gateway creates the tables, so that two starting at once do not
@@ -243,7 +246,7 @@ impl Store for PgStore {
             let tx = client.transaction().await?;
             let updated = tx
                 .execute(
-                    "UPDATE runs SET finished = $1, status = $2, message = $3, protocols = $4
+                    "UPDATE runs SET finished = $1, status = $2, message = $3, protocols = $4, machine_time_s = $6
                      WHERE id = $5 AND status IN ('running', 'interrupted')",
                     &[
                         &rows.finished,
@@ -251,6 +254,7 @@ impl Store for PgStore {
                         &rows.message,
                         &rows.protocols,
                         &id,
+                        &rows.machine_time_s,
                     ],
                 )
                 .await?;
@@ -319,7 +323,7 @@ impl Store for PgStore {
         within(&self.rt, self.statement, "listing", async {
             let rows = client
                 .query(
-                    "SELECT id, started, finished, machine, source, request_seq, program_number, program, status, message, protocols, max_modification
+                    "SELECT id, started, finished, machine, source, request_seq, program_number, program, status, message, protocols, max_modification, machine_time_s
                      FROM runs WHERE ($1::TEXT IS NULL OR machine = $1) AND ($2::TEXT IS NULL OR started >= $2) ORDER BY started, id",
                     &[&filter.machine, &filter.since],
                 )
@@ -342,6 +346,7 @@ impl Store for PgStore {
                     results: Vec::new(),
                     iso_errors: Vec::new(),
                     max_modification: r.get(11),
+                    machine_time_s: r.get(12),
                     dispersion: Vec::new(),
                     parameters: Vec::new(),
                 };

@@ -288,6 +288,7 @@ mod tests {
             status: status.into(),
             message: None,
             protocols: "[]".into(),
+            machine_time_s: Some(6.875),
             results: vec![(
                 0,
                 super::super::ResultRow {

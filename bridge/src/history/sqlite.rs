@@ -20,7 +20,8 @@ CREATE TABLE IF NOT EXISTS runs (
     status TEXT NOT NULL,
     message TEXT,
     protocols TEXT NOT NULL DEFAULT '[]',
-    max_modification REAL
+    max_modification REAL,
+    machine_time_s REAL
 );
 CREATE INDEX IF NOT EXISTS runs_machine_started ON runs (machine, started);
 CREATE TABLE IF NOT EXISTS results (
@@ -56,8 +57,11 @@ CREATE TABLE IF NOT EXISTS axis_dispersion (
 
 /// Columns added since the first schema, as (table, column, type): a history written
 /// before them gains them (NULL in its old rows) when it is opened.
-const ADDED_COLUMNS: [(&str, &str, &str); 2] =
-    [("results", "u", "REAL"), ("iso_errors", "u", "REAL")];
+const ADDED_COLUMNS: [(&str, &str, &str); 3] = [
+    ("results", "u", "REAL"),
+    ("iso_errors", "u", "REAL"),
+    ("runs", "machine_time_s", "REAL"),
+];
 
 /// Adds the [`ADDED_COLUMNS`] a file lacks, in one transaction (SQLite has no
 /// `ADD COLUMN IF NOT EXISTS`).
@@ -194,7 +198,7 @@ impl SqliteStore {
 
     fn list_runs(&self, filter: &Filter) -> rusqlite::Result<Vec<RunRow>> {
         let mut stmt = self.conn.prepare(
-            "SELECT id, started, finished, machine, source, request_seq, program_number, program, status, message, protocols, max_modification
+            "SELECT id, started, finished, machine, source, request_seq, program_number, program, status, message, protocols, max_modification, machine_time_s
              FROM runs WHERE (?1 IS NULL OR machine = ?1) AND (?2 IS NULL OR started >= ?2) ORDER BY started, id",
         )?;
         let rows = stmt.query_map(params![filter.machine, filter.since], |r| {
@@ -214,6 +218,7 @@ impl SqliteStore {
                 results: Vec::new(),
                 iso_errors: Vec::new(),
                 max_modification: r.get(11)?,
+                machine_time_s: r.get(12)?,
                 dispersion: Vec::new(),
                 parameters: Vec::new(),
             })
@@ -265,9 +270,16 @@ impl Store for SqliteStore {
         let tx = self.conn.transaction().map_err(text)?;
         let updated = tx
             .execute(
-                "UPDATE runs SET finished = ?1, status = ?2, message = ?3, protocols = ?4
+                "UPDATE runs SET finished = ?1, status = ?2, message = ?3, protocols = ?4, machine_time_s = ?6
                  WHERE id = ?5 AND status IN ('running', 'interrupted')",
-                params![rows.finished, rows.status, rows.message, rows.protocols, id],
+                params![
+                    rows.finished,
+                    rows.status,
+                    rows.message,
+                    rows.protocols,
+                    id,
+                    rows.machine_time_s
+                ],
             )
             .map_err(text)?;
         if updated == 0 {

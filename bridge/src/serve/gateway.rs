@@ -10,6 +10,7 @@ use super::ownership::{Ownership, Takeover};
 use super::register_map::{MapException, RegisterMap};
 use super::results::ResultValues;
 use crate::history::recorder::Recorder;
+use cycles::machine_time::TimeSplit;
 use hal::AbortFlag;
 use std::collections::BTreeMap;
 use std::net::IpAddr;
@@ -284,6 +285,7 @@ impl Core {
                 );
                 self.map
                     .set_results(start.seq.wrapping_sub(1), &BTreeMap::new());
+                self.map.set_machine_time(start.seq.wrapping_sub(1), None);
                 self.run = Some(RunInfo {
                     program: start.program,
                     face: start.face,
@@ -399,7 +401,13 @@ impl Core {
 
     /// The measurement ended (the machine is at rest): its outcome, and the stop
     /// request re-armed for the next one (not after a shutdown).
-    pub fn finish(&mut self, outcome: Outcome, cycle: u16, values: &ResultValues) {
+    pub fn finish(
+        &mut self,
+        outcome: Outcome,
+        cycle: u16,
+        values: &ResultValues,
+        machine_time: Option<&TimeSplit>,
+    ) {
         if self.abort_reason != Some(AbortReason::Shutdown) {
             self.abort.rearm();
             self.abort_reason = None;
@@ -412,6 +420,8 @@ impl Core {
             &empty
         };
         self.map.set_results(seq, values);
+        // Whatever the outcome: the machine was held.
+        self.map.set_machine_time(seq, machine_time);
         self.end_run(outcome);
         self.publish();
     }

@@ -9,7 +9,7 @@ use super::handshake::{
 };
 use super::machine_link::MachineLink;
 use super::prepare::{Job, Preparer};
-use super::results::{last_results, of_cycle};
+use super::results::{last_results, machine_time, of_cycle};
 use crate::history::recorder::{Kept, Recorder};
 use crate::ipc::{EstimatorChild, IpcEstimator};
 use crate::session::Session;
@@ -280,7 +280,7 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
                 .collect(),
         );
     }
-    core.finish(outcome, cycle, &values);
+    core.finish(outcome, cycle, &values, machine_time(&report).as_ref());
 }
 
 /// The machine as the cycles drive it, remembering the last error a motion returned
@@ -318,6 +318,9 @@ impl<M: Machine<Error = MachineError> + ?Sized> Machine for ErrorNote<'_, M> {
     }
     fn set_run(&mut self, run_id: u64) {
         self.inner.set_run(run_id);
+    }
+    fn clock_ns(&mut self) -> u64 {
+        self.inner.clock_ns()
     }
     fn health(&mut self) -> Result<(), MachineError> {
         self.inner.health()

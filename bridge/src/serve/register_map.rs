@@ -18,10 +18,15 @@
 //!   without moving it): the result sequence, cycle 460's probe table row (R, CAL_OF1,
 //!   CAL_OF2, L) as REAL and their standard uncertainties as REAL (NaN when the cycle
 //!   the result block holds is not 460, or for a column it kept), and the sequence again.
+//! - machine time block (`TIME_BASE`, read-only, appended after the calibration block
+//!   without moving it): the request sequence, how long the run's cycles kept the
+//!   machine (s, REAL) and its split (positioning, rotary, probing, standing), and the
+//!   sequence again; written at the end of every run, whatever its outcome.
 //!
 //! Reads and writes must lie inside one block; writes only inside the request block.
 
 use super::results::{slots, Quantity, ResultKey, ResultValues};
+use cycles::machine_time::TimeSplit;
 
 pub const REQUEST_BASE: u16 = 0;
 pub const REQ_CODE: u16 = 0;
@@ -73,6 +78,14 @@ pub const CAL_REAL: u16 = CAL_SEQ_HEAD + 1;
 pub const CAL_UNC: u16 = CAL_REAL + 2 * CAL_COLUMNS.len() as u16;
 pub const CAL_SEQ_TAIL: u16 = CAL_UNC + 2 * CAL_COLUMNS.len() as u16;
 pub const CALIB_LEN: u16 = CAL_SEQ_TAIL - CALIB_BASE + 1;
+
+/// The machine time block: the total and its four parts, REAL each.
+pub const TIME_BASE: u16 = CAL_SEQ_TAIL + 1;
+pub const TIME_SEQ_HEAD: u16 = TIME_BASE;
+pub const TIME_TOTAL: u16 = TIME_SEQ_HEAD + 1;
+pub const TIME_SPLIT: u16 = TIME_TOTAL + 2;
+pub const TIME_SEQ_TAIL: u16 = TIME_SPLIT + 2 * 4;
+pub const TIME_LEN: u16 = TIME_SEQ_TAIL - TIME_BASE + 1;
 
 /// Register counts a single request may carry (Modbus application protocol 6.3/6.12).
 pub const MAX_READ: u16 = 125;
@@ -158,11 +171,12 @@ pub struct RegisterMap {
 impl RegisterMap {
     pub fn new(order: WordOrder, int_scale: f64) -> Self {
         let mut m = Self {
-            regs: vec![0; usize::from(CAL_SEQ_TAIL) + 1],
+            regs: vec![0; usize::from(TIME_SEQ_TAIL) + 1],
             order,
             int_scale,
         };
         m.set_results(0, &ResultValues::new());
+        m.set_machine_time(0, None);
         m
     }
 
@@ -174,6 +188,7 @@ impl RegisterMap {
             (RESULT_BASE, RESULT_LEN),
             (UNCERT_BASE, UNCERT_LEN),
             (CALIB_BASE, CALIB_LEN),
+            (TIME_BASE, TIME_LEN),
         ]
         .into_iter()
         .find(|&(base, len)| addr >= base && end <= u32::from(base) + u32::from(len))
@@ -300,6 +315,22 @@ impl RegisterMap {
         }
     }
 
+    /// Writes how long the run of request `seq` kept the machine (`None`: not known,
+    /// NaN), the sequence last at both ends.
+    pub fn set_machine_time(&mut self, seq: u16, time: Option<&TimeSplit>) {
+        let values = time.map_or([f64::NAN; 5], |t| {
+            [t.total(), t.positioning, t.rotary, t.probing, t.standing]
+        });
+        for (i, v) in values.into_iter().enumerate() {
+            let [a, b] = self.order.split((v as f32).to_bits());
+            let r = usize::from(TIME_TOTAL) + 2 * i;
+            self.regs[r] = a;
+            self.regs[r + 1] = b;
+        }
+        self.regs[usize::from(TIME_SEQ_HEAD)] = seq;
+        self.regs[usize::from(TIME_SEQ_TAIL)] = seq;
+    }
+
     fn scaled(&self, v: f64) -> i32 {
         let s = (v * self.int_scale).round();
         if s.is_finite() && s > f64::from(DINT_MISSING) && s <= f64::from(i32::MAX) {
@@ -342,6 +373,38 @@ mod tests {
         assert_eq!(
             (CALIB_BASE, CAL_REAL, CAL_UNC, CAL_SEQ_TAIL, CALIB_LEN),
             (464, 465, 473, 481, 18)
+        );
+        // And the machine time block after that.
+        assert_eq!(
+            (TIME_BASE, TIME_TOTAL, TIME_SPLIT, TIME_SEQ_TAIL, TIME_LEN),
+            (482, 483, 485, 493, 12)
+        );
+    }
+
+    #[test]
+    fn golden_machine_time_block() {
+        let mut m = RegisterMap::new(WordOrder::LowFirst, 10_000.0);
+        // Before any run: NaN, sequence 0.
+        assert_eq!(m.read(TIME_TOTAL, 2).unwrap(), vec![0, 0x7FC0]);
+        let t = TimeSplit {
+            positioning: 2.0,
+            rotary: 0.5,
+            probing: 0.25,
+            standing: 0.0,
+        };
+        m.set_machine_time(7, Some(&t));
+        // 2.75 = 0x4030_0000, 2.0 = 0x4000_0000, 0.5 = 0x3F00_0000, 0.25 = 0x3E80_0000.
+        assert_eq!(
+            m.read(TIME_BASE, TIME_LEN).unwrap(),
+            vec![7, 0, 0x4030, 0, 0x4000, 0, 0x3F00, 0, 0x3E80, 0, 0, 7]
+        );
+        assert_eq!(
+            m.read(CAL_SEQ_TAIL, 2),
+            Err(MapException::IllegalDataAddress)
+        );
+        assert_eq!(
+            m.write(TIME_TOTAL, &[1]),
+            Err(MapException::IllegalDataAddress)
         );
     }
 

@@ -80,6 +80,15 @@ pub fn last_results(report: &ProgramReport) -> (u16, ResultValues) {
     (last.cycle, of_cycle(last))
 }
 
+/// How long the run's cycles kept the machine, part by part (`None`: no cycle ran).
+pub fn machine_time(report: &ProgramReport) -> Option<cycles::machine_time::TimeSplit> {
+    report
+        .cycles
+        .iter()
+        .filter_map(|c| c.machine_time_split_s)
+        .reduce(|a, b| a.plus(&b))
+}
+
 /// A cycle's results: its Q parameters (460: the probe table row's columns), for 451
 /// the errors before and after; with their standard uncertainties.
 pub fn of_cycle(c: &CycleResult) -> ResultValues {

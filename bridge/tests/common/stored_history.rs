@@ -58,6 +58,8 @@ fn report(run: &StoredRun) -> ProgramReport {
             u: Default::default(),
             kinematics: Some(Box::new(serde_json::from_value(kinematics).unwrap())),
             calibration: None,
+            machine_time_s: None,
+            machine_time_split_s: None,
         }],
         ..ProgramReport::default()
     }

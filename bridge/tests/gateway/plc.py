@@ -17,6 +17,8 @@ RES_HEAD, RES_REAL, RES_DINT, RES_TAIL = 64, 65, 197, 329
 UNC_HEAD, UNC_REAL, UNC_TAIL = 330, 331, 463
 CAL_HEAD, CAL_REAL, CAL_UNC, CAL_TAIL = 464, 465, 473, 481
 CAL_COLUMNS = ("R", "CAL_OF1", "CAL_OF2", "L")
+TIME_HEAD, TIME_TOTAL, TIME_TAIL = 482, 483, 493
+TIME_PARTS = ("total", "positioning", "rotary", "probing", "standing")
 START, ABORT, ACK = 1, 2, 3
 IDLE, BUSY, DONE, ERROR, ABORTED = range(5)
 NAMES = (
@@ -130,6 +132,17 @@ class Plc:
         return cal, cal_u
 
 
+    def machine_time(self, seq):
+        regs = self.read(TIME_HEAD, TIME_TAIL - TIME_HEAD + 1)
+        head, tail = regs[0], regs[TIME_TAIL - TIME_HEAD]
+        check(head == tail == seq, f"machine time sequence {head}/{tail} for request {seq}")
+        out = {}
+        for i, name in enumerate(TIME_PARTS):
+            a = TIME_TOTAL - TIME_HEAD + 2 * i
+            out[name] = struct.unpack(">f", struct.pack(">HH", regs[a], regs[a + 1]))[0]
+        return out
+
+
 # Parameters 1..8 of every start of `run`: recorded with the run in the history.
 PARAMS = (1.5, -2.25, 0.0, 0.0, 0.0, 0.0, 0.0, 1000.125)
 
@@ -144,8 +157,10 @@ def run(plc, program):
     real, dint = plc.results(seq)
     u = plc.uncertainties(seq)
     cal, cal_u = plc.calibration(seq)
+    t = plc.machine_time(seq)
     cycle = plc.read(43, 1)[0]
-    return {"cycle": cycle, "real": real, "dint": dint, "u": u, "cal": cal, "cal_u": cal_u}
+    return {"cycle": cycle, "real": real, "dint": dint, "u": u, "cal": cal, "cal_u": cal_u,
+            "time": t}
 
 
 def last(plc):

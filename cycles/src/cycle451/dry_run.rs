@@ -21,6 +21,7 @@ use crate::error::CycleError;
 use crate::kinematics::model::{angles_of, ErrorSet, KinematicModel};
 use crate::kinematics::LocalEstimator;
 use crate::kinematics_file::ActiveKinematics;
+use crate::machine_time::Prediction;
 use crate::plan::{in_every_world, when, PlanMachine, Sphere, SphereSet, StartReach, World};
 use hal::AxisPositions;
 use nalgebra::Vector3;
@@ -35,6 +36,8 @@ pub struct PlannedRun {
     pub preset: [f64; 3],
     /// Every positioning target, in order.
     pub moves: Vec<AxisPositions>,
+    /// The machine time the moves will take, and their lower bound.
+    pub time: Prediction,
 }
 
 /// Plans every move of a 451 block: the plan of [`super::plan()`], then the cycle's
@@ -81,6 +84,7 @@ pub fn plan_moves(
                 program: None,
                 probing3d: Vec::new(),
                 datum: datum.clone(),
+                machine_time: None,
             };
             let preset = {
                 let mut m = Measure::new(
@@ -103,6 +107,7 @@ pub fn plan_moves(
                 end: machine.position(),
                 preset: preset.into(),
                 moves: machine.moves().to_vec(),
+                time: machine.prediction(),
             })
         },
         |e: PlanError, what| PlanError::new(e.kind(), when(&e.to_string(), what)),

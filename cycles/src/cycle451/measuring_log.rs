@@ -73,6 +73,9 @@ pub fn kinematics_log_html(
             .join(", "),
     );
     row(&mut s, "Estimator", &esc(&r.estimator));
+    if let Some(t) = &r.machine_time {
+        row(&mut s, "Machine time", &t.to_string());
+    }
     row(&mut s, "Preset before", &v3(&r.preset_before));
     if r.preset_set || !r.preset.contains("preset not set") {
         row(&mut s, "Preset after", &v3(&r.preset_after));

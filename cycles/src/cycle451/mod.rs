@@ -143,7 +143,9 @@ impl MeasuringCycle for KinematicsParams {
         }
         notes.push(format!("{spheres} sphere(s) measured"));
         notes.extend(result.transfers.iter().map(transfer_note));
+        let now_ns = m.clock_ns();
         let ctx = m.ctx;
+        let machine_time = ctx.machine_time_at(now_ns);
 
         let write_back = WriteBack::decide(
             call.block,
@@ -175,6 +177,7 @@ impl MeasuringCycle for KinematicsParams {
             errors_u,
             axes,
             notes,
+            machine_time,
         };
         let log = write_back.write(call.block, &mut report, &active, ctx)?;
         // Q431 != 0: the active preset row takes the sphere centre, written only in

@@ -108,6 +108,10 @@ pub struct KinematicsReport {
     pub errors_u: BTreeMap<String, f64>,
     pub axes: Vec<AxisReport>,
     pub notes: Vec<String>,
+    /// The machine time up to the measuring log (its "Machine time" row); the cycle's
+    /// own result carries the whole time (`machine_time_s`), so it is not repeated.
+    #[serde(skip)]
+    pub machine_time: Option<crate::machine_time::TimeSplit>,
 }
 
 impl KinematicsReport {

@@ -18,6 +18,7 @@ use crate::cycle_block::CycleBlock;
 use crate::cycles_config::CyclesConfig;
 use crate::datum::Datum;
 use crate::kinematics::LocalEstimator;
+use crate::machine_time::Prediction;
 use crate::plan::{in_every_world, when, PlanMachine, StartReach};
 use hal::AxisPositions;
 use nalgebra::Vector3;
@@ -32,7 +33,7 @@ pub fn plan_moves(
     cfg: &CyclesConfig,
     datum: &Datum,
     start: &AxisPositions,
-) -> Result<AxisPositions, String> {
+) -> Result<(AxisPositions, Prediction), String> {
     let probe = &call.tool.probe;
     let old = probe.calibration();
     let frame = super::frame(call);
@@ -66,6 +67,7 @@ pub fn plan_moves(
                 program: None,
                 probing3d: Vec::new(),
                 datum: datum.clone(),
+                machine_time: None,
             };
             Probing {
                 rs,
@@ -79,7 +81,7 @@ pub fn plan_moves(
             }
             .run()
             .map_err(|e| format!("cycle 460 cannot be planned: {e}"))?;
-            Ok(machine.position())
+            Ok((machine.position(), machine.prediction()))
         },
         |e: String, what| when(&e, what),
     )

@@ -8,6 +8,7 @@
 
 use super::path::{first_touch, Sphere, SphereSet, TOUCH_TOLERANCE};
 use crate::kinematics::model::{angles_of, KinematicModel};
+use crate::machine_time::{MotionModel, Prediction};
 use hal::config::MachineConfig;
 use hal::motion_guard::MotionGuard;
 use hal::{AxisPositions, Contact, ErrorKind, Machine, MachineError, ProbeMove};
@@ -28,6 +29,11 @@ pub struct PlanMachine {
     orientable: bool,
     pos: AxisPositions,
     moves: Vec<AxisPositions>,
+    /// The machine time of the moves so far, as [`MotionModel`] predicts it: the
+    /// plan's clock ([`Machine::clock_ns`]).
+    motion: MotionModel,
+    prediction: Prediction,
+    spindle_deg: f64,
 }
 
 impl PlanMachine {
@@ -51,6 +57,9 @@ impl PlanMachine {
             orientable: false,
             pos: start,
             moves: Vec::new(),
+            motion: MotionModel::new(machine),
+            prediction: Prediction::default(),
+            spindle_deg: 0.0,
         }
     }
 
@@ -69,6 +78,11 @@ impl PlanMachine {
     /// Every positioning target so far, in order (what `run` will command).
     pub fn moves(&self) -> &[AxisPositions] {
         &self.moves
+    }
+
+    /// The machine time of the moves so far and their lower bound.
+    pub fn prediction(&self) -> Prediction {
+        self.prediction
     }
 
     /// The spheres a positioning move must keep off now.
@@ -112,6 +126,8 @@ impl Machine for PlanMachine {
                 ),
             ));
         }
+        self.prediction
+            .add_move(&self.motion, &self.pos, target, feed);
         self.pos = self.pos.merged(target);
         self.moves.push(*target);
         Ok(())
@@ -144,6 +160,8 @@ impl Machine for PlanMachine {
             ));
         };
         let at = p + d * t.max(0.0);
+        self.prediction
+            .add_probe(&self.motion, d.into(), mv.feed, t.max(0.0), mv.max_distance);
         self.pos = self.pos.merged(&AxisPositions::linear(at.into()));
         self.contacted = true;
         Ok(Contact {
@@ -156,8 +174,18 @@ impl Machine for PlanMachine {
 
     fn set_run(&mut self, _run_id: u64) {}
 
-    fn orient_spindle(&mut self, _angle_deg: f64) -> Result<bool, MachineError> {
+    fn orient_spindle(&mut self, angle_deg: f64) -> Result<bool, MachineError> {
+        if self.orientable {
+            self.prediction
+                .add_orient(&self.motion, angle_deg - self.spindle_deg);
+            self.spindle_deg = angle_deg;
+        }
         Ok(self.orientable)
+    }
+
+    /// The predicted time of the moves so far.
+    fn clock_ns(&mut self) -> u64 {
+        (self.prediction.split.total() * 1e9) as u64
     }
 }
 

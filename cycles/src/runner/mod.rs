@@ -9,6 +9,7 @@ use crate::error::{CycleError, CycleErrorKind};
 use crate::kinematics::{Estimator, LocalEstimator};
 use crate::kinematics_file::ActiveKinematics;
 use crate::linear::{parse_linear, LinearMove, MoveFeed};
+use crate::machine_time::TimedMachine;
 use crate::parser::resolve_deferred;
 use crate::probe_table::probes_file::ProbeCalibrations;
 use crate::program::{CycleCall, CycleKind, Program, Statement};
@@ -30,7 +31,7 @@ use preflight::{check_cycle_moves, check_linear_move, preflight_cycle};
 
 pub use preflight::{
     assumed_start, check_complete, nothing_moved, preflight_program, preflight_program_from,
-    program_warnings, Preflight, PreflightKind,
+    program_warnings, rapid, CycleTime, PlannedTime, Preflight, PreflightKind,
 };
 
 pub struct RunOptions<'a> {
@@ -72,13 +73,7 @@ pub fn run_program<M: Machine>(
             Ok(started) => started,
             Err(refused) => return *refused,
         };
-    // Rapid positioning: as fast as the slowest axis on the path allows.
-    let rapid = cfg
-        .machine
-        .axes
-        .iter()
-        .map(|a| a.max_feed)
-        .fold(0.0, f64::max);
+    let rapid = rapid(&cfg.machine);
     let mut local = LocalEstimator;
     let estimator: &mut dyn Estimator = match opts.estimator.as_deref_mut() {
         Some(e) => e,
@@ -94,6 +89,7 @@ pub fn run_program<M: Machine>(
         program: program.path.as_deref(),
         probing3d: Vec::new(),
         datum: Datum::new(cfg.presets.clone()),
+        machine_time: None,
     };
     let guard = MotionGuard::new(&cfg.machine);
     let mut flow = Flow::new(cfg.parameters.max_jumps);
@@ -267,7 +263,7 @@ fn before_start(
 ) -> Result<(ProgramReport, QParams, PathBuf), Box<ProgramReport>> {
     let mut report = ProgramReport::default();
     match preflight_program_from(program, machine_axes, cfg, kinematics, start) {
-        Ok(()) => {}
+        Ok(_) => {}
         Err(Preflight::Cycle {
             block,
             cycle,
@@ -392,13 +388,18 @@ fn run_cycle<M: Machine>(
         cycle: head.cycle,
         line: head.line,
     });
+    // Timed on the machine's own clock, whatever the outcome: the machine was held.
+    let mut timed = TimedMachine::new(machine);
+    ctx.machine_time = Some(timed.ledger());
     let outcome: Result<CycleOutput, CycleError> = match &call.kind {
-        CycleKind::MeasurePlane(p) => p.run(head, machine, ctx),
-        CycleKind::Probing3d(p) => p.run(head, machine, ctx),
-        CycleKind::SaveKinematics(p) => p.run(head, machine, ctx),
-        CycleKind::MeasureKinematics(p) => p.run(head, machine, ctx),
-        CycleKind::CalibrateProbe(p) => p.run(head, machine, ctx),
+        CycleKind::MeasurePlane(p) => p.run(head, &mut timed, ctx),
+        CycleKind::Probing3d(p) => p.run(head, &mut timed, ctx),
+        CycleKind::SaveKinematics(p) => p.run(head, &mut timed, ctx),
+        CycleKind::MeasureKinematics(p) => p.run(head, &mut timed, ctx),
+        CycleKind::CalibrateProbe(p) => p.run(head, &mut timed, ctx),
     };
+    let split = timed.split();
+    ctx.machine_time = None;
     let result = match outcome {
         Ok(out) => {
             for path in out.logs {
@@ -423,6 +424,8 @@ fn run_cycle<M: Machine>(
                 u: out.u,
                 kinematics: out.kinematics,
                 calibration: out.calibration,
+                machine_time_s: None,
+                machine_time_split_s: None,
             }
         }
         Err(e) if e.kind() == CycleErrorKind::Machine(hal::ErrorKind::Aborted) => {
@@ -446,6 +449,7 @@ fn run_cycle<M: Machine>(
             CycleResult::error(head.block, head.cycle, message)
         }
     };
+    let result = result.timed(split);
     (ctx.progress)(ProgressEvent::CycleFinished {
         block: head.block,
         cycle: head.cycle,

@@ -10,6 +10,7 @@ use crate::datum::Datum;
 use crate::formula::EvalErrorKind;
 use crate::kinematics_file::ActiveKinematics;
 use crate::linear::{parse_linear, LinearBlockError, LinearBlockErrorKind, LinearMove, MoveFeed};
+use crate::machine_time::{MotionModel, Prediction};
 use crate::parser::resolve_deferred;
 use crate::planned_move::{check_planned, PlannedMove};
 use crate::program::{CycleCall, CycleKind, Program, Statement};
@@ -139,16 +140,37 @@ impl Preflight {
     }
 }
 
+/// The machine time `check` predicts for a program from its plan: each cycle's, in
+/// the order the program runs them, and the whole program's (its `L` moves included).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PlannedTime {
+    pub cycles: Vec<CycleTime>,
+    pub program: Prediction,
+    /// Why the prediction is not the whole run, if it is not: a value only a cycle
+    /// measures decides a move, a cycle's parameters or the way through the program.
+    pub partial: Option<String>,
+}
+
+/// One cycle of [`PlannedTime`]; `time` is `None` when its parameters are measured.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CycleTime {
+    pub block: u32,
+    pub cycle: u16,
+    pub line: usize,
+    pub time: Option<Prediction>,
+}
+
 /// Everything `run_program` checks before the first move, without a machine: `check`
 /// runs it on the configuration's axes, `run` on the connected machine's. The axes
 /// start where [`assumed_start`] puts them (`run` starts from where the machine stands,
-/// [`preflight_program_from`]).
+/// [`preflight_program_from`]). What passes comes with the machine time the plan
+/// predicts.
 pub fn preflight_program(
     program: &Program,
     machine_axes: u8,
     cfg: &CyclesConfig,
     kinematics: &std::path::Path,
-) -> Result<(), Preflight> {
+) -> Result<PlannedTime, Preflight> {
     let start = assumed_start(&cfg.machine);
     preflight_program_from(program, machine_axes, cfg, kinematics, &start)
 }
@@ -172,7 +194,7 @@ pub fn preflight_program_from(
     cfg: &CyclesConfig,
     kinematics: &std::path::Path,
     start: &AxisPositions,
-) -> Result<(), Preflight> {
+) -> Result<PlannedTime, Preflight> {
     for call in program.cycles() {
         preflight_cycle(call, machine_axes, cfg, kinematics)?;
     }
@@ -197,55 +219,68 @@ pub fn preflight_program_from(
         cfg.parameters.max_jumps,
         crate::cycle451::rotary_m_function::written_params(cfg),
     );
+    let motion = MotionModel::new(&cfg.machine);
+    let mut time = PlannedTime::default();
     while let Some(block) = walk.next_block().map_err(|f| Preflight::Program {
         line: f.line,
         kind: PreflightKind::Program(f.kind),
         message: f.message,
     })? {
+        // The time is the first way's: each condition on a measured value not taken.
+        let first_way = walk.path() == 0;
         let (datum, params, here) = walk.state();
         let mut path_ends = false;
         match &block.statement {
             // `run` stops at a preset row that does not exist, with the same message;
             // nothing after it moves.
             Statement::Datum(d) if datum.apply(d).is_err() => path_ends = true,
-            Statement::Other(code) => {
-                // A value measured by a cycle is known only when the program runs:
-                // `run` checks that move then, before it moves.
-                let code = match substitute_params(code, params) {
-                    Ok(c) => c,
-                    Err(e) if e.kind == EvalErrorKind::Measured => continue,
-                    Err(e) => {
-                        return Err(Preflight::Program {
-                            line: block.line,
-                            kind: PreflightKind::Program(FlowFaultKind::Eval(e.kind)),
-                            message: e.message,
-                        })
+            Statement::Other(code) => match l_block(code, block.line, params, datum, program, cfg)?
+            {
+                LBlock::Move(mv) => {
+                    if first_way {
+                        let feed = match mv.feed {
+                            MoveFeed::Rapid => rapid(&cfg.machine),
+                            MoveFeed::Feed(f) => f,
+                        };
+                        time.program.add_move(&motion, here, &mv.target, feed);
                     }
-                };
-                let checked = parse_linear(&code, program.unit).map(|r| {
-                    r.and_then(|mut mv| {
-                        mv.target = mv.machine_target(datum, cfg.parameters.m92_reference)?;
-                        check_linear_move(&mv, &cfg.machine).map(|()| mv)
-                    })
-                });
-                match checked {
-                    Some(Err(error)) => {
-                        return Err(Preflight::Positioning {
-                            line: block.line,
-                            error,
-                        })
-                    }
-                    Some(Ok(mv)) => *here = here.merged(&mv.target),
-                    None => {}
+                    *here = here.merged(&mv.target)
                 }
-            }
+                LBlock::Measured => {
+                    time.partial.get_or_insert_with(|| {
+                        format!(
+                            "the L block at line {} moves to a measured value",
+                            block.line
+                        )
+                    });
+                }
+                LBlock::NotL => {}
+            },
             Statement::Cycle(call) => {
-                check_cycle_moves(call, cfg, kinematics, datum, here, &guard)?;
+                let t = check_cycle_moves(call, cfg, kinematics, datum, here, &guard)?;
+                if first_way {
+                    time.add(call, Some(t));
+                }
             }
             Statement::Deferred(d) => match resolve_deferred(d, params, cfg) {
                 // A value measured by a cycle: `run` resolves and checks the block
                 // then, before it moves.
-                Err(e) if e.kind == EvalErrorKind::Measured => {}
+                Err(e) if e.kind == EvalErrorKind::Measured => {
+                    if first_way {
+                        time.cycles.push(CycleTime {
+                            block: d.block,
+                            cycle: d.cycle,
+                            line: d.line,
+                            time: None,
+                        });
+                        time.partial.get_or_insert_with(|| {
+                            format!(
+                                "cycle {} at line {} has measured parameters",
+                                d.cycle, d.line
+                            )
+                        });
+                    }
+                }
                 Err(e) => {
                     return Err(Preflight::Program {
                         line: d.line,
@@ -255,7 +290,10 @@ pub fn preflight_program_from(
                 }
                 Ok(call) => {
                     preflight_cycle(&call, machine_axes, cfg, kinematics)?;
-                    check_cycle_moves(&call, cfg, kinematics, datum, here, &guard)?;
+                    let t = check_cycle_moves(&call, cfg, kinematics, datum, here, &guard)?;
+                    if first_way {
+                        time.add(&call, Some(t));
+                    }
                 }
             },
             _ => {}
@@ -264,7 +302,74 @@ pub fn preflight_program_from(
             walk.end_path();
         }
     }
-    Ok(())
+    if walk.path() > 0 {
+        time.partial.get_or_insert_with(|| {
+            "the way through the program depends on measured values: predicted where each such condition does not jump".into()
+        });
+    }
+    Ok(time)
+}
+
+/// What `check` makes of a block that is not a cycle: an `L` move in machine
+/// coordinates, checked as `run` checks it.
+enum LBlock {
+    Move(LinearMove),
+    /// It moves to a value a cycle measures: `run` checks that move then, before it
+    /// moves.
+    Measured,
+    NotL,
+}
+
+fn l_block(
+    code: &str,
+    line: usize,
+    params: &crate::q_params::QParams,
+    datum: &Datum,
+    program: &Program,
+    cfg: &CyclesConfig,
+) -> Result<LBlock, Preflight> {
+    let code = match substitute_params(code, params) {
+        Ok(c) => c,
+        Err(e) if e.kind == EvalErrorKind::Measured => return Ok(LBlock::Measured),
+        Err(e) => {
+            return Err(Preflight::Program {
+                line,
+                kind: PreflightKind::Program(FlowFaultKind::Eval(e.kind)),
+                message: e.message,
+            })
+        }
+    };
+    let checked = parse_linear(&code, program.unit).map(|r| {
+        r.and_then(|mut mv| {
+            mv.target = mv.machine_target(datum, cfg.parameters.m92_reference)?;
+            check_linear_move(&mv, &cfg.machine).map(|()| mv)
+        })
+    });
+    match checked {
+        Some(Err(error)) => Err(Preflight::Positioning { line, error }),
+        Some(Ok(mv)) => Ok(LBlock::Move(mv)),
+        None => Ok(LBlock::NotL),
+    }
+}
+
+impl PlannedTime {
+    fn add(&mut self, call: &CycleCall, time: Option<Prediction>) {
+        if let Some(t) = &time {
+            self.program = self.program.plus(t);
+        }
+        self.cycles.push(CycleTime {
+            block: call.head.block,
+            cycle: call.head.cycle,
+            line: call.head.line,
+            time,
+        });
+    }
+}
+
+/// Rapid positioning (`FMAX`): as fast as the fastest axis's `max_feed` (the path's
+/// own axes then limit it), as `run` commands it.
+pub fn rapid(machine: &MachineConfig) -> f64 {
+    machine.axes.iter().map(|a| a.max_feed).fold(0.0, f64::max)
 }
 
 /// What `check` and `run` say about a program that does not stop it: block numbers out
@@ -321,7 +426,7 @@ pub(super) fn preflight_cycle(
 /// every move of cycles 451 and 460 (their sequences run on the planner's machine,
 /// [`crate::plan`], for every sphere the block allows). Leaves `here` where the cycle
 /// leaves the axes, and, for 451 with Q431 = 1/3 in modes 1..3, the active preset at
-/// the sphere centre it sets.
+/// the sphere centre it sets. Returns the machine time the cycle's moves will take.
 pub(super) fn check_cycle_moves(
     call: &CycleCall,
     cfg: &CyclesConfig,
@@ -329,8 +434,9 @@ pub(super) fn check_cycle_moves(
     datum: &mut Datum,
     here: &mut AxisPositions,
     guard: &MotionGuard,
-) -> Result<(), Preflight> {
+) -> Result<Prediction, Preflight> {
     let origin = datum.origin();
+    let mut time = Prediction::default();
     let refused = |kind: PreflightKind, message: String| Preflight::Cycle {
         block: call.head.block,
         cycle: call.head.cycle,
@@ -350,6 +456,7 @@ pub(super) fn check_cycle_moves(
                 cycle451::dry_run::plan_moves(p, &call.head, cfg, kinematics, datum, here)
                     .map_err(|e| refused(PreflightKind::Plan(e.kind()), nothing_moved(e)))?;
             *here = planned.end;
+            time = planned.time;
             // Q431 = 1/3 in modes 1..3: later blocks are relative to the preset the
             // cycle writes at the sphere centre.
             if (p.preset == 1 || p.preset == 3) && p.mode.writes() {
@@ -362,7 +469,7 @@ pub(super) fn check_cycle_moves(
         // Planned from where the axes stand: the probe over the sphere, as the
         // operator puts it before the block.
         CycleKind::CalibrateProbe(p) => {
-            *here = crate::cycle460::plan::plan_moves(p, &call.head, cfg, datum, here)
+            (*here, time) = crate::cycle460::plan::plan_moves(p, &call.head, cfg, datum, here)
                 .map_err(|message| refused(PreflightKind::Moves, message))?;
             Ok(Vec::new())
         }
@@ -370,12 +477,34 @@ pub(super) fn check_cycle_moves(
     let moves = moves
         .and_then(|m| check_planned(&m, guard).map(|()| m))
         .map_err(|message| refused(PreflightKind::Moves, message))?;
+    let motion = MotionModel::new(&cfg.machine);
+    let mut probed_along = [0.0; 3];
     for m in &moves {
-        if let PlannedMove::Position { target, .. } = m {
-            *here = here.merged(target);
+        match m {
+            PlannedMove::Position { target, feed, .. } => {
+                time.add_move(&motion, here, target, *feed);
+                *here = here.merged(target);
+            }
+            PlannedMove::Probe {
+                from, mv, nominal, ..
+            } => {
+                time.add_probe(&motion, mv.direction, mv.feed, *nominal, mv.max_distance);
+                let d = mv.direction;
+                let at = [0, 1, 2].map(|i| from[i] + d[i] * nominal);
+                *here = here.merged(&AxisPositions::linear(at));
+                probed_along = d;
+            }
+            // From the nominal contact, as the time is predicted for it.
+            PlannedMove::Retract { distance, feed, .. } => {
+                let p = here.xyz();
+                let target =
+                    AxisPositions::linear([0, 1, 2].map(|i| p[i] - probed_along[i] * distance));
+                time.add_move(&motion, here, &target, *feed);
+                *here = here.merged(&target);
+            }
         }
     }
-    Ok(())
+    Ok(time)
 }
 
 /// A program file as `check` and `run` take it: BEGIN PGM and END PGM present (an

@@ -233,6 +233,10 @@ impl Machine for MockMachine {
 
     /// The mock publishes no samples: nothing to tag.
     fn set_run(&mut self, _run_id: u64) {}
+
+    fn clock_ns(&mut self) -> u64 {
+        0
+    }
 }
 
 /// Rotation matrices written out here, independent of the crate's.

@@ -20,7 +20,7 @@ pub use process_data::BusLoad;
 pub use rt_loop::Pacing;
 pub use rt_loop::{LoopConfig, LoopStats, RtLoop};
 use std::io::Write as _;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -84,6 +84,8 @@ pub struct CanMachine {
     thread: Option<JoinHandle<()>>,
     running: Arc<AtomicBool>,
     stats: Arc<Mutex<LoopStats>>,
+    /// The time of the last SYNC, ns (the loop's clock: virtual in lockstep).
+    clock: Arc<AtomicU64>,
     config: MachineConfig,
     guard: MotionGuard,
     options: MasterOptions,
@@ -138,12 +140,14 @@ impl CanMachine {
         let (reply_tx, reply_rx) = sync_channel::<Reply>(1);
         let running = Arc::new(AtomicBool::new(true));
         let stats = Arc::new(Mutex::new(LoopStats::default()));
+        let clock = Arc::new(AtomicU64::new(0));
         type RtSettings = (bool, bool, Option<usize>, bool, Option<String>);
         let (rt_tx, rt_rx) = sync_channel::<RtSettings>(1);
         let machine_cfg = cfg.clone();
         let thread = {
             let running = running.clone();
             let stats = stats.clone();
+            let clock = clock.clone();
             let realtime = matches!(options.pacing, Pacing::RealTime);
             let priority = if realtime { options.rt_priority } else { 0 };
             let rt_cpu = options.rt_cpu;
@@ -168,7 +172,7 @@ impl CanMachine {
                     let held = matches!(latency, Some(Ok(_)));
                     let _ = rt_tx.send((got.0, got.1, got.2, held, latency_note));
                     let mut rt = PacedLoop::new(&machine_cfg, loop_cfg, transport, sink);
-                    run_thread(&mut rt, &cmd_rx, &reply_tx, &running, &stats);
+                    run_thread(&mut rt, &cmd_rx, &reply_tx, &running, &stats, &clock);
                 })
                 .map_err(|e| {
                     MachineError::new(
@@ -202,6 +206,7 @@ impl CanMachine {
             thread: Some(thread),
             running,
             stats,
+            clock,
             config: cfg.clone(),
             guard: MotionGuard::new(cfg),
             options,
@@ -320,6 +325,7 @@ fn run_thread<T: CanTransport, S: SampleSink>(
     replies: &SyncSender<Reply>,
     running: &AtomicBool,
     stats: &Mutex<LoopStats>,
+    clock: &AtomicU64,
 ) {
     // The startup Ready/Error goes out like any reply.
     let mut shutdown_cycles = 0;
@@ -368,6 +374,8 @@ fn run_thread<T: CanTransport, S: SampleSink>(
                 }
             }
         }
+        // Before the reply: whoever reads the clock after an answer sees its SYNC.
+        clock.store(rt.rt().now_ns(), Ordering::Release);
         if let Some(r) = rt.take_reply() {
             let _ = replies.try_send(r);
         }
@@ -392,6 +400,11 @@ impl Machine for CanMachine {
 
     fn set_run(&mut self, run_id: u64) {
         self.set_run_id(run_id);
+    }
+
+    /// The time of the last SYNC: the drives' time, virtual in lockstep.
+    fn clock_ns(&mut self) -> u64 {
+        self.clock.load(Ordering::Acquire)
     }
 
     /// The loop's own supervision (heartbeats, EMCY, statusword fault) and whether the

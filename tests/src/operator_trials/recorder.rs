@@ -74,6 +74,10 @@ impl<M: Machine<Error = MachineError>> Machine for Recorder<M> {
         self.inner.set_run(run_id);
     }
 
+    fn clock_ns(&mut self) -> u64 {
+        self.inner.clock_ns()
+    }
+
     fn health(&mut self) -> Result<(), MachineError> {
         self.inner.health()
     }

@@ -1,8 +1,9 @@
 //! The benchmark commands: `bench trigger` over CANopen ([`trigger`]) and over
-//! Modbus TCP ([`modbus`]), and what both runs share (their scratch folder, the
+//! Modbus TCP ([`modbus`]), `bench cycles` (the examples' machine time, [`cycles`]), and what both runs share (their scratch folder, the
 //! estimator's receive times). The measuring tools themselves (order statistics,
 //! the host's wake-up floor, the benchmark machine) are in [`crate::bench`].
 
+pub mod cycles;
 pub mod modbus;
 pub mod trigger;
 

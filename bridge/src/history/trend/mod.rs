@@ -104,6 +104,7 @@ mod tests {
                     },
                 ],
                 max_modification: Some(0.03),
+                machine_time_s: Some(400.0 + i as f64),
                 parameters: vec![],
                 dispersion: vec![DispersionRow {
                     block: 11,
@@ -136,6 +137,11 @@ mod tests {
         assert_eq!(html.matches("class=\"xtick\"").count() % 3, 0);
         assert!(html.contains("run start (UTC), 2026"));
         assert!(!html.contains("-0.0") && !html.contains(">-0<"));
+        // How long the runs kept the machine: the latest (404 s) and the range.
+        assert!(
+            html.contains("Machine time of the latest run: <b>404.0 s</b> (5 run(s) with a machine time: 400.0 .. 404.0 s)"),
+            "{html}"
+        );
     }
 
     #[test]

@@ -117,6 +117,7 @@ pub fn machine_page(
     // The summary lists the errors that moved most (in alarms) first; stable otherwise.
     rows.sort_by(|a, b| b.1.weight(&b.2).total_cmp(&a.1.weight(&a.2)));
     headline(&mut html, &rows);
+    machine_time(&mut html, runs, machine);
     summary(&mut html, &rows);
     html.push_str("<p><span class=\"swatch before\"></span>before optimisation (kinematics in use) <span class=\"swatch after\"></span>after optimisation (identified by cycle 451) <span class=\"swatch tol\"></span>tolerance (maxModification) <span class=\"swatch ebar\"></span>&#177; standard uncertainty (k = 1) <span class=\"swatch moved\"></span>changed by more than 2 combined standard uncertainties since the previous run</p>\n");
     let (errs, disp): (Vec<_>, Vec<_>) = rows
@@ -176,6 +177,27 @@ fn headline(html: &mut String, rows: &[(usize, &Series, Verdict)]) {
         html.push_str(", <span class=\"bad\">alarm</span>");
     }
     html.push_str(".</p>\n");
+}
+
+/// How long the 451 runs kept the machine: the latest, and the range of the runs shown.
+fn machine_time(html: &mut String, runs: &[RunRow], machine: &str) {
+    let times: Vec<f64> = done_runs(runs, machine)
+        .filter(|r| !r.iso_errors.is_empty())
+        .filter_map(|r| r.machine_time_s)
+        .collect();
+    let Some(latest) = times.last() else {
+        return;
+    };
+    let (lo, hi) = times
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), t| {
+            (l.min(*t), h.max(*t))
+        });
+    let _ = writeln!(
+        html,
+        "<p id=\"machine-time\">Machine time of the latest run: <b>{latest:.1} s</b> ({} run(s) with a machine time: {lo:.1} .. {hi:.1} s).</p>",
+        times.len()
+    );
 }
 
 fn summary(html: &mut String, rows: &[(usize, &Series, Verdict)]) {

@@ -92,7 +92,7 @@ const ACTIVE_PROGRAM: [(&str, DataTypeId); 7] = [
     ("EndTime", DataTypeId::DateTime),
     ("Cycle", DataTypeId::UInt16),
 ];
-pub const RUN_FIELDS: [(&str, DataTypeId, i32); 11] = [
+pub const RUN_FIELDS: [(&str, DataTypeId, i32); 12] = [
     ("Id", DataTypeId::Int64, -1),
     ("Status", DataTypeId::String, -1),
     ("Source", DataTypeId::String, -1),
@@ -104,6 +104,8 @@ pub const RUN_FIELDS: [(&str, DataTypeId, i32); 11] = [
     ("Parameters", DataTypeId::Double, 1),
     ("ResultNames", DataTypeId::String, 1),
     ("ResultValues", DataTypeId::Double, 1),
+    // How long the run's cycles kept the machine, s.
+    ("MachineTime", DataTypeId::Double, -1),
 ];
 
 /// What Identification shows.

@@ -279,6 +279,7 @@ fn run_field(r: &RunRow, name: &str) -> Variant {
         "Finished" => date_time_text(r.finished.as_deref()),
         "Message" => r.message.as_deref().map_or(Variant::Empty, Variant::from),
         "Parameters" => Variant::from(r.parameters.clone()),
+        "MachineTime" => r.machine_time_s.map_or(Variant::Empty, Variant::from),
         "ResultNames" | "ResultValues" => {
             let mut pairs: Vec<(String, f64)> = r
                 .results

@@ -121,6 +121,11 @@ pub(super) struct Measure<'a, 'c, M: Machine> {
 }
 
 impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
+    /// The machine's clock now (the cycle's machine time is read against it).
+    pub(super) fn clock_ns(&mut self) -> u64 {
+        self.machine.clock_ns()
+    }
+
     /// Reads where the machine stands; nothing moves yet.
     pub fn new(
         machine: &'a mut M,

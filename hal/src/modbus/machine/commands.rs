@@ -15,6 +15,13 @@ impl Machine for ModbusMachine {
         self.config.axis_mask()
     }
 
+    /// The PLC's own clock, read now (the last reading when the read fails: the
+    /// command that needs the PLC will say why).
+    fn clock_ns(&mut self) -> u64 {
+        let _ = self.read_status();
+        self.plc_clock.ns()
+    }
+
     fn positions(&mut self) -> Result<AxisPositions, MachineError> {
         let s = self.read_status()?;
         Ok(AxisPositions::from_raw(

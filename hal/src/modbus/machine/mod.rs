@@ -100,6 +100,9 @@ pub struct ModbusMachine {
     /// The last status read, and the bridge's clock at that read (mid request).
     status: StatusBlock,
     status_ns: u64,
+    /// The PLC's free-running µs clock, unwrapped (it wraps after 71 min): the
+    /// machine's own time, which [`Machine::clock_ns`] reports.
+    plc_clock: PlcClock,
     /// The linear direction of the motion that put the stylus in contact (the last
     /// probing contact or collision), while it may still be; see
     /// [`may_start_deflected`].
@@ -150,6 +153,7 @@ impl ModbusMachine {
             last_capture: None,
             status: StatusBlock::default(),
             status_ns: 0,
+            plc_clock: PlcClock::default(),
             contact_along: None,
         };
         let s = m.read_status()?;
@@ -207,6 +211,7 @@ impl ModbusMachine {
             .ok_or_else(|| MachineError::new(ErrorKind::Bus, "status block of the wrong length"))?;
         self.status = s;
         self.status_ns = t0 + (t1 - t0) / 2;
+        self.plc_clock.saw(s.plc_time_us);
         Ok(s)
     }
 
@@ -413,5 +418,42 @@ impl ModbusMachine {
                 format!("{what}: unexpected result code {}", s.result),
             ),
         }
+    }
+}
+
+/// The PLC's u32 µs clock made monotonic over wraps: each read adds the time since
+/// the one before (reads are far less than 71 min apart while a cycle runs).
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct PlcClock {
+    last_us: Option<u32>,
+    total_us: u64,
+}
+
+impl PlcClock {
+    pub(super) fn saw(&mut self, now_us: u32) {
+        if let Some(last) = self.last_us {
+            self.total_us += u64::from(now_us.wrapping_sub(last));
+        }
+        self.last_us = Some(now_us);
+    }
+
+    pub(super) fn ns(&self) -> u64 {
+        self.total_us * 1000
+    }
+}
+
+#[cfg(test)]
+mod plc_clock_tests {
+    use super::PlcClock;
+
+    #[test]
+    fn the_plc_clock_runs_on_over_its_wrap() {
+        let mut c = PlcClock::default();
+        c.saw(u32::MAX - 499);
+        assert_eq!(c.ns(), 0);
+        c.saw(500);
+        assert_eq!(c.ns(), 1_000_000);
+        c.saw(1500);
+        assert_eq!(c.ns(), 2_000_000);
     }
 }

@@ -1,0 +1,180 @@
+//! `probebridge bench cycles`: the machine time of the shipped examples, as `check`
+//! predicts it and as `run` takes it on the simulator's clock, beside the plan's lower
+//! bound, one row per cycle: the table of docs/cycles.md ("Machine time"), from the
+//! current tree, so that the next change can be measured against it. Each example runs
+//! in a fresh state folder of its own, by this very binary (`check --json`, then
+//! `run --json`), as a user would.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The shipped examples and the scenario each is written for (docs/cycles.md,
+/// "Example programs").
+pub const EXAMPLES: [(&str, &str); 10] = [
+    ("431-plane.h", "tilted-plane.toml"),
+    ("431-plane-y.h", "tilted-plane-y.toml"),
+    ("444-freeform.h", "freeform.toml"),
+    ("444-seed.h", "seed-444.toml"),
+    ("451-optimise.h", "demo-sphere.toml"),
+    ("451-check.h", "demo-sphere.toml"),
+    ("451-preset-set.h", "demo-sphere.toml"),
+    ("451-preset-247.h", "demo-sphere.toml"),
+    ("450-save-restore.h", "demo-sphere.toml"),
+    ("460-calibrate.h", "demo-sphere.toml"),
+];
+
+#[derive(clap::Args, Clone, Debug)]
+pub struct CyclesBenchArgs {
+    /// The folder holding `programs/` and `scenarios/`.
+    #[arg(long, default_value = "configs")]
+    pub configs: PathBuf,
+    /// Only the examples whose program name contains this.
+    #[arg(long)]
+    pub only: Option<String>,
+    /// Write the rows as JSON too.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// One cycle of one example.
+#[derive(Clone, Debug, serde::Serialize)]
+struct Row {
+    program: String,
+    block: u64,
+    cycle: u64,
+    predicted_s: f64,
+    measured_s: f64,
+    lower_bound_s: f64,
+}
+
+pub fn run(args: &CyclesBenchArgs) -> Result<(), String> {
+    let exe = std::env::current_exe().map_err(|e| format!("this program's path: {e}"))?;
+    let scratch =
+        std::env::temp_dir().join(format!("probebridge-bench-cycles-{}", std::process::id()));
+    let mut rows = Vec::new();
+    let mut failed = None;
+    for (i, (program, scenario)) in EXAMPLES.iter().enumerate() {
+        if args.only.as_deref().is_some_and(|o| !program.contains(o)) {
+            continue;
+        }
+        let state = scratch.join(format!("{i}"));
+        match example(&exe, &args.configs, program, scenario, &state, i) {
+            Ok(mut r) => rows.append(&mut r),
+            Err(e) => {
+                failed = Some(format!("{program}: {e}"));
+                break;
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&scratch);
+    say!("{}", table(&rows));
+    if let Some(path) = &args.json {
+        let text = serde_json::to_string_pretty(&rows).expect("numbers and strings serialise");
+        std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))?;
+    }
+    failed.map_or(Ok(()), Err)
+}
+
+/// `check --json` then `run --json` of one example in the state folder `state`.
+fn example(
+    exe: &Path,
+    configs: &Path,
+    program: &str,
+    scenario: &str,
+    state: &Path,
+    i: usize,
+) -> Result<Vec<Row>, String> {
+    let program_path = configs.join("programs").join(program);
+    let scenario_path = configs.join("scenarios").join(scenario);
+    let common = |cmd: &mut Command| {
+        cmd.arg(&program_path)
+            .arg("--scenario")
+            .arg(&scenario_path)
+            .arg("--state-dir")
+            .arg(state);
+    };
+    let mut check = Command::new(exe);
+    check.arg("check");
+    common(&mut check);
+    let out = check
+        .arg("--json")
+        .output()
+        .map_err(|e| format!("check: {e}"))?;
+    if !out.status.success() {
+        return Err(format!(
+            "check failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        ));
+    }
+    let planned: serde_json::Value =
+        serde_json::from_slice(&out.stdout).map_err(|e| format!("check --json: {e}"))?;
+    let json = state.join("run.json");
+    let mut run = Command::new(exe);
+    run.arg("run");
+    common(&mut run);
+    let service = format!("pb-bench-cycles-{}-{i}", std::process::id());
+    let out = run
+        .arg("--json")
+        .arg(&json)
+        .args(["--yes", "--service", &service])
+        .output()
+        .map_err(|e| format!("run: {e}"))?;
+    if !out.status.success() {
+        return Err(format!(
+            "run failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        ));
+    }
+    let text = std::fs::read_to_string(&json).map_err(|e| format!("{}: {e}", json.display()))?;
+    let ran: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| format!("run --json: {e}"))?;
+    let (Some(p), Some(r)) = (planned["cycles"].as_array(), ran["cycles"].as_array()) else {
+        return Err("no cycles".into());
+    };
+    if p.len() != r.len() {
+        return Err(format!(
+            "check planned {} cycles, run ran {}",
+            p.len(),
+            r.len()
+        ));
+    }
+    let f = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+    Ok(p.iter()
+        .zip(r)
+        .map(|(p, r)| Row {
+            program: program.to_string(),
+            block: p["block"].as_u64().unwrap_or(0),
+            cycle: p["cycle"].as_u64().unwrap_or(0),
+            predicted_s: f(p, "predicted_machine_time_s"),
+            measured_s: f(r, "machine_time_s"),
+            lower_bound_s: f(p, "lower_bound_s"),
+        })
+        .collect())
+}
+
+/// The rows as a Markdown table (docs/cycles.md's form).
+fn table(rows: &[Row]) -> String {
+    let mut s = String::from(
+        "| program | block | cycle | predicted | measured | predicted - measured | lower bound | measured / lower bound |\n|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in rows {
+        let ratio = if r.lower_bound_s > 0.0 {
+            format!("{:.2}", r.measured_s / r.lower_bound_s)
+        } else {
+            "-".into()
+        };
+        let off = if r.measured_s > 0.0 {
+            format!(
+                "{:+.1} %",
+                (r.predicted_s - r.measured_s) / r.measured_s * 100.0
+            )
+        } else {
+            "-".into()
+        };
+        s.push_str(&format!(
+            "| `{}` | {} | {} | {:.2} s | {:.2} s | {off} | {:.2} s | {ratio} |\n",
+            r.program, r.block, r.cycle, r.predicted_s, r.measured_s, r.lower_bound_s
+        ));
+    }
+    s
+}
