@@ -31,34 +31,25 @@ fn run_example(
     service: &str,
 ) -> std::process::Output {
     common::run(
-        probebridge(state)
-            .args([
-                "run",
-                configs().join("programs").join(program).to_str().unwrap(),
-            ])
-            .args([
-                "--scenario",
-                configs().join("scenarios").join(scenario).to_str().unwrap(),
-            ])
+        example(state, "run", program, scenario)
             .args(["--json", json.to_str().unwrap(), "--yes"])
             .args(["--service", service]),
     )
 }
 
+/// `VERB PROGRAM --scenario SCENARIO` of a shipped example on the state `state`.
+fn example(state: &Path, verb: &str, program: &str, scenario: &str) -> Command {
+    let mut c = probebridge(state);
+    c.arg(verb)
+        .arg(configs().join("programs").join(program))
+        .arg("--scenario")
+        .arg(configs().join("scenarios").join(scenario));
+    c
+}
+
 /// `check --json`'s predicted machine time of each cycle, in order (s).
 fn predicted_times(state: &Path, program: &str, scenario: &str) -> Vec<f64> {
-    let out = common::run(
-        probebridge(state)
-            .args([
-                "check",
-                configs().join("programs").join(program).to_str().unwrap(),
-            ])
-            .args([
-                "--scenario",
-                configs().join("scenarios").join(scenario).to_str().unwrap(),
-            ])
-            .arg("--json"),
-    );
+    let out = common::run(example(state, "check", program, scenario).arg("--json"));
     assert!(out.status.success(), "check {program}: {out:?}");
     let v: serde_json::Value = serde_json::from_slice(&out.stdout)
         .unwrap_or_else(|e| panic!("check --json of {program}: {e}: {out:?}"));
@@ -203,17 +194,7 @@ fn every_shipped_example_runs_twice_in_a_row_and_the_tree_stays_as_it_was() {
             }
         }
         // `check` of every example still says ok on the state the runs left.
-        let out = common::run(
-            probebridge(&state)
-                .args([
-                    "check",
-                    configs().join("programs").join(program).to_str().unwrap(),
-                ])
-                .args([
-                    "--scenario",
-                    configs().join("scenarios").join(scenario).to_str().unwrap(),
-                ]),
-        );
+        let out = common::run(&mut example(&state, "check", program, scenario));
         assert!(out.status.success(), "check {program}");
     }
     assert_eq!(tree(&configs()), before, "configs/ changed");

@@ -423,6 +423,10 @@ fn kinematics(
         t0.elapsed().as_secs_f64(),
         k.estimator
     );
+    if let Some(t) = &result.machine_time_split_s {
+        // The virtual clock's figure: what the cycle holds a machine that runs it.
+        say!("  machine time {t}");
+    }
     say!("  error       before   after ± u (k = 1)       injected (scenario truth)");
     for a in &measured {
         for name in cycles::iso230_7::error_names(*a) {
