@@ -419,14 +419,11 @@ fn kinematics(
         .as_ref()
         .ok_or("cycle 451 gave no kinematics result")?;
     say!(
-        "  measured in {:.1} s; spheres fitted and errors identified by the {}",
+        "  measured in {:.1} s; spheres fitted and errors identified by the {}\n  machine time {}",
         t0.elapsed().as_secs_f64(),
-        k.estimator
+        k.estimator,
+        result.machine_time_split_s.unwrap_or_default()
     );
-    if let Some(t) = &result.machine_time_split_s {
-        // The virtual clock's figure: what the cycle holds a machine that runs it.
-        say!("  machine time {t}");
-    }
     say!("  error       before   after ± u (k = 1)       injected (scenario truth)");
     for a in &measured {
         for name in cycles::iso230_7::error_names(*a) {
