@@ -300,10 +300,30 @@ impl Folders<'_> {
     }
 }
 
+/// A cycle's machine time is the machine's own clock: on vcan0 the real-time SYNCs of
+/// the VM (a longer period, late on an emulated CPU), on the reference the in-process
+/// bus's virtual clock. Both must have it; the VM's may be longer, never shorter.
+fn machine_time(path: &str, got: Option<&Value>, want: Option<&Value>, out: &mut Vec<String>) {
+    match (got, want) {
+        (Some(g), Some(w)) => {
+            if let (Some(a), Some(b)) = (g.as_f64(), w.as_f64()) {
+                if a < 0.95 * b {
+                    out.push(format!(
+                        "{path} = {a} s, shorter than the virtual clock's {b} s"
+                    ));
+                }
+            }
+        }
+        (None, Some(_)) => out.push(format!("{path} missing (reference has it)")),
+        (Some(_), None) => out.push(format!("{path} is not in the reference")),
+        (None, None) => {}
+    }
+}
+
 /// Every number of `got` equals `want` to [`TOL`], every text is the same but for the
 /// results folder; keys that depend on the clock or the folder (`trigger_ns`,
 /// `protocols`, the clock-based `run_id`s of the estimator's sample sets) are not
-/// compared.
+/// compared, the machine time as [`machine_time`] says.
 fn compare_json(path: &str, got: &Value, want: &Value, dirs: &Folders, out: &mut Vec<String>) {
     match (got, want) {
         (Value::Object(g), Value::Object(w)) => {
@@ -313,6 +333,10 @@ fn compare_json(path: &str, got: &Value, want: &Value, dirs: &Folders, out: &mut
                     k.as_str(),
                     "trigger_ns" | "protocols" | "run_id" | "run_ids"
                 ) {
+                    continue;
+                }
+                if matches!(k.as_str(), "machine_time_s" | "machine_time_split_s") {
+                    machine_time(&format!("{path}/{k}"), g.get(k), w.get(k), out);
                     continue;
                 }
                 match (g.get(k), w.get(k)) {
