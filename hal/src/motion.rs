@@ -12,6 +12,22 @@ pub struct AxisLimits {
     pub max_acceleration: [f64; MAX_AXES],
 }
 
+impl AxisLimits {
+    /// The limits of `machine`'s axes: `max_feed` (per minute) and `max_acceleration`;
+    /// 0 for an axis it does not have.
+    pub fn of(machine: &crate::config::MachineConfig) -> Self {
+        let mut limits = AxisLimits {
+            max_velocity: [0.0; MAX_AXES],
+            max_acceleration: [0.0; MAX_AXES],
+        };
+        for a in &machine.axes {
+            limits.max_velocity[a.name.index()] = a.max_feed / 60.0;
+            limits.max_acceleration[a.name.index()] = a.max_acceleration;
+        }
+        limits
+    }
+}
+
 /// A move along a straight line from `start` by `length` along the unit vector `dir`
 /// (path units: mm when a linear axis moves, else deg).
 #[derive(Clone, Copy, Debug, PartialEq)]

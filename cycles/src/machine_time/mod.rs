@@ -9,7 +9,23 @@ mod timed;
 pub use model::{MotionModel, Prediction};
 pub use timed::{TimeLedger, TimedMachine};
 
+use hal::AxisPositions;
 use serde::{Deserialize, Serialize};
+
+/// Linear travel below this is no positioning move (mm).
+const MOVED: f64 = 1e-6;
+
+/// Does a move from `from` to `to` move a linear axis (a positioning move), or only
+/// rotary ones? A linear axis `from` does not know counts as moved: the measured and
+/// the predicted time book a move alike.
+fn moves_linear(from: Option<&AxisPositions>, to: &AxisPositions) -> bool {
+    to.iter().any(|(a, v)| {
+        a.index() < 3
+            && from
+                .and_then(|f| f.get(a))
+                .is_none_or(|f| (v - f).abs() >= MOVED)
+    })
+}
 
 /// Where a cycle's machine time went, s. `standing` is what no move accounts for:
 /// settling, arming the probes, reading positions, waiting for the estimator.

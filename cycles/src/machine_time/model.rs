@@ -6,7 +6,7 @@
 //! SYNC periods. Beside it the plan's lower bound: every positioning move at the axes'
 //! limits, every probing distance at the probing feed, nothing standing.
 
-use super::TimeSplit;
+use super::{moves_linear, TimeSplit};
 use hal::axis::MAX_AXES;
 use hal::config::{CanOpenBusConfig, MachineConfig};
 use hal::motion::{AxisLimits, Profile};
@@ -14,14 +14,13 @@ use hal::AxisPositions;
 
 /// SYNC periods a positioning command costs beyond its profile: the command taken at
 /// the next SYNC, the last setpoint's answer and settling in the window, the reply.
-/// Measured on the simulator (`machine_time` test), where the drives follow at once.
+/// Measured on the simulator (`cli_rerun` compares every shipped example), where the
+/// drives follow at once.
 const MOVE_PERIODS: f64 = 3.0;
 /// SYNC periods a probing move costs beyond its motion: the position read before it,
 /// arming the touch probes (disarm, enable, wait for armed), the latch frames and
 /// settling after the stop, the reply.
 const PROBE_PERIODS: f64 = 8.0;
-/// Linear travel below this is no positioning move (mm), as `TimedMachine` counts.
-const MOVED: f64 = 1e-6;
 
 /// The machine's axes as the real-time loop moves them.
 #[derive(Clone, Debug)]
@@ -34,14 +33,7 @@ pub struct MotionModel {
 
 impl MotionModel {
     pub fn new(machine: &MachineConfig) -> Self {
-        let mut limits = AxisLimits {
-            max_velocity: [0.0; MAX_AXES],
-            max_acceleration: [0.0; MAX_AXES],
-        };
-        for a in &machine.axes {
-            limits.max_velocity[a.name.index()] = a.max_feed / 60.0;
-            limits.max_acceleration[a.name.index()] = a.max_acceleration;
-        }
+        let limits = AxisLimits::of(machine);
         let bus = machine.canopen_bus().unwrap_or(&CanOpenBusConfig::DEFAULT);
         MotionModel {
             limits,
@@ -116,10 +108,7 @@ impl Prediction {
         feed: f64,
     ) {
         let t = model.move_s(from, to, feed);
-        let linear = to
-            .iter()
-            .any(|(a, v)| a.index() < 3 && from.get(a).is_none_or(|f| (v - f).abs() >= MOVED));
-        if linear {
+        if moves_linear(Some(from), to) {
             self.split.positioning += t;
         } else {
             self.split.rotary += t;

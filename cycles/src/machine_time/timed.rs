@@ -1,7 +1,7 @@
 //! A machine that times every call on the machine's own clock and books it to the
 //! part of the split it belongs to: what the runner hands each cycle.
 
-use super::TimeSplit;
+use super::{moves_linear, TimeSplit};
 use hal::{AxisPositions, Contact, Machine, ProbeMove};
 use std::cell::Cell;
 use std::rc::Rc;
@@ -46,9 +46,6 @@ pub struct TimedMachine<'a, M: Machine + ?Sized> {
     last: Option<AxisPositions>,
 }
 
-/// Linear travel below this is no positioning move (mm).
-const MOVED: f64 = 1e-6;
-
 impl<'a, M: Machine + ?Sized> TimedMachine<'a, M> {
     /// Starts the clock now.
     pub fn new(inner: &'a mut M) -> Self {
@@ -85,17 +82,6 @@ impl<'a, M: Machine + ?Sized> TimedMachine<'a, M> {
         self.ledger.book(part, elapsed_s(t0, t1));
         out
     }
-
-    /// Does the move to `target` turn only rotary axes (as far as is known)?
-    fn rotary_only(&self, target: &AxisPositions) -> bool {
-        let names_linear = target.iter().any(|(a, _)| a.index() < 3);
-        match &self.last {
-            Some(last) => target
-                .iter()
-                .all(|(a, v)| a.index() >= 3 || last.get(a).is_some_and(|l| (v - l).abs() < MOVED)),
-            None => !names_linear,
-        }
-    }
 }
 
 fn elapsed_s(from_ns: u64, to_ns: u64) -> f64 {
@@ -116,10 +102,10 @@ impl<M: Machine + ?Sized> Machine for TimedMachine<'_, M> {
     }
 
     fn move_to(&mut self, target: &AxisPositions, feed: f64) -> Result<(), Self::Error> {
-        let part: fn(&mut TimeSplit) -> &mut f64 = if self.rotary_only(target) {
-            |s| &mut s.rotary
-        } else {
+        let part: fn(&mut TimeSplit) -> &mut f64 = if moves_linear(self.last.as_ref(), target) {
             |s| &mut s.positioning
+        } else {
+            |s| &mut s.rotary
         };
         let done = self.timed(part, |m| m.move_to(target, feed));
         self.last = match done {

@@ -86,10 +86,7 @@ impl PlcProgram {
         let mut increments = [1.0; MAX_AXES];
         let mut min = [0.0; MAX_AXES];
         let mut max = [0.0; MAX_AXES];
-        let mut limits = AxisLimits {
-            max_velocity: [0.0; MAX_AXES],
-            max_acceleration: [0.0; MAX_AXES],
-        };
+        let limits = AxisLimits::of(cfg);
         let mut setpoint = [0.0; MAX_AXES];
         let mut actual_inc = [0; MAX_AXES];
         for a in &cfg.axes {
@@ -97,8 +94,6 @@ impl PlcProgram {
             increments[i] = a.increments_per_unit;
             min[i] = a.min;
             max[i] = a.max;
-            limits.max_velocity[i] = a.max_feed / 60.0;
-            limits.max_acceleration[i] = a.max_acceleration;
             setpoint[i] = home.get(a.name).unwrap_or(0.0);
             actual_inc[i] = (setpoint[i] * a.increments_per_unit).round() as i64;
         }

@@ -286,17 +286,12 @@ impl<S: SampleSink> RtLoop<S> {
     /// Operation enabled; [`Reply::Ready`] is answered when they are there.
     pub fn new(machine: &MachineConfig, cfg: LoopConfig, sink: S, now_ns: u64) -> Self {
         let mut drives = heapless::Vec::new();
-        let mut limits = AxisLimits {
-            max_velocity: [0.0; MAX_AXES],
-            max_acceleration: [0.0; MAX_AXES],
-        };
+        let limits = AxisLimits::of(machine);
         let mut heartbeat = HeartbeatConsumer::new();
         for a in &machine.axes {
             // MachineConfig allows at most one entry per axis, so at most 6.
             let node = a.canopen_node();
             let _ = drives.push(DriveLink::new(a.name, node, a.increments_per_unit));
-            limits.max_velocity[a.name.index()] = a.max_feed / 60.0;
-            limits.max_acceleration[a.name.index()] = a.max_acceleration;
             // Node IDs were validated (1..=127) with the configuration.
             let _ = heartbeat.watch(node, cfg.heartbeat_timeout_ns);
         }
