@@ -29,7 +29,8 @@
 //!    axes turn at Q253; with Q408 = 0 it rises along the tool axis to the lowest height
 //!    that clears the sphere at every angle of the turn (refused with a Hirth axis).
 //!    Either way the approach starts only after the axes stand at the measurement's
-//!    angles. Linear pre-positioning runs at min(Q253, FMAX).
+//!    angles. Moves toward the sphere along the tool axis run at min(Q253, FMAX) (the
+//!    approach to the probing height), every other linear move at the probe table's FMAX.
 //! 3. Sphere measurement: the pole along the (possibly tilted) tool axis, then Q423
 //!    points around the equator in the working plane from Q380, radially toward the
 //!    centre; a sphere with free radius through the latched X/Y/Z positions (each

@@ -81,8 +81,14 @@ pub struct KinematicsPlan {
     pub present: Vec<Axis>,
     /// Incidence angles of the present axes (on their grid), 0 for absent ones.
     pub incidence: Angles,
-    /// Linear pre-positioning feed: min(Q253, FMAX), mm/min.
-    pub positioning_feed: f64,
+    /// The approach to the probing height along the tool axis: min(Q253, FMAX), mm/min
+    /// (the seeds). Every move that brings the probe nearer the sphere along the tool
+    /// axis runs at it.
+    pub approach_feed: f64,
+    /// Every other linear positioning move (up, over, around the sphere at a distance
+    /// the plan proves clear): the probe table's FMAX, mm/min, as the touch probe
+    /// cycles' positioning logic moves.
+    pub rapid_feed: f64,
     /// Rotary positioning feed: Q253 (FMAX: the probe table's), deg/min.
     pub rotary_feed: f64,
     /// The M function that positions the rotary axes (`mStrobeRotAxPos`), if one does.
@@ -137,7 +143,7 @@ pub fn plan(
             )));
         }
     }
-    let positioning_feed = match params.feed {
+    let approach_feed = match params.feed {
         Feed::Fmax => probe.fmax,
         Feed::Value(v) => v.min(probe.fmax),
     };
@@ -151,16 +157,20 @@ pub fn plan(
     let feed_range = hal::config::bounds::MIN_FEED..=fastest;
     for (what, feed) in [
         (
-            "the linear pre-positioning feed min(Q253, FMAX)",
-            positioning_feed,
+            "Q253: the approach feed to the probing height min(Q253, FMAX)",
+            approach_feed,
         ),
-        ("the rotary positioning feed", rotary_feed),
+        (
+            "the probe table's FMAX (the positioning feed of every other linear move)",
+            probe.fmax,
+        ),
+        ("Q253: the rotary positioning feed", rotary_feed),
     ] {
         if !feed_range.contains(&feed) {
             return Err(PlanError::new(
                 PlanErrorKind::Feed,
                 format!(
-                    "Q253: {what} {feed} must be between {} and the machine's fastest max_feed {fastest} (mm/min, deg/min); nothing moved",
+                    "{what} {feed} must be between {} and the machine's fastest max_feed {fastest} (mm/min, deg/min); nothing moved",
                     hal::config::bounds::MIN_FEED
                 ),
             ));
@@ -182,7 +192,8 @@ pub fn plan(
         axes,
         present,
         incidence,
-        positioning_feed,
+        approach_feed,
+        rapid_feed: probe.fmax,
         rotary_feed,
         rotary_m: None,
     })

@@ -1,7 +1,7 @@
 0 BEGIN PGM 451-check-vcan MM
 ; configs/programs/451-check.h for the vcan VM (tests/vcan/cases): the same
 ; cycle 451 in mode 0 with Q253 (pre-positioning feed) 10000 (the axes' max feed) instead of 750, so it
-; runs in about 1 min of real time instead of 5. tests/vcan/check.rs makes sure the
+; runs in about 1 min of real time instead of 4. tests/vcan/check.rs makes sure the
 ; two differ in nothing else.
 1 ; Cycle 451 MEASURE KINEMATICS, mode 0 (check), on configs/scenarios/demo-sphere.toml:
 2 ; the calibration sphere R12.5 at X+50 Y-30 Z+80 on the A/C tilting table.

@@ -1,7 +1,7 @@
 0 BEGIN PGM 451-evaluate-vcan MM
 ; configs/programs/451-evaluate.h for the vcan VM (tests/vcan/cases): the same
 ; program with Q253 (pre-positioning feed) 10000 (the axes' max feed) instead of 750, so it runs in
-; about 1 min of real time instead of 5. tests/vcan/check.rs makes sure the two
+; about 1 min of real time instead of 4. tests/vcan/check.rs makes sure the two
 ; differ in nothing else.
 1 ; Cycle 451 in mode 0 on configs/scenarios/demo-sphere.toml (as 451-check.h), then
 2 ; the program evaluates what it measured: the C axis's location errors out of QS146

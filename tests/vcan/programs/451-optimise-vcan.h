@@ -1,7 +1,7 @@
 0 BEGIN PGM 451-optimise-vcan MM
 ; configs/programs/451-optimise.h for the vcan VM (tests/vcan/cases): the same
 ; program with Q253 (pre-positioning feed) 10000 (the axes' max feed) instead of 750, so it runs in
-; about 1 min of real time instead of 5. tests/vcan/check.rs makes sure the two
+; about 1 min of real time instead of 4. tests/vcan/check.rs makes sure the two
 ; differ in nothing else.
 1 ; Cycle 451 MEASURE KINEMATICS, mode 1 (optimise position), on demo-sphere.toml:
 2 ; A at -90, -30, +30, +90 and C at 90, 180, 270 deg around the 0 deg references.

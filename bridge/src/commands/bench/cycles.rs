@@ -10,7 +10,7 @@ use std::process::Command;
 
 /// The shipped examples and the scenario each is written for (docs/cycles.md,
 /// "Example programs").
-pub const EXAMPLES: [(&str, &str); 10] = [
+pub const EXAMPLES: [(&str, &str); 11] = [
     ("431-plane.h", "tilted-plane.toml"),
     ("431-plane-y.h", "tilted-plane-y.toml"),
     ("444-freeform.h", "freeform.toml"),
@@ -19,6 +19,7 @@ pub const EXAMPLES: [(&str, &str); 10] = [
     ("451-check.h", "demo-sphere.toml"),
     ("451-preset-set.h", "demo-sphere.toml"),
     ("451-preset-247.h", "demo-sphere.toml"),
+    ("451-head-b.h", "head-b-table-c.toml"),
     ("450-save-restore.h", "demo-sphere.toml"),
     ("460-calibrate.h", "demo-sphere.toml"),
 ];

@@ -205,7 +205,8 @@ impl<M: Machine> Measure<'_, '_, M> {
     /// move clears all of those spheres by the clearance Q320 + SET_UP: up to
     /// Q407 + R + clearance over `touch`, out to 2 (Q407 + R) + clearance from its axis,
     /// down to LOCATE_DEPTH x (Q407 + R) below it, then Q423 points probed toward the
-    /// axis (each from its own side, back out the way it came, up again). A sphere with
+    /// axis (each from its own side, back out the way it came, on to the next along the
+    /// tangents of their circle, [`Measure::next_start`]). A sphere with
     /// free radius through the pole contact and those points is the rough centre
     /// (corrected by the probe's calibration); its radius must be Q407 within
     /// maxDevCalBall, else the cycle stops here: every later move is planned with Q407.
@@ -224,26 +225,30 @@ impl<M: Machine> Measure<'_, '_, M> {
         let mut contacts = Vec::with_capacity(1 + p.points as usize);
         contacts.push(pole);
         let safe = touch + n * (rs + clearance);
-        self.move_xyz(&format!("{what}: up to clear the sphere"), safe)?;
+        self.rapid_xyz(&format!("{what}: up to clear the sphere"), safe)?;
         let out = 2.0 * rs + clearance;
         let deep = touch - n * (LOCATE_DEPTH * rs);
         let phi0 = self.first_pass_start(a, [safe, deep], out);
+        // Between points along the tangents of their circle (`out` from the axis):
+        // every sphere the pole contact allows has its centre within Q407 + R of the
+        // axis, so those legs clear it by Q320 + SET_UP, as the points' starts do.
+        let mut prev = None;
         for i in 0..p.points {
             let phi = (phi0 + 360.0 * f64::from(i) / f64::from(p.points)).to_radians();
             let w = u * phi.cos() + v * phi.sin();
             let step = format!("{what}: point {} of {}", i + 1, p.points);
-            let high = safe + w * out;
-            let low = deep + w * out;
-            self.move_xyz(&step, high)?;
-            self.move_xyz(&step, low)?;
+            self.next_start(&step, a, [deep, safe], out, prev, w)?;
             let c = self
                 .probe(&step, -w, out + self.probe.dist)
                 .map_err(|e| self.not_found(e))?;
             contacts.push(c);
-            self.move_xyz(&step, low)?;
-            self.move_xyz(&step, high)?;
+            self.rapid_xyz(&step, deep + w * out)?;
+            prev = Some(w);
         }
-        self.move_xyz(&format!("{what}: back over the pole"), safe)?;
+        if let Some(w) = prev {
+            self.rapid_xyz(&format!("{what}: back up"), safe + w * out)?;
+        }
+        self.rapid_xyz(&format!("{what}: back over the pole"), safe)?;
         let fit =
             self.ctx.estimator.fit_sphere(run, &contacts).map_err(|e| {
                 CycleError::Geometry(format!("{what}: sphere fit (run {run}): {e}"))
@@ -359,11 +364,7 @@ impl<M: Machine> Measure<'_, '_, M> {
             self.plan.params.preset, self.preset.x, self.preset.y, self.preset.z
         ));
         let up = AxisPositions::new().with(Axis::LINEAR[t], height);
-        self.mv(
-            "moving up to the safe height",
-            up,
-            self.plan.positioning_feed,
-        )?;
+        self.mv("moving up to the safe height", up, self.plan.rapid_feed)?;
         if (0..3).any(|s| (first[s] - start[s]).abs() > 1e-9) {
             self.note(format!(
                 "the rotary axes turn from {} to {} at the safe height before the approach",
@@ -373,8 +374,8 @@ impl<M: Machine> Measure<'_, '_, M> {
             self.turn_rotary("turning the rotary axes to 0 at the safe height", &first)?;
             self.now = first;
         }
-        self.move_xyz("moving over the sphere at the safe height", above)?;
-        self.move_xyz("approaching the sphere", pole)?;
+        self.rapid_xyz("moving over the sphere at the safe height", above)?;
+        self.approach_xyz("approaching the sphere", pole)?;
         self.find_at_datum(&first, rise)
     }
 

@@ -213,12 +213,18 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
         }
     }
 
-    fn move_xyz(&mut self, step: &str, p: Vector3<f64>) -> Result<(), CycleError> {
-        self.mv(
-            step,
-            AxisPositions::linear(arr(&p)),
-            self.plan.positioning_feed,
-        )
+    /// A linear move that brings the probe nearer the sphere along the tool axis (to
+    /// the probing height, or down to a start over it): min(Q253, FMAX), as the seeds say.
+    fn approach_xyz(&mut self, step: &str, p: Vector3<f64>) -> Result<(), CycleError> {
+        let feed = self.plan.approach_feed;
+        self.mv(step, AxisPositions::linear(arr(&p)), feed)
+    }
+
+    /// Any other linear positioning move (away from the sphere, or beside it at a
+    /// distance the plan proves clear): the probe table's FMAX.
+    fn rapid_xyz(&mut self, step: &str, p: Vector3<f64>) -> Result<(), CycleError> {
+        let feed = self.plan.rapid_feed;
+        self.mv(step, AxisPositions::linear(arr(&p)), feed)
     }
 
     fn probe(&mut self, step: &str, dir: Vector3<f64>, max: f64) -> Result<Contact, CycleError> {

@@ -147,7 +147,7 @@ impl<M: Machine> Measure<'_, '_, M> {
         let moves = (0..3).any(|s| (to[s] - self.now[s]).abs() > 1e-9) || via.is_some();
         if !moves {
             let pole = self.predicted_pole(&to);
-            return self.move_xyz("moving over the sphere", pole);
+            return self.approach_xyz("moving over the sphere", pole);
         }
         let t = self.tool.tool_index();
         let turn: Vec<Angles> = std::iter::once(self.now)
@@ -171,7 +171,7 @@ impl<M: Machine> Measure<'_, '_, M> {
             self.mv(
                 "moving up to clear the sphere before the rotary axes turn",
                 up,
-                self.plan.positioning_feed,
+                self.plan.rapid_feed,
             )?;
             height
         };
@@ -199,8 +199,8 @@ impl<M: Machine> Measure<'_, '_, M> {
         } else {
             "moving over the sphere at the clearing height"
         };
-        self.move_xyz(over, above)?;
-        self.move_xyz("approaching the sphere", pole)
+        self.rapid_xyz(over, above)?;
+        self.approach_xyz("approaching the sphere", pole)
     }
 
     /// Q408 = 0: refuses a turn through `turn` (its angles in order) when `height`, the
@@ -250,15 +250,11 @@ impl<M: Machine> Measure<'_, '_, M> {
         }
         let [main, minor, _] = self.tool.indices();
         let up = AxisPositions::new().with(Axis::LINEAR[t], height);
-        self.mv("retracting to Q408", up, self.plan.positioning_feed)?;
+        self.mv("retracting to Q408", up, self.plan.rapid_feed)?;
         let over = AxisPositions::new()
             .with(Axis::LINEAR[main], self.preset[main])
             .with(Axis::LINEAR[minor], self.preset[minor]);
-        self.mv(
-            "moving over the preset at Q408",
-            over,
-            self.plan.positioning_feed,
-        )?;
+        self.mv("moving over the preset at Q408", over, self.plan.rapid_feed)?;
         Ok(height)
     }
 }

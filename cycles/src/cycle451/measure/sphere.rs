@@ -1,6 +1,15 @@
 //! One sphere measured: the pole along the (possibly tilted) tool axis and Q423 points
 //! around the equator, fitted by the estimator; probed again around the fitted centre
 //! when that is more than [`super::RE_PROBE_TOLERANCE`] from where it was expected.
+//!
+//! The probe goes down to the equator once, at min(Q253, FMAX), and from one point's
+//! start to the next along the tangents of the circle the starts lie on
+//! ([`Measure::next_start`]): every point of those two legs is at least as far from the
+//! expected centre as the starts, where the ball stands before each probe anyway. Those
+//! legs, the retracts and the moves over the sphere run at the probe table's FMAX. Where
+//! the sphere's holder may lie in the plane of the points (the table tilted against the
+//! tool axis) or a corner is outside the software limits, the probe goes over the top
+//! instead (up, over, down), as it did between all points before.
 
 use super::{arr, axis_map, Measure, Sphere, RE_PROBE_TOLERANCE};
 use crate::cycle451::report::SphereRecord;
@@ -8,6 +17,10 @@ use crate::error::CycleError;
 use crate::kinematics::model::{angles_of, rotary_slot, Angles};
 use hal::{Axis, AxisPositions, Machine, ProbeMove};
 use nalgebra::Vector3;
+
+/// How far (deg) the sphere's holder may turn from the tool axis for the probe to go
+/// from one equator point to the next in their plane ([`Measure::next_start`]).
+pub const HOLDER_ALONG_TOOL_AXIS: f64 = 1.0;
 
 impl<M: Machine> Measure<'_, '_, M> {
     /// Measures the sphere expected at `c` with the axes at `a` (the probe stands at
@@ -28,22 +41,25 @@ impl<M: Machine> Measure<'_, '_, M> {
             let mut contacts = Vec::with_capacity(1 + p.points as usize);
             let top = c + n * reach;
             let phi0 = self.equator_start(a, c, what);
-            self.move_xyz(&format!("{what}: moving over the pole"), top)?;
+            self.approach_xyz(&format!("{what}: moving over the pole"), top)?;
             let pole = self.probe(&format!("{what}: probing the pole"), -n, dist);
             contacts.push(pole.map_err(|e| self.not_at_preset(e))?);
-            self.move_xyz(&format!("{what}: retracting from the pole"), top)?;
+            self.rapid_xyz(&format!("{what}: retracting from the pole"), top)?;
+            let mut prev = None;
             for i in 0..p.points {
                 let phi = (phi0 + 360.0 * f64::from(i) / f64::from(p.points)).to_radians();
                 let w = u * phi.cos() + v * phi.sin();
                 let step = format!("{what}: point {} of {}", i + 1, p.points);
-                self.move_xyz(&step, top + w * reach)?;
-                self.move_xyz(&step, c + w * reach)?;
+                self.next_start(&step, a, [c, top], reach, prev, w)?;
                 let contact = self.probe(&step, -w, dist);
                 contacts.push(contact.map_err(|e| self.not_at_preset(e))?);
-                self.move_xyz(&step, c + w * reach)?;
-                self.move_xyz(&step, top + w * reach)?;
+                self.rapid_xyz(&step, c + w * reach)?;
+                prev = Some(w);
             }
-            self.move_xyz(&format!("{what}: back over the pole"), top)?;
+            if let Some(w) = prev {
+                self.rapid_xyz(&format!("{what}: back up"), top + w * reach)?;
+            }
+            self.rapid_xyz(&format!("{what}: back over the pole"), top)?;
             let fit = self.ctx.estimator.fit_sphere(run, &contacts).map_err(|e| {
                 CycleError::Geometry(format!("{what}: sphere fit (run {run}): {e}"))
             })?;
@@ -119,6 +135,55 @@ impl<M: Machine> Measure<'_, '_, M> {
             .collect();
         let (c, r) = cal.correct_sphere(self.tool, (back * centre).into(), radius, &directions);
         (rot * Vector3::from(c), r)
+    }
+
+    /// To the start of the next of Q423 points standing `r` from the tool axis through
+    /// `c` (in the direction `w`), from the start of the previous one (`prev`; `None`:
+    /// the probe stands at `top`, over `c` on that axis). From one start to the next
+    /// along the tangents of their circle, through the corner where they meet: no
+    /// point of the way is nearer the axis than `r`. That way stays in the plane of the
+    /// points, where nothing but the sphere is known to be: only while the sphere's
+    /// holder (the table's normal, down from the sphere) runs along the tool axis, below
+    /// that plane. With the table tilted against the tool axis the holder may cross the
+    /// plane between two points (Q380 turns the points off it, not the corners), and a
+    /// corner may be outside the software limits: then, and for the first point, up to
+    /// the height of `top`, over, and down at the approach feed.
+    pub(super) fn next_start(
+        &mut self,
+        step: &str,
+        a: &Angles,
+        [c, top]: [Vector3<f64>; 2],
+        r: f64,
+        prev: Option<Vector3<f64>>,
+        w: Vector3<f64>,
+    ) -> Result<(), CycleError> {
+        let half = (180.0 / f64::from(self.plan.params.points)).to_radians();
+        if let Some(p) = prev {
+            let corner = c + (p + w).normalize() * (r / half.cos());
+            if self.holder_below(a) && self.reachable(a, corner) {
+                self.rapid_xyz(step, corner)?;
+                return self.rapid_xyz(step, c + w * r);
+            }
+            self.rapid_xyz(step, top + p * r)?;
+        }
+        self.rapid_xyz(step, top + w * r)?;
+        self.approach_xyz(step, c + w * r)
+    }
+
+    /// Whether the sphere's holder, along the table's normal down from the sphere,
+    /// runs along the tool axis at `a` (within [`HOLDER_ALONG_TOOL_AXIS`] degrees): away
+    /// from the probe, below the plane of the equator's points.
+    fn holder_below(&self, a: &Angles) -> bool {
+        let down = self.model.table_transform(a).rotation * -Vector3::z();
+        let away = -self.frame(a)[0];
+        down.dot(&away) >= HOLDER_ALONG_TOOL_AXIS.to_radians().cos()
+    }
+
+    /// Whether the machine may stand at `p` (X/Y/Z) with the rotary axes at `a`.
+    fn reachable(&self, a: &Angles, p: Vector3<f64>) -> bool {
+        let guard = hal::motion_guard::MotionGuard::new(&self.ctx.cfg.machine);
+        let at = AxisPositions::linear(arr(&p)).merged(&self.rotary(a));
+        guard.check_target(&at, "move").is_ok()
     }
 
     /// Where the Q423 points around the sphere at `c` (axes at `a`) start: Q380, or,
