@@ -9,6 +9,11 @@
 //!   name and declares no module of its own (checked).
 //! - No production file (a `src/` file up to its `#[cfg(test)]` module) is over
 //!   [`MAX_LINES`] lines, except the ones being split ([`BEING_SPLIT`]).
+//! - The protocol cores ([`IO_FREE_CORES`]: CANopen, CiA 402, the real-time loop, the
+//!   PLC handshake) do no I/O: neither they nor any module of their crate they use
+//!   (through the same import graph) reads a clock, starts a thread or opens a file, a
+//!   socket or a process ([`IO_WORDS`]). Time is their argument, frames their input
+//!   and output; the drivers around them do the rest.
 //!
 //! Rerun with `cargo test -p probebridge-tests --test module_graph`.
 
@@ -23,6 +28,39 @@ const MAX_LINES: usize = 600;
 /// (issue 24). Once a split is merged its entry goes: a listed file that is short
 /// enough (or gone) fails the check, so the list only shrinks.
 const BEING_SPLIT: &[&str] = &[];
+
+/// The cores that do no I/O: (workspace member, module path). A module counts with
+/// its submodules.
+const IO_FREE_CORES: &[(&str, &str)] = &[
+    ("hal", "crate::canopen"),
+    ("hal", "crate::cia402"),
+    ("hal", "crate::master::rt_loop"),
+    ("bridge", "crate::serve::handshake"),
+];
+
+/// What I/O looks like in Rust source: reading a clock, a thread, a file, a socket, a
+/// process, the async runtime, the CAN socket crate, a system call.
+const IO_WORDS: &[&str] = &[
+    "Instant::now",
+    "SystemTime::now",
+    "monotonic_ns",
+    "std::thread",
+    "thread::spawn",
+    "thread::sleep",
+    "std::fs",
+    "File::",
+    "OpenOptions",
+    "std::net",
+    "TcpStream",
+    "TcpListener",
+    "UdpSocket",
+    "std::process",
+    "Command::new",
+    "tokio",
+    "socketcan",
+    "libc::",
+    "nix::",
+];
 
 fn workspace_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -403,6 +441,100 @@ fn no_module_imports_another_in_a_circle() {
         found.is_empty(),
         "modules that import each other in a circle:\n{}",
         found.join("\n")
+    );
+}
+
+/// The modules `core` (a module path, with its submodules) and every module it uses,
+/// through the import graph `g`.
+fn closure(g: &BTreeMap<String, BTreeSet<String>>, core: &str) -> BTreeSet<String> {
+    let within = |m: &str| m == core || m.starts_with(&format!("{core}::"));
+    let mut seen: BTreeSet<String> = g.keys().filter(|m| within(m)).cloned().collect();
+    let mut stack: Vec<String> = seen.iter().cloned().collect();
+    while let Some(m) = stack.pop() {
+        for t in g.get(&m).into_iter().flatten() {
+            if seen.insert(t.clone()) {
+                stack.push(t.clone());
+            }
+        }
+    }
+    seen
+}
+
+/// The [`IO_WORDS`] in `code`, each where it starts a word (`std::fs` and its `fs::`
+/// inside a path both count; `offs::` does not).
+fn io_words(code: &str) -> Vec<&'static str> {
+    let word = |c: char| c.is_alphanumeric() || c == '_';
+    IO_WORDS
+        .iter()
+        .copied()
+        .filter(|w| {
+            code.match_indices(w)
+                .any(|(i, _)| !code[..i].chars().next_back().is_some_and(word))
+        })
+        .collect()
+}
+
+#[test]
+fn the_protocol_cores_do_no_io() {
+    let root = workspace_root();
+    let mut found = Vec::new();
+    for (member, core) in IO_FREE_CORES {
+        let src = root.join(member).join("src");
+        let mods = modules(&src);
+        let g = graph(&src);
+        let reached = closure(&g, core);
+        assert!(
+            reached.iter().any(|m| m == core),
+            "{member}: the core {core} was found"
+        );
+        for m in &reached {
+            let words = io_words(&code(&mods[m]));
+            if !words.is_empty() {
+                found.push(format!(
+                    "  {member} {m} (from {core}): {}",
+                    words.join(", ")
+                ));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "I/O in a protocol core, or in a module of its crate it uses (a clock read, \
+         a thread, a file, a socket, a process): pass time and frames in as arguments, \
+         and move the I/O to the driver around the core\n{}",
+        found.join("\n")
+    );
+}
+
+#[test]
+fn the_io_check_sees_io_in_what_a_core_uses() {
+    let set = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<BTreeSet<_>>();
+    let mut g = BTreeMap::new();
+    g.insert("crate::core".to_string(), set(&["crate::helper"]));
+    g.insert("crate::core::part".to_string(), set(&[]));
+    g.insert("crate::helper".to_string(), set(&["crate::deep"]));
+    g.insert("crate::deep".to_string(), set(&[]));
+    g.insert("crate::other".to_string(), set(&["crate::core"]));
+    assert_eq!(
+        closure(&g, "crate::core"),
+        set(&[
+            "crate::core",
+            "crate::core::part",
+            "crate::helper",
+            "crate::deep"
+        ])
+    );
+    assert_eq!(
+        io_words("let t = std::time::Instant::now();\nlet f = std::fs::read(p);"),
+        vec!["Instant::now", "std::fs"]
+    );
+    assert_eq!(
+        io_words("let t: Instant = at; let offs::x = 1;"),
+        Vec::<&str>::new()
+    );
+    assert_eq!(
+        io_words("use tokio::net::TcpStream;"),
+        vec!["TcpStream", "tokio"]
     );
 }
 

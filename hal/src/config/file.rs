@@ -1,44 +1,18 @@
 //! Reading a configuration file (machine, scenario, gateway): at most
-//! [`MAX_CONFIG_BYTES`], UTF-8; and the errors a configuration file gives.
+//! [`MAX_CONFIG_BYTES`], UTF-8; and [`MachineConfig::load`], the machine file read,
+//! parsed and validated.
 
-use std::path::{Path, PathBuf};
+use super::{ConfigError, MachineConfig};
+use std::path::Path;
 
-#[derive(Debug, thiserror::Error)]
-pub enum ConfigError {
-    #[error("cannot read {path}: {source}")]
-    Read {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("{path}: {message}")]
-    Parse { path: PathBuf, message: String },
-    #[error("{path}: {key}: {message}")]
-    Invalid {
-        path: PathBuf,
-        key: String,
-        message: String,
-    },
-}
-
-/// What kind of [`ConfigError`] (and of `sim`'s scenario errors, which wrap it).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[non_exhaustive]
-pub enum ConfigErrorKind {
-    /// The file could not be read.
-    Read,
-    /// Not TOML, or a key or value the format does not have.
-    Parse,
-    /// A value out of range or inconsistent with another.
-    Invalid,
-}
-
-impl ConfigError {
-    pub fn kind(&self) -> ConfigErrorKind {
-        match self {
-            ConfigError::Read { .. } => ConfigErrorKind::Read,
-            ConfigError::Parse { .. } => ConfigErrorKind::Parse,
-            ConfigError::Invalid { .. } => ConfigErrorKind::Invalid,
-        }
+impl MachineConfig {
+    /// Reads the machine file at `path`, then [`MachineConfig::parse`]s it.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = read_config_text(path).map_err(|source| ConfigError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::parse(&text, path)
     }
 }
 

@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 mod axis;
 pub mod bounds;
 mod bus;
+mod error;
 mod file;
 mod kinematics;
 mod spindle;
@@ -20,7 +21,8 @@ mod spindle;
 pub use crate::modbus::config::ModbusBusConfig;
 pub use axis::AxisConfig;
 pub use bus::{BusConfig, CanOpenBusConfig};
-pub use file::{read_config_text, ConfigError, ConfigErrorKind, MAX_CONFIG_BYTES};
+pub use error::{ConfigError, ConfigErrorKind};
+pub use file::{read_config_text, MAX_CONFIG_BYTES};
 pub use kinematics::KinematicsConfig;
 pub use spindle::SpindleConfig;
 
@@ -53,14 +55,6 @@ pub struct MachineConfig {
 }
 
 impl MachineConfig {
-    pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = read_config_text(path).map_err(|source| ConfigError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        Self::parse(&text, path)
-    }
-
     /// Parses and validates; `path` names the source in errors.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
         let mut cfg: MachineConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
