@@ -249,8 +249,19 @@ impl<M: Machine> Measure<'_, '_, M> {
             )));
         }
         let [main, minor, _] = self.tool.indices();
+        // Q408 clears the sphere; from above it, still nearer along the tool axis.
+        let here = self
+            .machine
+            .positions()
+            .map_err(|e| CycleError::machine("reading the axis positions", &e))?
+            .xyz();
+        let feed = if height < here[t] {
+            self.plan.approach_feed
+        } else {
+            self.plan.rapid_feed
+        };
         let up = AxisPositions::new().with(Axis::LINEAR[t], height);
-        self.mv("retracting to Q408", up, self.plan.rapid_feed)?;
+        self.mv("retracting to Q408", up, feed)?;
         let over = AxisPositions::new()
             .with(Axis::LINEAR[main], self.preset[main])
             .with(Axis::LINEAR[minor], self.preset[minor]);
