@@ -1,6 +1,7 @@
 //! What every measuring cycle has in common: what it runs with besides the machine
 //! ([`CycleContext`]) and the one signature all of them have ([`MeasuringCycle`]).
 
+use crate::confirmation::Confirmation;
 use crate::cycle_block::CycleBlock;
 use crate::cycles_config::CyclesConfig;
 use crate::datum::Datum;
@@ -20,8 +21,9 @@ pub struct CycleContext<'a> {
     pub kinematics: PathBuf,
     /// Where cycle 451 fits its spheres and solves its identification.
     pub estimator: &'a mut dyn Estimator,
-    /// Shows a text and returns whether to go on (Q281=2, a large 451 correction).
-    pub confirm: &'a mut dyn FnMut(&str) -> bool,
+    /// Asks a question and returns whether to go on (Q281=2, a large 451 correction,
+    /// rotary axes an M function positions).
+    pub confirm: &'a mut dyn FnMut(&Confirmation) -> bool,
     pub progress: &'a mut ProgressSink<'a>,
     /// Where measuring logs are written.
     pub out_dir: &'a Path,

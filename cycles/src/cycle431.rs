@@ -1,6 +1,7 @@
 //! Cycle 431 MEASURE PLANE: three points probed along the probe axis, the plane's
 //! spatial angles (for PLANE SPATIAL) and projection angles.
 
+use crate::confirmation::{ConfirmKind, Confirmation};
 use crate::cycle::{CycleContext, MeasuringCycle};
 use crate::cycle_block::{CycleBlock, Param, ParamReader};
 use crate::diagnostic::Diagnostic;
@@ -82,7 +83,8 @@ impl MeasuringCycle for PlaneParams {
                 .push(write_plane_log(ctx.out_dir, &record, ctx.program).map_err(log_error(ctx))?),
             2 => {
                 let text = plane_log_text(&record, ctx.program, &timestamp_utc());
-                if !(ctx.confirm)(&text) {
+                let question = Confirmation::new(ConfirmKind::PlaneProtocol, text);
+                if !(ctx.confirm)(&question) {
                     out.stop = Some(
                         "the cycle 431 protocol was not confirmed (Q281=2); program stopped"
                             .to_string(),

@@ -24,6 +24,7 @@
 //!   subprograms, FN 14).
 
 pub mod check_walk;
+pub mod confirmation;
 pub mod cycle;
 pub mod cycle431;
 pub mod cycle444;

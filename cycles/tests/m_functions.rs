@@ -25,7 +25,7 @@ fn config_with_row(n: u32, xyz: [f64; 3]) -> CyclesConfig {
 fn moves(cfg: &CyclesConfig, text: &str, name: &str) -> Vec<[f64; 3]> {
     let program = Program::parse(text, cfg).unwrap_or_else(|e| panic!("{e}\n{text}"));
     let mut m = MockMachine::new(vec![]);
-    let mut confirm = |_: &str| true;
+    let mut confirm = |_: &probebridge_cycles::confirmation::Confirmation| true;
     let mut progress = |_| {};
     let mut opts = probebridge_cycles::RunOptions {
         out_dir: common::temp_dir(name),

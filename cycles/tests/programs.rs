@@ -23,7 +23,7 @@ fn load(name: &str) -> Program {
 }
 
 fn run(p: &Program, m: &mut MockMachine) -> probebridge_cycles::ProgramReport {
-    let mut confirm = |_: &str| true;
+    let mut confirm = |_: &probebridge_cycles::confirmation::Confirmation| true;
     let mut progress = |_| {};
     let mut opts = probebridge_cycles::RunOptions {
         out_dir: common::temp_dir("programs"),

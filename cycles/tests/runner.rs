@@ -140,7 +140,7 @@ fn nothing_moves_when_validation_fails() {
     let mut other = cfg.clone();
     other.probes.retain(|p| p.name != "TOUCH_PROBE");
     let mut m = MockMachine::new(flat());
-    let mut confirm = |_: &str| true;
+    let mut confirm = |_: &probebridge_cycles::confirmation::Confirmation| true;
     let mut progress = |_| {};
     let mut opts = probebridge_cycles::RunOptions {
         out_dir: common::temp_dir("run-probe"),
@@ -209,7 +209,7 @@ fn progress_reports_cycles_moves_and_contacts() {
     let program = three_points();
     let mut m = MockMachine::new(flat());
     let mut events = Vec::new();
-    let mut confirm = |_: &str| true;
+    let mut confirm = |_: &probebridge_cycles::confirmation::Confirmation| true;
     let mut progress = |e| events.push(e);
     let mut opts = probebridge_cycles::RunOptions {
         out_dir: common::temp_dir("run-progress"),
@@ -267,7 +267,7 @@ fn a_refusal_says_nothing_moved_once() {
             .to_string();
         assert_eq!(e.matches("nothing moved").count(), 1, "{e}");
         let mut m = MockMachine::new(flat());
-        let mut confirm = |_: &str| true;
+        let mut confirm = |_: &probebridge_cycles::confirmation::Confirmation| true;
         let mut progress = |_| {};
         let mut opts = probebridge_cycles::RunOptions {
             out_dir: dir.clone(),

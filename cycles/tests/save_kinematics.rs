@@ -24,7 +24,7 @@ fn run(text: &str, kin: &std::path::Path) -> (probebridge_cycles::ProgramReport,
     let program = Program::parse(text, &cfg).unwrap();
     let mut m = common::MockMachine::new(vec![]);
     let mut notes = Vec::new();
-    let mut confirm = |_: &str| true;
+    let mut confirm = |_: &probebridge_cycles::confirmation::Confirmation| true;
     let mut progress = |e: probebridge_cycles::ProgressEvent| {
         if let probebridge_cycles::ProgressEvent::Note { text, .. } = e {
             notes.push(text);

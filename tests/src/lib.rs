@@ -65,7 +65,7 @@ pub fn run_shipped_program(
     ));
     let _ = std::fs::remove_dir_all(&out);
     std::fs::create_dir_all(&out).unwrap();
-    let mut confirm = |_: &str| true;
+    let mut confirm = |_: &cycles::confirmation::Confirmation| true;
     // A long run (451 on a lossy bus: minutes) says where it is every PROGRESS_EVERY.
     let (name, mut said, mut probes) = (program_name(&path), std::time::Instant::now(), 0u32);
     let mut on_event = |ev: cycles::progress::ProgressEvent| {

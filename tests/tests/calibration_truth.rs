@@ -120,7 +120,7 @@ fn run_counted(
     let program = Program::parse(text, cfg).unwrap_or_else(|e| panic!("{e}"));
     let out = std::env::temp_dir().join(format!("pb-truth-{tag}-{}", std::process::id()));
     std::fs::create_dir_all(&out).unwrap();
-    let mut confirm = |_: &str| true;
+    let mut confirm = |_: &cycles::confirmation::Confirmation| true;
     let mut probes = 0;
     let mut progress = |e| {
         if matches!(e, cycles::progress::ProgressEvent::Probe { .. }) {

@@ -132,7 +132,7 @@ fn run_on<M: hal::Machine>(text: &str, mut m: M, cfg: &cycles::CyclesConfig, tag
         .err()
         .map(|e| e.to_string());
     let mut events = Vec::new();
-    let mut confirm = |_: &str| true;
+    let mut confirm = |_: &cycles::confirmation::Confirmation| true;
     let mut progress = |e| events.push(e);
     let mut opts = RunOptions {
         out_dir: dir.clone(),

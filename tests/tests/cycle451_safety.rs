@@ -118,7 +118,7 @@ fn run(text: &str, sc: &sim::Scenario, cfg: &cycles::CyclesConfig, tag: &str) ->
         .err()
         .map(|e| e.to_string());
     let mut events = Vec::new();
-    let mut confirm = |_: &str| true;
+    let mut confirm = |_: &cycles::confirmation::Confirmation| true;
     let mut progress = |e| events.push(e);
     let mut opts = RunOptions {
         out_dir: dir.clone(),

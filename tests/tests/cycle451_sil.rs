@@ -3,6 +3,7 @@
 //! injected truth and against an independent computation of spec.md's formulas
 //! written here with plain arrays (its own kinematic chain, its own Gauss-Newton).
 
+use cycles::confirmation::{ConfirmKind, Confirmation};
 use cycles::program::Program;
 use cycles::results::{CycleResult, ProgramReport, Status};
 use cycles::runner::{run_program, RunOptions};
@@ -17,7 +18,7 @@ use std::path::{Path, PathBuf};
 
 struct Run {
     report: ProgramReport,
-    confirmations: Vec<String>,
+    confirmations: Vec<Confirmation>,
 }
 
 fn temp_dir(name: &str) -> PathBuf {
@@ -37,8 +38,8 @@ fn run_with(
     let program = Program::parse(program, cfg).unwrap_or_else(|e| panic!("{e}"));
     let mut m = CanInproc::open(sc);
     let mut confirmations = Vec::new();
-    let mut confirm = |t: &str| {
-        confirmations.push(t.to_string());
+    let mut confirm = |c: &Confirmation| {
+        confirmations.push(c.clone());
         answer
     };
     let mut progress = |_| {};
@@ -472,7 +473,9 @@ fn a_correction_beyond_max_modification_needs_confirmation() {
     let r = run_with(&program(&p, [50.0, -30.0, 80.0]), &sc, &cfg, &dir, false);
     let c = only_cycle(&r);
     assert_eq!(r.confirmations.len(), 1);
-    assert!(r.confirmations[0].contains("maxModification") && r.confirmations[0].contains("EX0C"));
+    let asked = &r.confirmations[0];
+    assert_eq!(asked.kind, ConfirmKind::KinematicsCorrection);
+    assert!(asked.text.contains("maxModification") && asked.text.contains("EX0C"));
     assert!(c.message.as_deref().unwrap().contains("not confirmed"));
     assert!(!r.report.completed());
     assert!(!dir.join("kinematics.toml").exists());
@@ -870,7 +873,7 @@ fn tool_axis_y_on_a_horizontal_spindle_recovers_the_injected_errors() {
         let cfg = cycles_config(&sc);
         let program = Program::parse(&text, &cfg).unwrap_or_else(|e| panic!("{e}"));
         let mut m = CanInproc::open(&sc);
-        let mut confirm = |_: &str| true;
+        let mut confirm = |_: &Confirmation| true;
         let mut progress = |ev| {
             if let cycles::progress::ProgressEvent::Probe { direction, .. } = ev {
                 directions.push(direction);
@@ -1019,8 +1022,8 @@ fn with_m_strobe_rot_ax_pos_451_starts_only_at_0_deg_and_confirmed() {
     );
     assert_eq!(r.confirmations.len(), 1, "{:?}", r.confirmations);
     assert!(
-        r.confirmations[0].starts_with(cycles::cycle451::rotary_m_function::ROTARY_AT_ZERO)
-            && r.confirmations[0].contains("collision"),
+        r.confirmations[0].kind == ConfirmKind::RotaryAtZero
+            && r.confirmations[0].text.contains("collision"),
         "{}",
         r.confirmations[0]
     );

@@ -14,7 +14,7 @@ fn run(program: &str, sc: &sim::Scenario) -> ProgramReport {
     let mut m = CanInproc::open(sc);
     let out = std::env::temp_dir().join(format!("pb-sil-{}", std::process::id()));
     std::fs::create_dir_all(&out).unwrap();
-    let mut confirm = |_: &str| true;
+    let mut confirm = |_: &cycles::confirmation::Confirmation| true;
     let mut progress = |_| {};
     let mut opts = RunOptions {
         out_dir: out,

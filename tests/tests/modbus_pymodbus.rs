@@ -140,7 +140,7 @@ fn cycle_431_against_the_pymodbus_double() {
     let program = Program::parse(&text, &cfg).unwrap();
     let out = std::env::temp_dir().join(format!("pb-pymodbus-431-{}", std::process::id()));
     std::fs::create_dir_all(&out).unwrap();
-    let mut confirm = |_: &str| true;
+    let mut confirm = |_: &cycles::confirmation::Confirmation| true;
     let mut progress = |_| {};
     let mut opts = RunOptions {
         out_dir: out.clone(),

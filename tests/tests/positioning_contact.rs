@@ -27,7 +27,7 @@ fn run(program: &str, tag: &str) -> (ProgramReport, Vec<Act>) {
     );
     let out = std::env::temp_dir().join(format!("pb-contact-{tag}-{}", std::process::id()));
     std::fs::create_dir_all(&out).unwrap();
-    let mut confirm = |_: &str| true;
+    let mut confirm = |_: &cycles::confirmation::Confirmation| true;
     let mut progress = |_| {};
     let mut opts = RunOptions {
         out_dir: out.clone(),

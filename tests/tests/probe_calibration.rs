@@ -87,7 +87,7 @@ fn run_on<M: Machine<Error = hal::MachineError>>(
     let program = Program::parse(program, cfg).unwrap_or_else(|e| panic!("{e}"));
     let out = std::env::temp_dir().join(format!("pb-calib-{tag}-{}", std::process::id()));
     std::fs::create_dir_all(&out).unwrap();
-    let mut confirm = |_: &str| true;
+    let mut confirm = |_: &cycles::confirmation::Confirmation| true;
     let mut progress = |_| {};
     let mut opts = RunOptions {
         out_dir: out,
@@ -585,7 +585,7 @@ fn cycle_451_with_the_calibrated_probe_recovers_the_errors() {
     let parsed = Program::parse(&program, &cfg).unwrap_or_else(|e| panic!("{e}"));
     let dir = std::env::temp_dir().join(format!("pb-calib-451-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let mut confirm = |_: &str| true;
+    let mut confirm = |_: &cycles::confirmation::Confirmation| true;
     let mut progress = |_| {};
     let mut opts = RunOptions {
         out_dir: dir.clone(),

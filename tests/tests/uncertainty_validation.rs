@@ -54,7 +54,7 @@ fn run_on<M: Machine<Error = MachineError>>(
     let program = Program::parse(program, &cfg).unwrap_or_else(|e| panic!("{e}"));
     let out: PathBuf = std::env::temp_dir().join(format!("pb-uncert-{tag}-{}", std::process::id()));
     std::fs::create_dir_all(&out).unwrap();
-    let mut confirm = |_: &str| true;
+    let mut confirm = |_: &cycles::confirmation::Confirmation| true;
     let mut progress = |_| {};
     let mut opts = RunOptions {
         out_dir: out.clone(),

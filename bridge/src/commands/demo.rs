@@ -394,7 +394,7 @@ fn kinematics(
             }
         }
     };
-    let mut confirm = |_: &str| true;
+    let mut confirm = |_: &cycles::confirmation::Confirmation| true;
     let mut ipc = IpcEstimator::new(estimator.client(), Duration::from_secs(10));
     let t0 = std::time::Instant::now();
     let mut run = RunOptions {

@@ -111,8 +111,8 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
         _ => {}
     };
     let yes = args.yes;
-    let mut confirm = |text: &str| -> bool {
-        say!("{text}");
+    let mut confirm = |asked: &cycles::confirmation::Confirmation| -> bool {
+        say!("{asked}");
         if yes {
             return true;
         }

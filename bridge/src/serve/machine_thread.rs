@@ -13,6 +13,7 @@ use super::results::{last_results, machine_time, of_cycle};
 use crate::history::recorder::{Kept, Recorder};
 use crate::ipc::{EstimatorChild, IpcEstimator};
 use crate::session::Session;
+use cycles::confirmation::{ConfirmKind, Confirmation};
 use cycles::progress::ProgressEvent;
 use cycles::results::Status;
 use cycles::runner::{run_program, RunOptions};
@@ -189,12 +190,11 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
         lock(shared).progress(permille, points);
     };
     let confirm_all = job.start.confirm;
-    let mut confirm = |text: &str| {
+    let mut confirm = |asked: &Confirmation| {
         // The rotary axes at 0 deg before a 451 on a machine whose PLC positions them
         // (mStrobeRotAxPos): the PLC's start request is that confirmation.
-        let confirmed =
-            confirm_all || text.starts_with(cycles::cycle451::rotary_m_function::ROTARY_AT_ZERO);
-        tracing::info!(confirmed, "confirmation asked: {text}");
+        let confirmed = confirm_all || asked.kind == ConfirmKind::RotaryAtZero;
+        tracing::info!(confirmed, kind = ?asked.kind, "confirmation asked: {asked}");
         confirmed
     };
     let out_dir = cfg

@@ -71,7 +71,7 @@ pub fn plan_moves(
             let mut machine =
                 PlanMachine::new(&cfg.machine, Some(model.clone()), w.truth, possible, *start);
             let mut estimator = LocalEstimator;
-            let mut confirm = |_: &str| true;
+            let mut confirm = |_: &crate::confirmation::Confirmation| true;
             let mut progress = |_: crate::progress::ProgressEvent| {};
             let out_dir = std::env::temp_dir();
             let mut ctx = CycleContext {

@@ -5,16 +5,12 @@
 //! angle to the PLC in Q120 (A), Q121 (B), Q122 (C) before the M function.
 
 use super::plan::KinematicsPlan;
+use crate::confirmation::{ConfirmKind, Confirmation};
 use crate::cycle::CycleContext;
 use crate::cycles_config::CyclesConfig;
 use crate::error::CycleError;
 use crate::q_params::QName;
 use hal::{Axis, AxisPositions, Machine};
-
-/// The start of the confirmation asked before a 451 on such a machine. The gateway
-/// answers it with the PLC's start request (the PLC positions the table); the CLI asks
-/// the operator (`--yes` answers it).
-pub const ROTARY_AT_ZERO: &str = "mStrobeRotAxPos:";
 
 /// How far from 0 deg a rotary axis may stand and still count as at 0 (deg): the
 /// drives' resolution, not a tolerance of the measurement.
@@ -58,10 +54,12 @@ pub(super) fn check_start<M: Machine>(
     }
     let names: Vec<&str> = plan.present.iter().map(|a| a.name()).collect();
     let text = format!(
-        "{ROTARY_AT_ZERO} cycle 451 (block {block}): M{m} positions the rotary axes {}; the PLC turns them to each measuring angle (Q120..Q122) while the probe stands at Q408. They read 0 deg: check that they really stand at 0 deg and that the probe clears the sphere at every angle (collision danger). Start the measurement?",
+        "mStrobeRotAxPos: cycle 451 (block {block}): M{m} positions the rotary axes {}; the PLC turns them to each measuring angle (Q120..Q122) while the probe stands at Q408. They read 0 deg: check that they really stand at 0 deg and that the probe clears the sphere at every angle (collision danger). Start the measurement?",
         names.join(", ")
     );
-    if !(ctx.confirm)(&text) {
+    // The gateway answers it with the PLC's start request (the PLC positions the
+    // table); the CLI asks the operator (`--yes` answers it).
+    if !(ctx.confirm)(&Confirmation::new(ConfirmKind::RotaryAtZero, text)) {
         return Err(CycleError::Plan(format!(
             "cycle 451: the start with the rotary axes at 0 deg (M{m} positions them, mStrobeRotAxPos) was not confirmed; nothing moved"
         )));

@@ -4,6 +4,7 @@
 
 use super::measuring_log::{write_kinematics_log, KINEMATICS_LOG};
 use super::report::KinematicsReport;
+use crate::confirmation::{ConfirmKind, Confirmation};
 use crate::cycle::CycleContext;
 use crate::error::CycleError;
 use crate::kinematics::identification::{IdentificationResult, Mode};
@@ -57,7 +58,7 @@ impl WriteBack {
             }
             let file = ctx.kinematics.display().to_string();
             text.push_str(&format!("Accept and write it to {file}?"));
-            if !(ctx.confirm)(&text) {
+            if !(ctx.confirm)(&Confirmation::new(ConfirmKind::KinematicsCorrection, text)) {
                 accept = false;
                 stop = Some(format!(
                     "the kinematics correction (largest change {largest:.6} > maxModification {limit}) was not confirmed; {file} was not changed"

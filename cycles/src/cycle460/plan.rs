@@ -54,7 +54,7 @@ pub fn plan_moves(
             let mut machine = PlanMachine::new(&cfg.machine, None, w.truth, possible, *start)
                 .with_orientable_spindle(true);
             let mut estimator = LocalEstimator;
-            let mut confirm = |_: &str| true;
+            let mut confirm = |_: &crate::confirmation::Confirmation| true;
             let mut progress = |_: crate::progress::ProgressEvent| {};
             let out_dir = std::env::temp_dir();
             let mut ctx = CycleContext {

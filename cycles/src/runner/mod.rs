@@ -37,8 +37,9 @@ pub use preflight::{
 pub struct RunOptions<'a> {
     /// Where protocols are written (the TNC writes them next to the program).
     pub out_dir: PathBuf,
-    /// Shows a text (the 431 protocol with Q281=2) and returns whether to go on.
-    pub confirm: &'a mut dyn FnMut(&str) -> bool,
+    /// Asks a question (the 431 protocol with Q281=2, a large 451 correction, rotary
+    /// axes an M function positions) and returns whether to go on.
+    pub confirm: &'a mut dyn FnMut(&crate::confirmation::Confirmation) -> bool,
     pub progress: &'a mut ProgressSink<'a>,
     /// The machine's active kinematics file (cycles 450, 451); `None`: the default
     /// beside the machine configuration.

@@ -273,8 +273,8 @@ pub fn run_on(
     confirm: bool,
 ) -> (probebridge_cycles::ProgramReport, Vec<String>) {
     let mut shown = Vec::new();
-    let mut confirm_fn = |text: &str| {
-        shown.push(text.to_string());
+    let mut confirm_fn = |asked: &probebridge_cycles::confirmation::Confirmation| {
+        shown.push(asked.text.clone());
         confirm
     };
     let mut progress = |_e: probebridge_cycles::ProgressEvent| {};

@@ -76,7 +76,7 @@ fn run_on<M: Machine<Error = MachineError>>(m: M, s: &Setup, program: &Program) 
     let mut rec = Recorder::new(m, hal::motion_guard::MotionGuard::new(&s.cfg.machine));
     let mut starts = Vec::new();
     let state = s.state.clone();
-    let mut confirm = |_: &str| true;
+    let mut confirm = |_: &cycles::confirmation::Confirmation| true;
     let mut progress = |e: ProgressEvent| {
         if matches!(e, ProgressEvent::CycleStarted { .. }) {
             starts.push(snapshot(&state));
