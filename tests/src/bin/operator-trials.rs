@@ -24,6 +24,15 @@ fn show(case: &operator_trials::Case) {
     println!("{}: {:?}\n{:#?}", t.outcome.name(), t.message, t.violations);
 }
 
+/// Ends the process with `code`, removing the folder the trials wrote their files in
+/// (`pbtest-<pid>` under the temp folder, `probebridge_tests::process_temp_dir`): run
+/// outside `scripts/with-test-root`, nothing else would until the next test process.
+fn finish(code: i32) -> ! {
+    let dir = std::env::temp_dir().join(format!("pbtest-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(dir);
+    std::process::exit(code)
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.iter().any(|a| a == "--help" || a == "-h") {
@@ -74,7 +83,7 @@ fn main() {
             }
         }
         show(&case);
-        return;
+        finish(0);
     }
     if args.iter().any(|a| a == "--case") {
         // One case of the seed, with its program.
@@ -84,7 +93,7 @@ fn main() {
             i,
             &Shares { can, modbus },
         ));
-        return;
+        finish(0);
     }
     if args.iter().any(|a| a == "--nominal") {
         // Every cycle on every machine with nominal genes: all must be ok.
@@ -109,7 +118,7 @@ fn main() {
                 );
             }
         }
-        std::process::exit(i32::from(bad > 0));
+        finish(i32::from(bad > 0));
     }
     let shares = Shares { can, modbus };
     let policy = ShrinkPolicy { per_kind, budget };
@@ -133,7 +142,5 @@ fn main() {
         });
     print!("{}", summary.report());
     println!("{}", summary.line());
-    if !summary.findings.is_empty() {
-        std::process::exit(1);
-    }
+    finish(i32::from(!summary.findings.is_empty()));
 }
