@@ -328,11 +328,7 @@ impl<M: Machine> Measure<'_, '_, M> {
         // any direction) reaches: a preset that far off is met probing, not positioning.
         let rise = DATUM_REACH * (self.plan.params.sphere_radius + self.probe.radius);
         let pole = self.predicted_pole(&first) + self.frame(&first)[0] * rise;
-        let here = self
-            .machine
-            .positions()
-            .map_err(|e| CycleError::machine("reading the axis positions", &e))?
-            .xyz();
+        let here = self.here()?;
         let t = self.tool.tool_index();
         let q408 = self.plan.params.retract_height;
         let clear = self.clear_height(&[start, first], self.reach() + rise);

@@ -213,6 +213,13 @@ impl<'a, 'c, M: Machine> Measure<'a, 'c, M> {
         }
     }
 
+    /// Where the X/Y/Z axes stand now (read from the machine).
+    fn here(&mut self) -> Result<Vector3<f64>, CycleError> {
+        let at = self.machine.positions();
+        let at = at.map_err(|e| CycleError::machine("reading the axis positions", &e))?;
+        Ok(Vector3::from(at.xyz()))
+    }
+
     /// A linear move that brings the probe nearer the sphere along the tool axis (to
     /// the probing height, or down to a start over it): min(Q253, FMAX), as the seeds say.
     fn approach_xyz(&mut self, step: &str, p: Vector3<f64>) -> Result<(), CycleError> {

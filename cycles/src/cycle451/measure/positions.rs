@@ -158,11 +158,7 @@ impl<M: Machine> Measure<'_, '_, M> {
         let height = if h > 0.0 {
             self.retract_to_q408(&turn)?
         } else {
-            let here = self
-                .machine
-                .positions()
-                .map_err(|e| CycleError::machine("reading the axis positions", &e))?
-                .xyz();
+            let here = self.here()?;
             let pole = self.predicted_pole(&to);
             let clear = self.clear_height(&turn, self.reach());
             self.turn_height_in_limits(&turn, clear)?;
@@ -250,11 +246,7 @@ impl<M: Machine> Measure<'_, '_, M> {
         }
         let [main, minor, _] = self.tool.indices();
         // Q408 clears the sphere; from above it, still nearer along the tool axis.
-        let here = self
-            .machine
-            .positions()
-            .map_err(|e| CycleError::machine("reading the axis positions", &e))?
-            .xyz();
+        let here = self.here()?;
         let feed = if height < here[t] {
             self.plan.approach_feed
         } else {
