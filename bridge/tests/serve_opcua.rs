@@ -441,10 +441,11 @@ fn the_431_as_the_plc(serve: &Serve, py: &Path) {
         matches!((start, end), (Some(s), Some(e)) if s <= e),
         "the run's start and end times: {active}"
     );
-    // The PLC face's result block holds this run's results too (under a result
-    // sequence that is not the PLC's request sequence).
+    // The PLC face's result block holds this run's results too, under the result
+    // sequence 0, which no PLC request has.
     let plc_now = serve.plc(py, &["last"]);
     assert_eq!(plc_now["cycle"], 431, "{plc_now}");
+    assert_eq!(plc_now["seq"], 0, "{plc_now}");
     let results = mes["results"].as_object().unwrap();
     // The same run on both faces, and the PLC's own 431 of the same plane before.
     for real in [&plc_now["real"], &plc["real"]] {

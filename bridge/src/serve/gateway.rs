@@ -4,7 +4,7 @@
 //! under the lock: a start is prepared on the machine thread ([`super::prepare`]).
 
 use super::handshake::{
-    AbortReason, Action, Command, Face, Handshake, Outcome, Refusal, Start, State,
+    AbortReason, Action, Command, Face, Handshake, Outcome, Refusal, Start, State, NO_REQUEST,
 };
 use super::ownership::{Ownership, Takeover};
 use super::register_map::{MapException, RegisterMap};
@@ -270,34 +270,32 @@ impl Core {
         match answer {
             Ok(()) if !taken => {
                 tracing::error!(
-                    seq = start.seq,
+                    origin = ?start.origin,
                     "a start that was not being prepared: dropped"
                 );
             }
             Ok(()) => {
                 tracing::info!(
-                    seq = start.seq,
+                    origin = ?start.origin,
                     program = start.program,
                     params = ?start.params,
-                    face = ?start.face,
                     who = %request.who,
                     "measurement started"
                 );
-                self.map
-                    .set_results(start.seq.wrapping_sub(1), &BTreeMap::new());
-                self.map.set_machine_time(start.seq.wrapping_sub(1), None);
+                // The last run's results stop matching any start.
+                self.map.set_results(NO_REQUEST, &BTreeMap::new());
+                self.map.set_machine_time(NO_REQUEST, None);
                 self.run = Some(RunInfo {
                     program: start.program,
-                    face: start.face,
+                    face: start.face(),
                     started: SystemTime::now(),
                     ended: None,
                     outcome: None,
                 });
             }
             Err(r) => tracing::info!(
-                seq = start.seq,
+                origin = ?start.origin,
                 program = start.program,
-                face = ?start.face,
                 who = %request.who,
                 reason = r as u16,
                 "start refused ({})",
@@ -322,7 +320,7 @@ impl Core {
     /// the same refusals, the same abort flag); `Err` says why it was refused. A start
     /// is answered once prepared: wait on the [`Pending`] after the lock is released.
     pub fn command(&mut self, cmd: &FaceCommand) -> Result<Option<Pending>, Refusal> {
-        let answer = self.hs.command(cmd.command, Face::OpcUa);
+        let answer = self.hs.command(cmd.command);
         match &answer {
             Ok(Some(Action::Prepare(_))) => {}
             Ok(_) => tracing::info!(

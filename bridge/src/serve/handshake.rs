@@ -24,6 +24,38 @@ pub enum Face {
     OpcUa,
 }
 
+/// The sequence the result blocks carry for a run no PLC request started (OPC UA's
+/// StartProgram), and from a start until its run ends. The PLC counts its requests
+/// skipping 0 and the handshake takes no request with sequence 0, so it never equals
+/// a PLC start's.
+pub const NO_REQUEST: u16 = 0;
+
+/// Who asked for a start: the PLC with its request, or a face without a request block.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Origin {
+    /// The PLC's start request: the result blocks carry its sequence.
+    Plc { seq: u16 },
+    /// OPC UA's StartProgram: the result blocks carry [`NO_REQUEST`].
+    OpcUa,
+}
+
+impl Origin {
+    pub fn face(self) -> Face {
+        match self {
+            Origin::Plc { .. } => Face::Plc,
+            Origin::OpcUa => Face::OpcUa,
+        }
+    }
+
+    /// The sequence the result blocks carry for the run.
+    pub fn results_seq(self) -> u16 {
+        match self {
+            Origin::Plc { seq } => seq,
+            Origin::OpcUa => NO_REQUEST,
+        }
+    }
+}
+
 /// The state register.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u16)]
@@ -84,14 +116,17 @@ pub enum Command {
 /// A start as the handshake took it, from either face.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Start {
-    /// The sequence its results carry: the PLC's request sequence, or for another
-    /// face one the PLC's current request does not have ([`Handshake::command`]).
-    pub seq: u16,
+    pub origin: Origin,
     pub program: u16,
     pub params: [f32; super::register_map::REQ_PARAM_COUNT],
     /// Go on where a cycle asks for confirmation.
     pub confirm: bool,
-    pub face: Face,
+}
+
+impl Start {
+    pub fn face(&self) -> Face {
+        self.origin.face()
+    }
 }
 
 #[derive(Debug)]
@@ -101,8 +136,8 @@ pub struct Handshake {
     state: State,
     machine_ok: bool,
     not_recorded: bool,
-    busy_seq: u16,
-    busy_face: Face,
+    /// Who started the running (or last) measurement; none before the first.
+    busy: Option<Origin>,
     /// The start being prepared (off the faces' lock), not yet answered.
     starting: Option<Start>,
     plc_heartbeat: u16,
@@ -118,8 +153,7 @@ impl Handshake {
             state: State::Idle,
             machine_ok: false,
             not_recorded: false,
-            busy_seq: 0,
-            busy_face: Face::Plc,
+            busy: None,
             starting: None,
             plc_heartbeat: 0,
             heartbeat_seen: now,
@@ -184,10 +218,11 @@ impl Handshake {
             self.plc_heartbeat = req.plc_heartbeat;
             self.heartbeat_seen = now;
         }
-        if req.seq == self.last_seq {
+        if req.seq == NO_REQUEST || req.seq == self.last_seq {
             return None;
         }
         self.last_seq = req.seq;
+        let origin = Origin::Plc { seq: req.seq };
         let answer = match req.code {
             CODE_START => {
                 let cmd = Command::Start {
@@ -195,10 +230,10 @@ impl Handshake {
                     params: req.params,
                     confirm: req.flags & super::register_map::FLAG_CONFIRM != 0,
                 };
-                self.decide(cmd, Face::Plc, req.seq, req.flags & !FLAGS_KNOWN == 0)
+                self.decide(cmd, origin, req.flags & !FLAGS_KNOWN == 0)
             }
-            CODE_ABORT => self.decide(Command::Abort, Face::Plc, req.seq, true),
-            CODE_ACKNOWLEDGE => self.decide(Command::Acknowledge, Face::Plc, req.seq, true),
+            CODE_ABORT => self.decide(Command::Abort, origin, true),
+            CODE_ACKNOWLEDGE => self.decide(Command::Acknowledge, origin, true),
             _ => Err(Refusal::UnknownCode),
         };
         match &answer {
@@ -224,13 +259,12 @@ impl Handshake {
         }
     }
 
-    /// A command of a face that has no request block (OPC UA's methods): decided by
-    /// the same rules as the PLC's requests, answered to the caller; the PLC's
-    /// acknowledge registers stay the PLC's. A run started so gets a result sequence
-    /// the PLC's current request does not have (the one before it), so its results
-    /// never pass for the PLC's own.
-    pub fn command(&mut self, cmd: Command, face: Face) -> Result<Option<Action>, Refusal> {
-        let answer = self.decide(cmd, face, self.last_seq.wrapping_sub(1), true);
+    /// A command of OPC UA's methods (a face without a request block): decided by the
+    /// same rules as the PLC's requests, answered to the caller; the PLC's acknowledge
+    /// registers stay the PLC's. A run started so has the result sequence
+    /// [`NO_REQUEST`], which no PLC start has.
+    pub fn command(&mut self, cmd: Command) -> Result<Option<Action>, Refusal> {
+        let answer = self.decide(cmd, Origin::OpcUa, true);
         self.refresh_bits();
         answer
     }
@@ -244,8 +278,11 @@ impl Handshake {
             return false;
         }
         self.starting = None;
-        if start.face == Face::Plc && self.last_seq == start.seq {
-            self.acknowledge(start.seq, CODE_START, answer);
+        match start.origin {
+            Origin::Plc { seq } if self.last_seq == seq => {
+                self.acknowledge(seq, CODE_START, answer);
+            }
+            _ => {}
         }
         if answer.is_ok() {
             self.begin(start, now);
@@ -261,8 +298,7 @@ impl Handshake {
 
     fn begin(&mut self, start: &Start, now: Instant) {
         self.state = State::Busy;
-        self.busy_seq = start.seq;
-        self.busy_face = start.face;
+        self.busy = Some(start.origin);
         self.heartbeat_seen = now;
         self.view.program = start.program;
         self.view.progress_permille = 0;
@@ -273,8 +309,8 @@ impl Handshake {
     }
 
     /// The face the running (or last) measurement was started from.
-    pub fn busy_face(&self) -> Face {
-        self.busy_face
+    pub fn busy_face(&self) -> Option<Face> {
+        self.busy.map(Origin::face)
     }
 
     /// One measurement at a time, the first start wins: a start while one runs or is
@@ -283,8 +319,7 @@ impl Handshake {
     fn decide(
         &mut self,
         cmd: Command,
-        face: Face,
-        seq: u16,
+        origin: Origin,
         flags_known: bool,
     ) -> Result<Option<Action>, Refusal> {
         let busy = self.state == State::Busy || self.starting.is_some();
@@ -303,11 +338,10 @@ impl Handshake {
                 confirm,
             } => {
                 let start = Start {
-                    seq,
+                    origin,
                     program,
                     params,
                     confirm,
-                    face,
                 };
                 self.starting = Some(start);
                 Ok(Some(Action::Prepare(start)))
@@ -351,7 +385,7 @@ impl Handshake {
             }
         }
         self.refresh_bits();
-        self.busy_seq
+        self.busy.map_or(NO_REQUEST, Origin::results_seq)
     }
 
     /// Is the PLC heartbeat stale while busy (the motion must be aborted)?
@@ -359,7 +393,7 @@ impl Handshake {
         match self.heartbeat_timeout {
             Some(t) => {
                 self.state == State::Busy
-                    && self.busy_face == Face::Plc
+                    && matches!(self.busy, Some(Origin::Plc { .. }))
                     && now.duration_since(self.heartbeat_seen) > t
             }
             None => false,
@@ -418,14 +452,14 @@ mod tests {
         let Some(Action::Prepare(start)) = a else {
             panic!("{a:?}")
         };
-        assert_eq!((start.seq, start.program, start.confirm), (1, 431, false));
+        assert_eq!(
+            (start.origin, start.program, start.confirm),
+            (Origin::Plc { seq: 1 }, 431, false)
+        );
         // Being prepared: not yet acknowledged, another start is busy.
         assert_eq!(h.view().ack_seq, 0);
         assert_eq!(h.starting(), Some(&start));
-        assert_eq!(
-            h.command(start_cmd([0.0; 8], false), Face::OpcUa),
-            Err(Refusal::Busy)
-        );
+        assert_eq!(h.command(start_cmd([0.0; 8], false)), Err(Refusal::Busy));
         h.prepared(&start, Ok(()), now);
         assert_eq!((h.view().ack_seq, h.view().ack_code), (1, CODE_START));
         assert_eq!(h.view().bits & BIT_BUSY, BIT_BUSY);
@@ -512,17 +546,14 @@ mod tests {
         let (mut h, now) = ready();
         h.on_request(&req(CODE_ACKNOWLEDGE, 7, 0), now);
         let before = h.view().clone();
-        let a = h.command(start_cmd([0.0; 8], true), Face::OpcUa);
+        let a = h.command(start_cmd([0.0; 8], true));
         let Ok(Some(Action::Prepare(start))) = a else {
             panic!("{a:?}")
         };
-        assert_eq!(
-            (start.seq, start.face, start.confirm),
-            (6, Face::OpcUa, true)
-        );
+        assert_eq!((start.origin, start.confirm), (Origin::OpcUa, true));
         h.prepared(&start, Ok(()), now);
         assert_eq!(h.state(), State::Busy);
-        assert_eq!(h.busy_face(), Face::OpcUa);
+        assert_eq!(h.busy_face(), Some(Face::OpcUa));
         assert_eq!(
             (h.view().ack_seq, h.view().ack_code, h.view().reason),
             (before.ack_seq, before.ack_code, before.reason)
@@ -531,27 +562,35 @@ mod tests {
         h.on_request(&req(CODE_START, 8, 0), now);
         assert_eq!(h.view().reason, Refusal::Busy as u16);
         // A second start of the face: busy, to the caller.
-        assert_eq!(
-            h.command(start_cmd([0.0; 8], false), Face::OpcUa),
-            Err(Refusal::Busy)
-        );
+        assert_eq!(h.command(start_cmd([0.0; 8], false)), Err(Refusal::Busy));
         // The PLC's heartbeat does not supervise the face's run.
         assert!(!h.heartbeat_lost(now + Duration::from_secs(5)));
+        assert_eq!(h.command(Command::Abort), Ok(Some(Action::Abort)));
+        // Its results carry no PLC request's sequence.
         assert_eq!(
-            h.command(Command::Abort, Face::OpcUa),
-            Ok(Some(Action::Abort))
+            h.finish(Outcome::Aborted(AbortReason::Request), 0),
+            NO_REQUEST
         );
-        h.finish(Outcome::Aborted(AbortReason::Request), 0);
-        assert_eq!(
-            h.command(Command::Abort, Face::OpcUa),
-            Err(Refusal::NotBusy)
-        );
+        assert_eq!(h.command(Command::Abort), Err(Refusal::NotBusy));
         let mut nan = [0.0; 8];
         nan[2] = f32::INFINITY;
-        assert_eq!(
-            h.command(start_cmd(nan, false), Face::OpcUa),
-            Err(Refusal::BadRequest)
-        );
+        assert_eq!(h.command(start_cmd(nan, false)), Err(Refusal::BadRequest));
+    }
+
+    #[test]
+    fn a_request_with_sequence_0_is_not_taken_and_a_plc_run_carries_its_own() {
+        let (mut h, now) = ready();
+        request(&mut h, &req(CODE_START, 5, 0), now, Ok(()));
+        assert_eq!(h.finish(Outcome::Done, 431), 5);
+        h.on_request(&req(CODE_ACKNOWLEDGE, 6, 0), now);
+        let before = h.view().clone();
+        // 0 is the sequence of runs no PLC request started: a start with it is not
+        // taken, and the next request counts as new.
+        assert_eq!(h.on_request(&req(CODE_START, 0, 0), now), None);
+        assert_eq!(h.view(), &before);
+        assert!(h.starting().is_none());
+        let a = h.on_request(&req(CODE_START, 7, 0), now);
+        assert!(matches!(a, Some(Action::Prepare(_))), "{a:?}");
     }
 
     #[test]

@@ -243,7 +243,7 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
     };
     let (cycle, values) = last_results(&report);
     tracing::info!(
-        seq = job.start.seq,
+        origin = ?job.start.origin,
         program = job.start.program,
         outcome = ?outcome,
         stopped = report.stopped.as_deref().unwrap_or(""),
@@ -254,12 +254,12 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
         match h.finish(id, outcome.history_status(), &report) {
             Kept::Recorded => {}
             Kept::Spooled => tracing::warn!(
-                seq = job.start.seq,
+                origin = ?job.start.origin,
                 "results not yet recorded: the end of the run is in the spool"
             ),
             Kept::NotKept(e) => {
                 tracing::error!(
-                    seq = job.start.seq,
+                    origin = ?job.start.origin,
                     "the end of the run could not be kept ({e}): reported as an error, without results"
                 );
                 outcome = Outcome::Error {

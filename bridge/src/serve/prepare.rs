@@ -4,7 +4,7 @@
 //! disk, a locked or distant history); meanwhile the faces go on answering, and the
 //! start is "starting" (other starts are refused as busy).
 
-use super::handshake::{Face, Refusal, Start};
+use super::handshake::{Origin, Refusal, Start};
 use crate::history::recorder::Recorder;
 use crate::history::NewRun;
 use cycles::program::{Program, ProgramError};
@@ -59,9 +59,9 @@ fn begin_run(
     start: &Start,
     program: &Program,
 ) -> Result<i64, Refusal> {
-    let (source, request_seq) = match start.face {
-        Face::Plc => ("serve", Some(start.seq)),
-        Face::OpcUa => ("opcua", None),
+    let (source, request_seq) = match start.origin {
+        Origin::Plc { seq } => ("serve", Some(seq)),
+        Origin::OpcUa => ("opcua", None),
     };
     history
         .begin(NewRun {
@@ -74,7 +74,7 @@ fn begin_run(
             parameters: start.params.iter().map(|&p| f64::from(p)).collect(),
         })
         .map_err(|e| {
-            tracing::error!(face = ?start.face, "start refused: {e}");
+            tracing::error!(origin = ?start.origin, "start refused: {e}");
             Refusal::HistoryUnavailable
         })
 }

@@ -165,14 +165,15 @@ def run(plc, program):
 
 def last(plc):
     """The result, uncertainty and calibration blocks as they are: the last run's,
-    whichever face started it (a run of the OPC UA face has a result sequence of its
-    own, not the PLC's request sequence)."""
+    whichever face started it (a run of the OPC UA face has the result sequence 0,
+    which no PLC request has)."""
     seq = plc.read(RES_HEAD, 1)[0]
     real, dint = plc.results(seq)
     u = plc.uncertainties(seq)
     cal, cal_u = plc.calibration(seq)
     cycle = plc.read(43, 1)[0]
-    return {"cycle": cycle, "real": real, "dint": dint, "u": u, "cal": cal, "cal_u": cal_u}
+    return {"cycle": cycle, "seq": seq, "real": real, "dint": dint, "u": u, "cal": cal,
+            "cal_u": cal_u}
 
 
 def busy_abort(plc, program, other, again):
