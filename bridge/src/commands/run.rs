@@ -151,12 +151,13 @@ pub fn run(args: &RunArgs) -> Result<u8, String> {
     // The drives are disabled before anything else is said or written.
     let closed = session.close();
     if let Some((h, id)) = history.as_mut() {
+        use crate::history::RunStatus;
         let status = if report.aborted {
-            "aborted"
+            RunStatus::Aborted
         } else if report.completed() {
-            "done"
+            RunStatus::Done
         } else {
-            "error"
+            RunStatus::Error
         };
         h.finish(*id, status, &report).map_err(|e| e.to_string())?;
     }

@@ -12,11 +12,13 @@ pub mod postgres;
 pub mod recorder;
 pub mod spool;
 pub mod sqlite;
+pub mod status;
 pub mod time;
 pub mod trend;
 
 use cycles::results::ProgramReport;
 use serde::{Deserialize, Serialize};
+pub use status::RunStatus;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -124,11 +126,17 @@ trait Store: Send {
     }
 }
 
+/// Run `id`'s status word as the history holds it; an error naming the run if it is
+/// none of [`RunStatus`]'s (a row written by hand).
+fn status_of(id: i64, word: &str) -> Result<RunStatus, String> {
+    word.parse().map_err(|e| format!("run {id}: {e}"))
+}
+
 /// The end of a run as rows, the same for every backend (and in the spool).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Rows {
     finished: String,
-    status: String,
+    status: RunStatus,
     message: Option<String>,
     /// JSON list of the measuring logs.
     protocols: String,
@@ -143,7 +151,7 @@ pub struct Rows {
 }
 
 impl Rows {
-    fn of(status: &str, report: &ProgramReport) -> Self {
+    fn of(status: RunStatus, report: &ProgramReport) -> Self {
         let protocols: Vec<String> = report
             .protocols
             .iter()
@@ -151,7 +159,7 @@ impl Rows {
             .collect();
         let mut rows = Rows {
             finished: time::now_utc(),
-            status: status.to_string(),
+            status,
             message: report.stopped.clone(),
             protocols: serde_json::to_string(&protocols).expect("strings serialise"),
             results: Vec::new(),
@@ -282,7 +290,7 @@ pub struct RunRow {
     pub request_seq: Option<u16>,
     pub program_number: Option<u16>,
     pub program: String,
-    pub status: String,
+    pub status: RunStatus,
     pub message: Option<String>,
     pub protocols: Vec<String>,
     pub results: Vec<ResultRow>,
@@ -397,12 +405,12 @@ impl History {
         self.store.discard(id).map_err(|e| self.err(e))
     }
 
-    /// Completes run `id`: status ("done", "error", "aborted"), every result, in one
+    /// Completes run `id`: its status (done, error, aborted), every result, in one
     /// transaction.
     pub fn finish(
         &mut self,
         id: i64,
-        status: &str,
+        status: RunStatus,
         report: &ProgramReport,
     ) -> Result<(), HistoryError> {
         self.finish_rows(id, &Rows::of(status, report))
@@ -464,7 +472,7 @@ pub fn to_text(runs: &[RunRow]) -> String {
             printable(&r.started),
             printable(&r.machine),
             printable(&program),
-            printable(&r.status),
+            r.status,
             r.results.len()
         ));
         if let Some(t) = r.machine_time_s {
@@ -550,8 +558,11 @@ mod tests {
             parameters: &[1.5, -2.25, 0.0, 0.0, 0.0, 0.0, 0.0, 7.0],
         };
         let id = h.begin(&start).unwrap();
-        assert_eq!(h.list(&Filter::default()).unwrap()[0].status, "running");
-        h.finish(id, "done", &report()).unwrap();
+        assert_eq!(
+            h.list(&Filter::default()).unwrap()[0].status,
+            RunStatus::Running
+        );
+        h.finish(id, RunStatus::Done, &report()).unwrap();
         let other = h
             .begin(&RunStart {
                 machine: "other",
@@ -581,22 +592,57 @@ mod tests {
             .unwrap()
             .is_empty());
         // The same end again (a retry, a replayed spool): still one set of rows.
-        h.finish(id, "done", &report()).unwrap();
+        h.finish(id, RunStatus::Done, &report()).unwrap();
         assert_eq!(h.list(&Filter::default()).unwrap()[0].results.len(), 2);
-        assert!(h.finish(9999, "done", &report()).is_err(), "no such run");
+        assert!(
+            h.finish(9999, RunStatus::Done, &report()).is_err(),
+            "no such run"
+        );
         let all = h.list(&Filter::default()).unwrap();
         assert_eq!(
             all.iter().find(|r| r.id == other).unwrap().status,
-            "interrupted"
+            RunStatus::Interrupted
         );
         // A run marked interrupted whose end comes later (from the spool) is completed.
-        h.finish(other, "aborted", &report()).unwrap();
+        h.finish(other, RunStatus::Aborted, &report()).unwrap();
         let all = h.list(&Filter::default()).unwrap();
         assert_eq!(
             all.iter().find(|r| r.id == other).unwrap().status,
-            "aborted"
+            RunStatus::Aborted
         );
         assert!(to_text(&all).contains("431.h"));
+    }
+
+    #[test]
+    fn a_status_written_by_hand_that_is_no_run_status_fails_the_listing_naming_the_run() {
+        let dir = std::env::temp_dir().join(format!("pb-history-status-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("h.sqlite");
+        let mut h = History::open(&HistoryTarget::Sqlite(file.clone())).unwrap();
+        let start = RunStart {
+            machine: "table-ac",
+            source: "serve",
+            request_seq: Some(3),
+            program_number: Some(431),
+            program: Path::new("/p/431.h"),
+            max_modification: None,
+            parameters: &[],
+        };
+        let id = h.begin(&start).unwrap();
+        h.finish(id, RunStatus::Done, &report()).unwrap();
+        let c = rusqlite::Connection::open(&file).unwrap();
+        c.execute("UPDATE runs SET status = 'finished' WHERE id = ?1", [id])
+            .unwrap();
+        drop(c);
+        let e = h.list(&Filter::default()).unwrap_err().to_string();
+        assert!(
+            e.contains(&format!(
+                "run {id}: status \"finished\" is not a run status"
+            )),
+            "{e}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
@@ -618,8 +664,12 @@ mod tests {
             run: run.clone(),
             started: "2026-11-28T10:00:00Z".into(),
         };
-        let record =
-            spool::SpoolRecord::new("h".into(), 1, Rows::of("done", &report()), Some(start));
+        let record = spool::SpoolRecord::new(
+            "h".into(),
+            1,
+            Rows::of(RunStatus::Done, &report()),
+            Some(start),
+        );
         // The fresh file in its place, whose run 1 is another run begun since.
         let mut h = History::open(&HistoryTarget::Sqlite(dir.join("h.sqlite"))).unwrap();
         let other = NewRun {
@@ -656,14 +706,18 @@ mod tests {
             run: twin,
             started: at.into(),
         };
-        let end =
-            spool::SpoolRecord::new("h".into(), second, Rows::of("done", &report()), Some(start));
+        let end = spool::SpoolRecord::new(
+            "h".into(),
+            second,
+            Rows::of(RunStatus::Done, &report()),
+            Some(start),
+        );
         h.finish_record(&end).unwrap();
         let runs = h.list(&Filter::default()).unwrap();
-        let status = |id| runs.iter().find(|r| r.id == id).unwrap().status.clone();
+        let status = |id| runs.iter().find(|r| r.id == id).unwrap().status;
         assert_eq!(
             (status(first), status(second)),
-            ("running".into(), "done".into())
+            (RunStatus::Running, RunStatus::Done)
         );
         let _ = std::fs::remove_dir_all(&dir);
     }
@@ -711,7 +765,7 @@ mod tests {
                 parameters: &[],
             })
             .unwrap();
-        h.finish(id, "done", &report()).unwrap();
+        h.finish(id, RunStatus::Done, &report()).unwrap();
         drop(h);
         let mut h = History::open(&HistoryTarget::Sqlite(path)).unwrap();
         let runs = h.list(&Filter::default()).unwrap();

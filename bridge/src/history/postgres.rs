@@ -8,7 +8,9 @@
 //! out is dropped; the caller opens a new one.
 
 use super::spool::SpooledStart;
-use super::{DispersionRow, Filter, IsoErrorRow, NewRun, ResultRow, Rows, RunRow, Store, Timeouts};
+use super::{
+    status_of, DispersionRow, Filter, IsoErrorRow, NewRun, ResultRow, Rows, RunRow, Store, Timeouts,
+};
 use std::future::Future;
 use std::time::Duration;
 use tokio_postgres::{Client, NoTls};
@@ -250,7 +252,7 @@ impl Store for PgStore {
                      WHERE id = $5 AND status IN ('running', 'interrupted')",
                     &[
                         &rows.finished,
-                        &rows.status,
+                        &rows.status.as_str(),
                         &rows.message,
                         &rows.protocols,
                         &id,
@@ -320,7 +322,10 @@ impl Store for PgStore {
 
     fn list(&mut self, filter: &Filter) -> Result<Vec<RunRow>, String> {
         let client = &self.client;
-        within(&self.rt, self.statement, "listing", async {
+        // A status word that is no run status (a row written by hand): the listing
+        // fails naming the run, after the query.
+        let mut unknown = None;
+        let runs = within(&self.rt, self.statement, "listing", async {
             let rows = client
                 .query(
                     "SELECT id, started, finished, machine, source, request_seq, program_number, program, status, message, protocols, max_modification, machine_time_s
@@ -331,6 +336,14 @@ impl Store for PgStore {
             let mut runs = Vec::new();
             for r in rows {
                 let protocols: String = r.get(10);
+                let word: String = r.get(8);
+                let status = match status_of(r.get(0), &word) {
+                    Ok(s) => s,
+                    Err(e) => {
+                        unknown = Some(e);
+                        break;
+                    }
+                };
                 let mut run = RunRow {
                     id: r.get(0),
                     started: r.get(1),
@@ -340,7 +353,7 @@ impl Store for PgStore {
                     request_seq: u16_of(r.get(5)),
                     program_number: u16_of(r.get(6)),
                     program: r.get(7),
-                    status: r.get(8),
+                    status,
                     message: r.get(9),
                     protocols: serde_json::from_str(&protocols).unwrap_or_default(),
                     results: Vec::new(),
@@ -354,7 +367,11 @@ impl Store for PgStore {
                 runs.push(run);
             }
             Ok(runs)
-        })
+        })?;
+        match unknown {
+            Some(e) => Err(e),
+            None => Ok(runs),
+        }
     }
 
     fn close_interrupted(&mut self, machine: &str) -> Result<usize, String> {

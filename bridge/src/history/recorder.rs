@@ -15,7 +15,7 @@
 //!   relabelled.
 
 use super::spool::{Spool, SpoolRecord, SpooledStart};
-use super::{time, History, HistoryTarget, NewRun, Rows, Timeouts, NO_RUN};
+use super::{time, History, HistoryTarget, NewRun, Rows, RunStatus, Timeouts, NO_RUN};
 use cycles::results::ProgramReport;
 use std::collections::HashMap;
 use std::path::Path;
@@ -212,7 +212,7 @@ impl Recorder {
 
     /// Completes run `id`. Returns once the end is in the history or fsynced in the
     /// spool (at most about twice the statement timeout), or says it was not kept.
-    pub fn finish(&self, id: i64, status: &str, report: &ProgramReport) -> Kept {
+    pub fn finish(&self, id: i64, status: RunStatus, report: &ProgramReport) -> Kept {
         let start = guard(&self.begun).remove(&id);
         let record = SpoolRecord::new(self.target.display(), id, Rows::of(status, report), start);
         let (reply, answer) = mpsc::sync_channel(1);

@@ -285,7 +285,7 @@ mod tests {
     fn rows(status: &str) -> Rows {
         Rows {
             finished: "2026-11-25T12:00:00Z".into(),
-            status: status.into(),
+            status: status.parse().unwrap(),
             message: None,
             protocols: "[]".into(),
             machine_time_s: Some(6.875),
@@ -332,7 +332,10 @@ mod tests {
         let (mut s, problems) = Spool::open(&p).unwrap();
         assert!(problems.is_empty(), "{problems:?}");
         assert_eq!(s.len(), 2);
-        assert_eq!(s.records()[1].rows.status, "aborted");
+        assert_eq!(
+            s.records()[1].rows.status,
+            crate::history::RunStatus::Aborted
+        );
         s.remove(&[("h".into(), 1)]).unwrap();
         let (s, _) = Spool::open(&p).unwrap();
         assert_eq!(s.records().iter().map(|r| r.id).collect::<Vec<_>>(), [2]);

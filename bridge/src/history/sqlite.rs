@@ -3,7 +3,10 @@
 //! leaves the last committed transaction.
 
 use super::spool::SpooledStart;
-use super::{DispersionRow, Filter, IsoErrorRow, NewRun, ResultRow, Rows, RunRow, Store, Timeouts};
+use super::{
+    status_of, DispersionRow, Filter, IsoErrorRow, NewRun, ResultRow, Rows, RunRow, RunStatus,
+    Store, Timeouts,
+};
 use rusqlite::{params, Connection, OpenFlags};
 use std::path::{Path, PathBuf};
 
@@ -120,7 +123,7 @@ impl SqliteStore {
     /// alone proves little: it keeps the pages it wrote in its cache and appends to the
     /// WAL where it last left it, so a file overwritten under it (the WAL, the first
     /// page) still takes its commits while nobody else can read them.
-    fn read_back(&self, id: i64, status: &str, results: usize) -> Result<(), String> {
+    fn read_back(&self, id: i64, status: RunStatus, results: usize) -> Result<(), String> {
         let fresh = || -> rusqlite::Result<(String, i64)> {
             let c = Connection::open_with_flags(&self.path, OpenFlags::SQLITE_OPEN_READ_ONLY)?;
             c.busy_timeout(self.timeouts.statement)?;
@@ -131,9 +134,9 @@ impl SqliteStore {
             )
         };
         match fresh() {
-            Ok((s, n)) if s == status && n == results as i64 => Ok(()),
+            Ok((s, n)) if s == status.as_str() && n == results as i64 => Ok(()),
             Ok((s, n)) => Err(format!(
-                "run {id} written as {status:?} with {results} results reads back as {s:?} with {n}"
+                "run {id} written as \"{status}\" with {results} results reads back as {s:?} with {n}"
             )),
             Err(e) => Err(format!(
                 "run {id} written, but the file cannot be read back: {e}"
@@ -203,8 +206,13 @@ impl SqliteStore {
         )?;
         let rows = stmt.query_map(params![filter.machine, filter.since], |r| {
             let protocols: String = r.get(10)?;
+            let id: i64 = r.get(0)?;
+            let word: String = r.get(8)?;
+            let status = status_of(id, &word).map_err(|e| {
+                rusqlite::Error::FromSqlConversionFailure(8, rusqlite::types::Type::Text, e.into())
+            })?;
             Ok(RunRow {
-                id: r.get(0)?,
+                id,
                 started: r.get(1)?,
                 finished: r.get(2)?,
                 machine: r.get(3)?,
@@ -212,7 +220,7 @@ impl SqliteStore {
                 request_seq: r.get(5)?,
                 program_number: r.get(6)?,
                 program: r.get(7)?,
-                status: r.get(8)?,
+                status,
                 message: r.get(9)?,
                 protocols: serde_json::from_str(&protocols).unwrap_or_default(),
                 results: Vec::new(),
@@ -262,7 +270,7 @@ impl Store for SqliteStore {
             .map_err(text)?;
         }
         tx.commit().map_err(text)?;
-        self.read_back(id, "running", 0)?;
+        self.read_back(id, RunStatus::Running, 0)?;
         Ok(id)
     }
 
@@ -274,7 +282,7 @@ impl Store for SqliteStore {
                  WHERE id = ?5 AND status IN ('running', 'interrupted')",
                 params![
                     rows.finished,
-                    rows.status,
+                    rows.status.as_str(),
                     rows.message,
                     rows.protocols,
                     id,
@@ -317,7 +325,7 @@ impl Store for SqliteStore {
             .map_err(text)?;
         }
         tx.commit().map_err(text)?;
-        self.read_back(id, &rows.status, rows.results.len())
+        self.read_back(id, rows.status, rows.results.len())
     }
 
     fn discard(&mut self, id: i64) -> Result<(), String> {

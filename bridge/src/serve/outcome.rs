@@ -2,6 +2,8 @@
 //! reason of a refusal, the reason of an abort, the error kinds, and the outcome of a
 //! run. Every face reports these (the OPC UA face as `Reason` and its text).
 
+use crate::history::RunStatus;
+
 /// Why a request was refused (the reason register).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u16)]
@@ -116,12 +118,12 @@ pub enum Outcome {
 }
 
 impl Outcome {
-    /// The run's status in the history: "done", "error" or "aborted".
-    pub fn history_status(self) -> &'static str {
+    /// The run's status in the history: done, error or aborted.
+    pub fn history_status(self) -> RunStatus {
         match self {
-            Outcome::Done => "done",
-            Outcome::Error { .. } => "error",
-            Outcome::Aborted(_) => "aborted",
+            Outcome::Done => RunStatus::Done,
+            Outcome::Error { .. } => RunStatus::Error,
+            Outcome::Aborted(_) => RunStatus::Aborted,
         }
     }
 }

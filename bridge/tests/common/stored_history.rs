@@ -3,7 +3,7 @@
 //! weeks, a tampered name), without the weeks.
 
 use cycles::results::{CycleResult, ProgramReport, Status};
-use probebridge::history::{History, HistoryTarget, RunStart};
+use probebridge::history::{History, HistoryTarget, RunStart, RunStatus};
 use std::path::Path;
 
 pub struct StoredRun<'a> {
@@ -82,7 +82,7 @@ pub fn store(db: &Path, runs: &[StoredRun]) -> Vec<i64> {
                     parameters: &[],
                 })
                 .unwrap();
-            h.finish(id, "done", &report(r)).unwrap();
+            h.finish(id, RunStatus::Done, &report(r)).unwrap();
             id
         })
         .collect();

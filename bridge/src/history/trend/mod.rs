@@ -69,7 +69,7 @@ pub fn trend_pages(runs: &[RunRow], alarm: &Alarm, stem: &str) -> Vec<(String, S
 mod tests {
     use super::text::{tick_label, tick_step};
     use super::*;
-    use crate::history::{DispersionRow, IsoErrorRow};
+    use crate::history::{DispersionRow, IsoErrorRow, RunStatus};
 
     /// Runs a week apart; `ex0c(i)` the identified EX0C of run i (mm).
     fn runs(machine: &str, n: usize, ex0c: impl Fn(usize) -> f64) -> Vec<RunRow> {
@@ -83,7 +83,7 @@ mod tests {
                 request_seq: Some(i as u16),
                 program_number: Some(451),
                 program: "451.h".into(),
-                status: "done".into(),
+                status: RunStatus::Done,
                 message: None,
                 protocols: vec![],
                 results: vec![],

@@ -3,7 +3,7 @@
 //! since the previous run, the drift, the alarms, the tolerance).
 
 use super::super::time::parse_utc;
-use super::super::RunRow;
+use super::super::{RunRow, RunStatus};
 use super::alarm::Alarm;
 use std::collections::BTreeMap;
 
@@ -128,7 +128,7 @@ pub(super) fn done_runs<'a>(
     machine: &'a str,
 ) -> impl Iterator<Item = &'a RunRow> {
     runs.iter()
-        .filter(move |r| r.status == "done" && r.machine == machine)
+        .filter(move |r| r.status == RunStatus::Done && r.machine == machine)
 }
 
 /// The errors (by ISO name) and dispersions (by axis) of `machine`'s completed runs.
@@ -188,7 +188,7 @@ pub(super) fn combined(a: Option<f64>, b: Option<f64>) -> Option<f64> {
 pub fn machines(runs: &[RunRow]) -> Vec<String> {
     let set: std::collections::BTreeSet<&str> = runs
         .iter()
-        .filter(|r| r.status == "done")
+        .filter(|r| r.status == RunStatus::Done)
         .map(|r| r.machine.as_str())
         .collect();
     set.into_iter().map(str::to_string).collect()
