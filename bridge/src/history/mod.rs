@@ -47,7 +47,50 @@ impl Default for Timeouts {
 pub struct HistoryError {
     /// The file, or the server's URL without its password.
     pub target: String,
+    pub kind: HistoryErrorKind,
     pub message: String,
+}
+
+impl HistoryError {
+    pub fn kind(&self) -> HistoryErrorKind {
+        self.kind
+    }
+}
+
+/// What a history operation failed on, where its caller acts on it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum HistoryErrorKind {
+    /// The run to complete is not in the history (one restored from before the run
+    /// began): not the store's failure; the history works.
+    NoRun,
+    /// The history cannot take or give what was asked: unreachable, unreadable,
+    /// refused, or no answer in time.
+    Unavailable,
+}
+
+/// A backend's error: its kind, and what happened.
+#[derive(Debug)]
+struct StoreError {
+    kind: HistoryErrorKind,
+    message: String,
+}
+
+impl StoreError {
+    fn no_run(id: i64) -> Self {
+        StoreError {
+            kind: HistoryErrorKind::NoRun,
+            message: format!("there is no run {id} to complete"),
+        }
+    }
+}
+
+impl From<String> for StoreError {
+    fn from(message: String) -> Self {
+        StoreError {
+            kind: HistoryErrorKind::Unavailable,
+            message,
+        }
+    }
 }
 
 /// Where the history is kept: an SQLite file, or a PostgreSQL server named by a
@@ -100,16 +143,13 @@ fn redact(url: &str) -> String {
     }
 }
 
-/// How a backend's error begins when the run to complete is not in the history.
-const NO_RUN: &str = "there is no run";
-
 /// What a backend keeps: the same operations on SQLite and PostgreSQL.
 trait Store: Send {
     fn begin(&mut self, run: &NewRun, now: &str) -> Result<i64, String>;
     /// Completes run `id` in one transaction, if it is still `running` (or was marked
     /// `interrupted`): a run already completed is left alone, so that an end recorded
     /// twice (a retry, a replayed spool) makes one row. Errs when there is no run `id`.
-    fn finish(&mut self, id: i64, rows: &Rows) -> Result<(), String>;
+    fn finish(&mut self, id: i64, rows: &Rows) -> Result<(), StoreError>;
     /// Removes run `id` and its rows: begun for a start that was refused after all.
     fn discard(&mut self, id: i64) -> Result<(), String>;
     fn list(&mut self, filter: &Filter) -> Result<Vec<RunRow>, String>;
@@ -343,6 +383,7 @@ impl History {
         };
         let store = store.map_err(|message| HistoryError {
             target: target.display(),
+            kind: HistoryErrorKind::Unavailable,
             message,
         })?;
         Ok(Self {
@@ -358,6 +399,7 @@ impl History {
     fn err(&self, message: String) -> HistoryError {
         HistoryError {
             target: self.target.display(),
+            kind: HistoryErrorKind::Unavailable,
             message,
         }
     }
@@ -373,7 +415,11 @@ impl History {
     }
 
     fn finish_rows(&mut self, id: i64, rows: &Rows) -> Result<(), HistoryError> {
-        self.store.finish(id, rows).map_err(|e| self.err(e))
+        self.store.finish(id, rows).map_err(|e| HistoryError {
+            target: self.target.display(),
+            kind: e.kind,
+            message: e.message,
+        })
     }
 
     /// Completes a spooled end. With its start, the run is found by what it is

@@ -9,7 +9,8 @@
 
 use super::spool::SpooledStart;
 use super::{
-    status_of, DispersionRow, Filter, IsoErrorRow, NewRun, ResultRow, Rows, RunRow, Store, Timeouts,
+    status_of, DispersionRow, Filter, IsoErrorRow, NewRun, ResultRow, Rows, RunRow, Store,
+    StoreError, Timeouts,
 };
 use std::future::Future;
 use std::time::Duration;
@@ -242,7 +243,7 @@ impl Store for PgStore {
         })
     }
 
-    fn finish(&mut self, id: i64, rows: &Rows) -> Result<(), String> {
+    fn finish(&mut self, id: i64, rows: &Rows) -> Result<(), StoreError> {
         let client = &mut self.client;
         let known = within(&self.rt, self.statement, "recording the end", async {
             let tx = client.transaction().await?;
@@ -295,7 +296,7 @@ impl Store for PgStore {
         if known {
             Ok(())
         } else {
-            Err(format!("{} {id} to complete", super::NO_RUN))
+            Err(StoreError::no_run(id))
         }
     }
 

@@ -15,7 +15,7 @@
 //!   relabelled.
 
 use super::spool::{Spool, SpoolRecord, SpooledStart};
-use super::{time, History, HistoryTarget, NewRun, Rows, RunStatus, Timeouts, NO_RUN};
+use super::{time, History, HistoryErrorKind, HistoryTarget, NewRun, Rows, RunStatus, Timeouts};
 use cycles::results::ProgramReport;
 use std::collections::HashMap;
 use std::path::Path;
@@ -530,7 +530,7 @@ impl Worker {
                     tracing::info!(run = r.id, status = %r.rows.status, "history: spooled end of the run recorded");
                     done.push((r.history.clone(), r.id));
                 }
-                Err(e) if e.message.starts_with(NO_RUN) => {
+                Err(e) if e.kind() == HistoryErrorKind::NoRun => {
                     // Not the store's failure: this run's start is not in it (a
                     // history restored from before it). Kept, said once.
                     tracing::error!(

@@ -5,7 +5,7 @@
 use super::spool::SpooledStart;
 use super::{
     status_of, DispersionRow, Filter, IsoErrorRow, NewRun, ResultRow, Rows, RunRow, RunStatus,
-    Store, Timeouts,
+    Store, StoreError, Timeouts,
 };
 use rusqlite::{params, Connection, OpenFlags};
 use std::path::{Path, PathBuf};
@@ -274,7 +274,7 @@ impl Store for SqliteStore {
         Ok(id)
     }
 
-    fn finish(&mut self, id: i64, rows: &Rows) -> Result<(), String> {
+    fn finish(&mut self, id: i64, rows: &Rows) -> Result<(), StoreError> {
         let tx = self.conn.transaction().map_err(text)?;
         let updated = tx
             .execute(
@@ -300,7 +300,7 @@ impl Store for SqliteStore {
             return if known == 1 {
                 Ok(())
             } else {
-                Err(format!("{} {id} to complete", super::NO_RUN))
+                Err(StoreError::no_run(id))
             };
         }
         for (position, r) in &rows.results {
@@ -325,7 +325,7 @@ impl Store for SqliteStore {
             .map_err(text)?;
         }
         tx.commit().map_err(text)?;
-        self.read_back(id, rows.status, rows.results.len())
+        Ok(self.read_back(id, rows.status, rows.results.len())?)
     }
 
     fn discard(&mut self, id: i64) -> Result<(), String> {
