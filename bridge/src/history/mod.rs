@@ -640,10 +640,8 @@ mod tests {
         // The same end again (a retry, a replayed spool): still one set of rows.
         h.finish(id, RunStatus::Done, &report()).unwrap();
         assert_eq!(h.list(&Filter::default()).unwrap()[0].results.len(), 2);
-        assert!(
-            h.finish(9999, RunStatus::Done, &report()).is_err(),
-            "no such run"
-        );
+        let e = h.finish(9999, RunStatus::Done, &report()).unwrap_err();
+        assert_eq!(e.kind(), HistoryErrorKind::NoRun, "no such run: {e}");
         let all = h.list(&Filter::default()).unwrap();
         assert_eq!(
             all.iter().find(|r| r.id == other).unwrap().status,
