@@ -13,7 +13,9 @@ use hal::modbus::mailbox::{
     STATUS_LEN,
 };
 use hal::modbus::word_order::WordOrder;
-use probebridge::serve::handshake::{AbortReason, Action, Handshake, Outcome, Refusal, State};
+use probebridge::serve::handshake::{
+    AbortReason, Action, Handshake, Origin, Outcome, Refusal, State, NO_REQUEST,
+};
 use probebridge::serve::register_map::{self as map, RegisterMap, StateView};
 use probebridge::serve::results::{self, Quantity, ResultKey};
 use std::collections::BTreeMap;
@@ -366,10 +368,13 @@ fn handshake_ops(u: &mut Unstructured<'_>, sig: &mut Sig) -> Result<()> {
                 let was = h.state();
                 let refuse = u.arbitrary::<u8>()? % 4 == 0;
                 let action = h.on_request(&req, now);
+                if req.seq == NO_REQUEST {
+                    assert_eq!(action, None, "a request with sequence 0 was taken");
+                }
                 if let Some(Action::Prepare(start)) = &action {
                     assert!(was != State::Busy, "a start while busy was not refused");
                     assert_eq!(h.starting(), Some(start), "a start not held as starting");
-                    assert_eq!(start.seq, req.seq);
+                    assert_eq!(start.origin, Origin::Plc { seq: req.seq });
                     // Prepared off the lock (the machine thread): taken or refused.
                     let answer = if refuse {
                         Err(Refusal::UnknownProgram)
