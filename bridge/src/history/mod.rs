@@ -553,6 +553,38 @@ pub fn printable(s: &str) -> String {
     out
 }
 
+/// A folder of one test's own under the temporary folder, removed when the test ends,
+/// however it ends: a run outside `scripts/test` (whose TMPDIR is removed) leaves
+/// nothing in /tmp either.
+#[cfg(test)]
+pub(crate) struct TestDir(PathBuf);
+
+#[cfg(test)]
+impl TestDir {
+    pub(crate) fn new(name: &str) -> Self {
+        let d = std::env::temp_dir().join(format!("pb-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        TestDir(d)
+    }
+}
+
+#[cfg(test)]
+impl std::ops::Deref for TestDir {
+    type Target = Path;
+
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+#[cfg(test)]
+impl Drop for TestDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -590,9 +622,7 @@ mod tests {
 
     #[test]
     fn a_run_is_recorded_and_listed_by_machine_and_date() {
-        let dir = std::env::temp_dir().join(format!("pb-history-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = TestDir::new("history");
         let mut h = History::open(&HistoryTarget::Sqlite(dir.join("h.sqlite"))).unwrap();
         let start = RunStart {
             machine: "table-ac",
@@ -659,9 +689,7 @@ mod tests {
 
     #[test]
     fn a_status_written_by_hand_that_is_no_run_status_fails_the_listing_naming_the_run() {
-        let dir = std::env::temp_dir().join(format!("pb-history-status-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = TestDir::new("history-status");
         let file = dir.join("h.sqlite");
         let mut h = History::open(&HistoryTarget::Sqlite(file.clone())).unwrap();
         let start = RunStart {
@@ -686,14 +714,11 @@ mod tests {
             )),
             "{e}"
         );
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn a_spooled_end_replays_into_a_fresh_file_without_touching_another_run_of_its_id() {
-        let dir = std::env::temp_dir().join(format!("pb-history-fresh-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = TestDir::new("history-fresh");
         let run = NewRun {
             machine: "table-ac".into(),
             source: "serve".into(),
@@ -763,14 +788,11 @@ mod tests {
             (status(first), status(second)),
             (RunStatus::Running, RunStatus::Done)
         );
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn a_history_from_before_the_uncertainties_gains_their_columns() {
-        let dir = std::env::temp_dir().join(format!("pb-history-old-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = TestDir::new("history-old");
         let path = dir.join("old.sqlite");
         {
             // The tables as the first schema made them, with a completed 451 run.
@@ -819,6 +841,5 @@ mod tests {
             (runs[0].machine_time_s, runs[1].machine_time_s),
             (None, Some(6.875))
         );
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -304,11 +304,8 @@ mod tests {
         }
     }
 
-    fn dir(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("pb-spool-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
+    fn dir(name: &str) -> crate::history::TestDir {
+        crate::history::TestDir::new(&format!("spool-{name}"))
     }
 
     #[test]
