@@ -620,11 +620,9 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_run_is_recorded_and_listed_by_machine_and_date() {
-        let dir = TestDir::new("history");
-        let mut h = History::open(&HistoryTarget::Sqlite(dir.join("h.sqlite"))).unwrap();
-        let start = RunStart {
+    /// A 431 the PLC started with request 3 and eight parameters.
+    fn plc_431() -> RunStart<'static> {
+        RunStart {
             machine: "table-ac",
             source: "serve",
             request_seq: Some(3),
@@ -632,7 +630,14 @@ mod tests {
             program: Path::new("/p/431.h"),
             max_modification: Some(0.05),
             parameters: &[1.5, -2.25, 0.0, 0.0, 0.0, 0.0, 0.0, 7.0],
-        };
+        }
+    }
+
+    #[test]
+    fn a_run_is_recorded_and_listed_by_machine_and_date() {
+        let dir = TestDir::new("history");
+        let mut h = History::open(&HistoryTarget::Sqlite(dir.join("h.sqlite"))).unwrap();
+        let start = plc_431();
         let id = h.begin(&start).unwrap();
         assert_eq!(
             h.list(&Filter::default()).unwrap()[0].status,
@@ -692,16 +697,7 @@ mod tests {
         let dir = TestDir::new("history-status");
         let file = dir.join("h.sqlite");
         let mut h = History::open(&HistoryTarget::Sqlite(file.clone())).unwrap();
-        let start = RunStart {
-            machine: "table-ac",
-            source: "serve",
-            request_seq: Some(3),
-            program_number: Some(431),
-            program: Path::new("/p/431.h"),
-            max_modification: None,
-            parameters: &[],
-        };
-        let id = h.begin(&start).unwrap();
+        let id = h.begin(&plc_431()).unwrap();
         h.finish(id, RunStatus::Done, &report()).unwrap();
         let c = rusqlite::Connection::open(&file).unwrap();
         c.execute("UPDATE runs SET status = 'finished' WHERE id = ?1", [id])
