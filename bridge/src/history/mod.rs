@@ -396,10 +396,12 @@ impl History {
         &self.target
     }
 
-    fn err(&self, message: String) -> HistoryError {
+    /// A backend's error (or its message: the history unavailable) as this history's.
+    fn err(&self, e: impl Into<StoreError>) -> HistoryError {
+        let StoreError { kind, message } = e.into();
         HistoryError {
             target: self.target.display(),
-            kind: HistoryErrorKind::Unavailable,
+            kind,
             message,
         }
     }
@@ -415,11 +417,7 @@ impl History {
     }
 
     fn finish_rows(&mut self, id: i64, rows: &Rows) -> Result<(), HistoryError> {
-        self.store.finish(id, rows).map_err(|e| HistoryError {
-            target: self.target.display(),
-            kind: e.kind,
-            message: e.message,
-        })
+        self.store.finish(id, rows).map_err(|e| self.err(e))
     }
 
     /// Completes a spooled end. With its start, the run is found by what it is
