@@ -219,6 +219,14 @@ impl Raw {
     fn served(&mut self) -> bool {
         matches!(self.read(32, 1), Ok(Ok(_)))
     }
+
+    /// The gateway has closed this connection (its end read, nothing waiting).
+    fn closed_by_the_gateway(&self) -> bool {
+        self.s.set_nonblocking(true).unwrap();
+        let closed = matches!(self.s.peek(&mut [0u8; 1]), Ok(0));
+        self.s.set_nonblocking(false).unwrap();
+        closed
+    }
 }
 
 /// The open descriptors of process `pid`.
@@ -359,9 +367,12 @@ fn a_slow_flood_from_other_hosts_never_keeps_the_plc_out() {
     let mut plc = Raw::connect(g.addr());
     assert_eq!(plc.write(20, &[1], true), Ok(()), "the PLC owns the block");
     drop(plc);
-    let mut flood = Vec::new();
+    let mut flood: Vec<Raw> = Vec::new();
     let mut reconnects = Vec::new();
-    for i in 0..120 {
+    // 20 connections a second for 60 s, as issue 35 asked; the flooder holds every
+    // connection until the gateway closes it (those it closed are let go here, or the
+    // test process would run out of descriptors).
+    for i in 0..1200 {
         let host = if i % 2 == 0 {
             [127, 0, 0, 2]
         } else {
@@ -369,6 +380,7 @@ fn a_slow_flood_from_other_hosts_never_keeps_the_plc_out() {
         };
         flood.push(Raw::connect_from(host, g.addr()));
         if i % 10 == 9 {
+            flood.retain(|c| !c.closed_by_the_gateway());
             let t = Instant::now();
             let mut p = Raw::connect(g.addr());
             p.s.set_read_timeout(Some(Duration::from_secs(1))).unwrap();
@@ -377,7 +389,13 @@ fn a_slow_flood_from_other_hosts_never_keeps_the_plc_out() {
         // The flood's pace: 20 connections a second.
         std::thread::sleep(Duration::from_millis(50));
     }
-    eprintln!("PLC reconnects during the flood (served, ms): {reconnects:?}");
+    eprintln!(
+        "PLC reconnects during the flood (served, ms): {reconnects:?}; connections the \
+         gateway holds of the flood's: {}",
+        flood.len()
+    );
+    // Served within 1 s each (the read timeout): a correctness bound, far above the
+    // few ms they take.
     assert!(
         reconnects.iter().all(|(served, _)| *served),
         "{reconnects:?}\n{}",

@@ -10,10 +10,13 @@
 //! - No production file (a `src/` file up to its `#[cfg(test)]` module) is over
 //!   [`MAX_LINES`] lines, except the ones being split ([`BEING_SPLIT`]).
 //! - The protocol cores ([`IO_FREE_CORES`]: CANopen, CiA 402, the real-time loop, the
-//!   PLC handshake) do no I/O: neither they nor any module of their crate they use
+//!   PLC handshake, the gateway's measurement rules) do no I/O: neither they nor any module of their crate they use
 //!   (through the same import graph) reads a clock, starts a thread or opens a file, a
 //!   socket or a process ([`IO_WORDS`]). Time is their argument, frames their input
 //!   and output; the drivers around them do the rest.
+//! - The gateway's faces reach the machine only through the measurement service: no
+//!   module of a face uses the machine thread's ([`MACHINE_SIDE`]), and the OPC UA and
+//!   web faces use none of the PLC face's ([`PLC_FACE`]).
 //!
 //! Rerun with `cargo test -p probebridge-tests --test module_graph`.
 
@@ -36,6 +39,27 @@ const IO_FREE_CORES: &[(&str, &str)] = &[
     ("hal", "crate::cia402"),
     ("hal", "crate::master::rt_loop"),
     ("bridge", "crate::serve::handshake"),
+    ("bridge", "crate::serve::measurement"),
+];
+
+/// The gateway's faces other than the PLC's, and the PLC face's own modules: a face
+/// reaches the machine only through the measurement service (`crate::serve::service`),
+/// never another face's modules or the machine thread's.
+const FACES_BESIDE_THE_PLC: &[&str] = &["crate::serve::opcua", "crate::serve::web_face"];
+const PLC_FACE: &[&str] = &[
+    "crate::serve::plc_face",
+    "crate::serve::modbus_face",
+    "crate::serve::handshake",
+    "crate::serve::register_map",
+    "crate::serve::ownership",
+];
+/// What runs the machine: only the service's owner (`crate::serve`) and the machine
+/// thread itself use these.
+const MACHINE_SIDE: &[&str] = &[
+    "crate::serve::machine_thread",
+    "crate::serve::machine_link",
+    "crate::serve::prepare",
+    "crate::session",
 ];
 
 /// What I/O looks like in Rust source: reading a clock, a thread, a file, a socket, a
@@ -503,6 +527,84 @@ fn the_protocol_cores_do_no_io() {
          a thread, a file, a socket, a process): pass time and frames in as arguments, \
          and move the I/O to the driver around the core\n{}",
         found.join("\n")
+    );
+}
+
+fn within(m: &str, root: &str) -> bool {
+    m == root || m.starts_with(&format!("{root}::"))
+}
+
+/// Where a face's module uses one past the service: (module, what it uses).
+fn faces_past_the_service(g: &BTreeMap<String, BTreeSet<String>>) -> Vec<String> {
+    let faces: Vec<&str> = FACES_BESIDE_THE_PLC
+        .iter()
+        .chain(PLC_FACE)
+        .copied()
+        .collect();
+    let mut found = Vec::new();
+    for (m, targets) in g {
+        let Some(face) = faces.iter().find(|f| within(m, f)) else {
+            continue;
+        };
+        for t in targets {
+            let machine = MACHINE_SIDE.iter().any(|x| within(t, x));
+            let plc = FACES_BESIDE_THE_PLC.contains(face) && PLC_FACE.iter().any(|x| within(t, x));
+            if machine || plc {
+                found.push(format!("  {m} uses {t}"));
+            }
+        }
+    }
+    found
+}
+
+#[test]
+fn the_faces_reach_the_machine_only_through_the_service() {
+    let g = graph(&workspace_root().join("bridge").join("src"));
+    for face in FACES_BESIDE_THE_PLC.iter().chain(PLC_FACE) {
+        assert!(
+            g.keys().any(|m| within(m, face)),
+            "the face {face} was found"
+        );
+    }
+    let found = faces_past_the_service(&g);
+    assert!(
+        found.is_empty(),
+        "a face reaches past the measurement service (crate::serve::service): into the \
+         machine thread's modules, or (OPC UA, web) into the PLC face's\n{}",
+        found.join("\n")
+    );
+}
+
+#[test]
+fn the_face_check_sees_a_face_past_the_service() {
+    let edge = |from: &str, to: &[&str]| {
+        (
+            from.to_string(),
+            to.iter().map(|t| t.to_string()).collect::<BTreeSet<_>>(),
+        )
+    };
+    let g: BTreeMap<String, BTreeSet<String>> = [
+        edge(
+            "crate::serve::opcua::values",
+            &["crate::serve::service", "crate::serve::register_map"],
+        ),
+        edge("crate::serve::web_face", &["crate::serve::machine_thread"]),
+        // The PLC face may use its own modules, not the machine thread's.
+        edge(
+            "crate::serve::plc_face",
+            &["crate::serve::handshake", "crate::serve::prepare"],
+        ),
+        edge("crate::serve::service", &["crate::serve::measurement"]),
+    ]
+    .into_iter()
+    .collect();
+    assert_eq!(
+        faces_past_the_service(&g),
+        [
+            "  crate::serve::opcua::values uses crate::serve::register_map",
+            "  crate::serve::plc_face uses crate::serve::prepare",
+            "  crate::serve::web_face uses crate::serve::machine_thread",
+        ]
     );
 }
 

@@ -41,7 +41,7 @@ impl MachineLink {
             MachineLink::Up(session) => {
                 if let Err(e) = session.machine.health() {
                     tracing::error!(kind = ?e.kind, "machine not ok: {e}; closing it to open it again");
-                    lock(shared).set_machine_ok(false);
+                    lock(shared).service.set_machine_ok(false);
                     *self = MachineLink::Down(Reconnect {
                         attempt: 0,
                         next: Instant::now(),
@@ -62,7 +62,7 @@ impl MachineLink {
                             tracing::info!("{n}");
                         }
                         tracing::info!(attempt = r.attempt, "machine ok again");
-                        lock(shared).set_machine_ok(true);
+                        lock(shared).service.set_machine_ok(true);
                         *self = MachineLink::Up(Box::new(s));
                     }
                     Err(e) => {

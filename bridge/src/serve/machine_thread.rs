@@ -3,13 +3,14 @@
 //! `cycles::runner::run_program` as `probebridge run`.
 
 use super::config::GatewayConfig;
-use super::gateway::{lock, Shared, StartRequest, ToMachine};
-use super::handshake::{
+use super::gateway::{lock, Shared};
+use super::machine_link::MachineLink;
+use super::outcome::{
     machine_error_kind, Outcome, Refusal, ERROR_KIND_CYCLE, ERROR_KIND_NOT_KEPT, ERROR_KIND_PROGRAM,
 };
-use super::machine_link::MachineLink;
 use super::prepare::{Job, Preparer};
 use super::results::{last_results, machine_time, of_cycle};
+use super::service::{StartRequest, ToMachine};
 use crate::history::recorder::{Kept, Recorder};
 use crate::ipc::{EstimatorChild, IpcEstimator};
 use crate::session::Session;
@@ -46,7 +47,7 @@ pub fn spawn(
 }
 
 /// Runs on its own thread until `Quit` (or the sender goes away). Says on `ready`
-/// whether the machine came up. Prepares each start (the faces' lock is not held
+/// whether the machine came up. Prepares each start (the gateway's lock is not held
 /// meanwhile; see [`super::prepare`]), then runs it; ends of runs go to `history`.
 pub fn run(
     cfg: &GatewayConfig,
@@ -58,7 +59,7 @@ pub fn run(
 ) {
     let mut opts = cfg.machine_options();
     // A move under way brakes on the PLC's abort, a stale heartbeat or SIGTERM.
-    opts.abort = Some(lock(shared).abort_flag());
+    opts.abort = Some(lock(shared).service.abort_flag());
     let session = match Session::open(&opts) {
         Ok(s) => s,
         Err(e) => {
@@ -106,17 +107,19 @@ fn start(
     request: &StartRequest,
 ) {
     let Some(session) = link.session() else {
-        lock(ctx.shared).prepared(request, Err(Refusal::MachineNotReady));
+        lock(ctx.shared)
+            .service
+            .prepared(request, Err(Refusal::MachineNotReady));
         return;
     };
     match preparer.prepare(&request.start) {
         Ok(job) => {
-            if lock(ctx.shared).prepared(request, Ok(())) {
+            if lock(ctx.shared).service.prepared(request, Ok(())) {
                 measure(ctx, session, estimator.as_ref(), &job);
             }
         }
         Err(r) => {
-            lock(ctx.shared).prepared(request, Err(r));
+            lock(ctx.shared).service.prepared(request, Err(r));
         }
     }
 }
@@ -187,7 +190,7 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
             _ => return,
         }
         let permille = (started.saturating_sub(1) * 1000 / total) as u16;
-        lock(shared).progress(permille, points);
+        lock(shared).service.progress(permille, points);
     };
     let confirm_all = job.start.confirm;
     let mut confirm = |asked: &Confirmation| {
@@ -218,7 +221,7 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
         last_error: None,
     };
     let report = run_program(&job.program, &mut machine, &job.cycles, &mut opts);
-    let reason = lock(shared).abort_reason();
+    let reason = lock(shared).service.abort_reason();
     let mut outcome = match reason {
         Some(r) => Outcome::Aborted(r),
         None if report.completed() => Outcome::Done,
@@ -269,9 +272,10 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
             }
         }
     }
-    let mut core = lock(shared);
+    let mut gateway = lock(shared);
+    let service = &mut gateway.service;
     if outcome == Outcome::Done {
-        core.set_cycle_results(
+        service.set_cycle_results(
             report
                 .cycles
                 .iter()
@@ -280,7 +284,7 @@ fn measure(ctx: Measure, session: &mut Session, estimator: Option<&EstimatorChil
                 .collect(),
         );
     }
-    core.finish(outcome, cycle, &values, machine_time(&report).as_ref());
+    service.finish(outcome, cycle, &values, machine_time(&report).as_ref());
 }
 
 /// The machine as the cycles drive it, remembering the last error a motion returned

@@ -12,23 +12,30 @@ pub mod gateway;
 pub mod handshake;
 pub mod machine_link;
 pub mod machine_thread;
+pub mod measurement;
 pub mod modbus_face;
 pub mod opcua;
 pub mod outcome;
 pub mod ownership;
 pub mod peer_allow;
+pub mod plc_face;
 pub mod prepare;
 pub mod register_map;
 pub mod results;
 pub mod sd_notify;
+pub mod service;
+pub mod tcp_keepalive;
 pub mod web_face;
 
 use config::GatewayConfig;
 use face_thread::FaceHealth;
-use gateway::{lock, Core, ToMachine};
+use gateway::{lock, Gateway};
 use hal::AbortFlag;
-use handshake::{AbortReason, Handshake, State};
+use handshake::Handshake;
+use measurement::State;
+use outcome::AbortReason;
 use register_map::RegisterMap;
+use service::{Service, ToMachine};
 use std::io::Write;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
@@ -184,19 +191,18 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     notifier.notify("STATUS=bringing the machine up");
 
     let (jobs_tx, jobs_rx) = std::sync::mpsc::channel::<ToMachine>();
-    let core = Core::new(
+    let mut service = Service::new(jobs_tx.clone());
+    let history = open_history(&cfg, &cycles)?;
+    if let Some(h) = &history {
+        service.set_history(h.clone());
+    }
+    let _ = ABORT.set(service.abort_flag());
+    let plc = plc_face::PlcFace::new(
         RegisterMap::new(order, cfg.plc.int_scale),
         Handshake::new(cfg.heartbeat_timeout(), Instant::now()),
         ownership::Ownership::new(cfg.owner_timeout()),
-        jobs_tx.clone(),
     );
-    let history = open_history(&cfg, &cycles)?;
-    let mut core = core;
-    if let Some(h) = &history {
-        core.set_history(h.clone());
-    }
-    let _ = ABORT.set(core.abort_flag());
-    let shared = Arc::new(Mutex::new(core));
+    let shared = Arc::new(Mutex::new(Gateway::new(service, plc)));
     let (machine, ready_rx) = machine_thread::spawn(
         cfg.clone(),
         cycles.clone(),
@@ -217,7 +223,7 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     }
     let mut face = modbus_face::PlcFace::start(shared.clone(), listener, face_opts)
         .map_err(|e| format!("PLC face on {listen}: {e}"))?;
-    lock(&shared).set_machine_ok(true);
+    lock(&shared).service.set_machine_ok(true);
     tracing::info!(listen = %face.local_addr, machine = %machine_cfg.name, "gateway ready");
     // Tests and scripts read the bound address (port 0 takes any) from this line.
     crate::say!("probebridge serve: listening on {}", face.local_addr);
@@ -241,9 +247,10 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     end.log();
     notifier.notify("STOPPING=1\nSTATUS=stopping");
     {
-        let mut core = lock(&shared);
-        core.set_machine_ok(false);
-        core.request_abort(AbortReason::Shutdown);
+        let mut gateway = lock(&shared);
+        let service = &mut gateway.service;
+        service.set_machine_ok(false);
+        service.request_abort(AbortReason::Shutdown);
     }
     let _ = jobs_tx.send(ToMachine::Quit);
     let _ = machine.join();
@@ -264,7 +271,7 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
         h.stop();
     }
     drop(web);
-    tracing::info!(state = lock(&shared).state().name(), "stopped");
+    tracing::info!(state = lock(&shared).service.state().name(), "stopped");
     match end {
         End::Signal(_) => Ok(0),
         End::Restart => Ok(RESTART_EXIT),
@@ -417,12 +424,13 @@ fn supervise(
         }
         let now = Instant::now();
         let (state, machine_ok) = {
-            let mut core = lock(shared);
-            core.tick(now);
+            let mut gateway = lock(shared);
+            gateway.tick(now);
+            let service = &mut gateway.service;
             // Checked and refused under one lock: no start slips in between.
             if RESTART_WHEN_IDLE.load(Ordering::Acquire) {
-                if core.between_measurements() {
-                    core.set_machine_ok(false);
+                if service.between_measurements() {
+                    service.set_machine_ok(false);
                     return End::Restart;
                 }
                 if !restart_said {
@@ -431,7 +439,7 @@ fn supervise(
                     restart_said = true;
                 }
             }
-            (core.state(), core.machine_ok())
+            (service.state(), service.machine_ok())
         };
         if (state, machine_ok) != last {
             let machine = if machine_ok {

@@ -1,6 +1,6 @@
 //! The Modbus TCP server of the PLC face: an accept loop and one task per connection
-//! around [`super::gateway::Core`]. Holding registers only (FC3, FC6, FC16); other
-//! functions get IllegalFunction.
+//! around [`super::plc_face::PlcFace`] (in [`super::gateway::Gateway`]). Holding
+//! registers only (FC3, FC6, FC16); other functions get IllegalFunction.
 //!
 //! The face must stay reachable for its PLC whatever else is on the network:
 //! - peers outside `plc.allow` are refused at accept;
@@ -22,13 +22,13 @@
 
 use super::face_log::{Event, FaceLog, SUMMARY_EVERY};
 use super::face_thread::{FaceHealth, FaceThread, Flavour, Heartbeat};
-use super::gateway::{lock, Shared, WriteRefusal};
+use super::gateway::{lock, Gateway, Shared};
 use super::peer_allow::AllowList;
+use super::plc_face::WriteRefusal;
 use super::register_map::MapException;
 use std::collections::BTreeMap;
 use std::io;
 use std::net::{IpAddr, SocketAddr};
-use std::os::fd::AsRawFd;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -45,11 +45,6 @@ const ACCEPT_RETRY_FIRST: Duration = Duration::from_millis(50);
 const ACCEPT_RETRY_MAX: Duration = Duration::from_secs(1);
 /// An answer the peer does not take within this long ends its connection.
 const WRITE_TIMEOUT: Duration = Duration::from_secs(10);
-/// TCP keepalive: probes after 5 s of silence, every 1 s, 5 unanswered end it.
-const KEEPALIVE_IDLE_S: libc::c_int = 5;
-const KEEPALIVE_INTERVAL_S: libc::c_int = 1;
-const KEEPALIVE_PROBES: libc::c_int = 5;
-const USER_TIMEOUT_MS: libc::c_uint = 10_000;
 
 const EXC_ILLEGAL_FUNCTION: u8 = 1;
 const EXC_ILLEGAL_DATA_ADDRESS: u8 = 2;
@@ -186,7 +181,7 @@ async fn accept_loop(
             Ok((stream, peer)) => {
                 retry = ACCEPT_RETRY_FIRST;
                 if let Some((close, id)) = admit(&reg, &opts, peer, &mut next_id) {
-                    keepalive(&stream, peer);
+                    super::tcp_keepalive::set(&stream, peer);
                     tokio::spawn(connection(
                         stream,
                         peer,
@@ -313,36 +308,6 @@ fn admit(
     Some((close, id))
 }
 
-/// TCP keepalive and a user timeout: a peer that lost power is found dead in about
-/// 10 s instead of holding its socket ESTABLISHED for hours.
-pub(super) fn keepalive(stream: &TcpStream, peer: SocketAddr) {
-    let fd = stream.as_raw_fd();
-    let set = |level, name, value: libc::c_int| {
-        // SAFETY: setsockopt on a socket we own, with a c_int of the right size.
-        let rc = unsafe {
-            libc::setsockopt(
-                fd,
-                level,
-                name,
-                (&value as *const libc::c_int).cast(),
-                std::mem::size_of::<libc::c_int>() as libc::socklen_t,
-            )
-        };
-        if rc != 0 {
-            tracing::debug!(%peer, "PLC face: setsockopt {name}: {}", io::Error::last_os_error());
-        }
-    };
-    set(libc::SOL_SOCKET, libc::SO_KEEPALIVE, 1);
-    set(libc::IPPROTO_TCP, libc::TCP_KEEPIDLE, KEEPALIVE_IDLE_S);
-    set(libc::IPPROTO_TCP, libc::TCP_KEEPINTVL, KEEPALIVE_INTERVAL_S);
-    set(libc::IPPROTO_TCP, libc::TCP_KEEPCNT, KEEPALIVE_PROBES);
-    set(
-        libc::IPPROTO_TCP,
-        libc::TCP_USER_TIMEOUT,
-        USER_TIMEOUT_MS as libc::c_int,
-    );
-}
-
 /// Ends a connection's part in the registry and the ownership, however it ends.
 struct Closing {
     id: u64,
@@ -354,7 +319,7 @@ struct Closing {
 
 impl Drop for Closing {
     fn drop(&mut self) {
-        lock(&self.shared).disconnected(self.id);
+        lock(&self.shared).plc_disconnected(self.id);
         let mut r = registry(&self.reg);
         r.conns.remove(&self.id);
         r.log.count(Event::Closed, Instant::now());
@@ -408,15 +373,15 @@ async fn connection(
             },
         };
         let (answer, owner) = {
-            let mut core = lock(&closing.shared);
-            core.heard(id);
+            let mut gateway = lock(&closing.shared);
+            gateway.plc_heard(id);
             let a = answer(
-                &mut core,
+                &mut gateway,
                 id,
                 peer.ip(),
                 &frame[MBAP_LEN..MBAP_LEN + pdu_len],
             );
-            (a, core.owner_ip())
+            (a, gateway.plc_owner_ip())
         };
         {
             let mut r = registry(&closing.reg);
@@ -459,12 +424,11 @@ fn word(pdu: &[u8], at: usize) -> u16 {
 }
 
 /// The answer PDU to a request PDU (at least the function code).
-fn answer(core: &mut super::gateway::Core, conn: u64, ip: IpAddr, pdu: &[u8]) -> Vec<u8> {
+fn answer(gateway: &mut Gateway, conn: u64, ip: IpAddr, pdu: &[u8]) -> Vec<u8> {
     let fc = pdu[0];
     let result: Result<Vec<u8>, u8> = match fc {
-        0x03 if pdu.len() == 5 => core
-            .map
-            .read(word(pdu, 1), word(pdu, 3))
+        0x03 if pdu.len() == 5 => gateway
+            .plc_read(word(pdu, 1), word(pdu, 3))
             .map(|regs| {
                 let mut a = vec![fc, (regs.len() * 2) as u8];
                 regs.iter()
@@ -472,8 +436,8 @@ fn answer(core: &mut super::gateway::Core, conn: u64, ip: IpAddr, pdu: &[u8]) ->
                 a
             })
             .map_err(exception),
-        0x06 if pdu.len() == 5 => core
-            .write(conn, ip, word(pdu, 1), &[word(pdu, 3)])
+        0x06 if pdu.len() == 5 => gateway
+            .plc_write(conn, ip, word(pdu, 1), &[word(pdu, 3)])
             .map(|()| pdu.to_vec())
             .map_err(write_refusal),
         0x10 if pdu.len() >= 6 => {
@@ -484,7 +448,8 @@ fn answer(core: &mut super::gateway::Core, conn: u64, ip: IpAddr, pdu: &[u8]) ->
                 let values: Vec<u16> = (0..usize::from(count))
                     .map(|i| word(pdu, 6 + 2 * i))
                     .collect();
-                core.write(conn, ip, addr, &values)
+                gateway
+                    .plc_write(conn, ip, addr, &values)
                     .map(|()| pdu[..5].to_vec())
                     .map_err(write_refusal)
             }

@@ -1,10 +1,11 @@
-//! A start prepared on the machine thread, never under the faces' lock: the machine's
+//! A start prepared on the machine thread, never under the gateway's lock: the machine's
 //! state read again from its files, the program `NNN.h` resolved and checked, the run
 //! written as `running` into the history. Each of these may take seconds (a slow
 //! disk, a locked or distant history); meanwhile the faces go on answering, and the
 //! start is "starting" (other starts are refused as busy).
 
-use super::handshake::{Origin, Refusal, Start};
+use super::measurement::{Origin, Start};
+use super::outcome::Refusal;
 use crate::history::recorder::Recorder;
 use crate::history::NewRun;
 use cycles::program::{Program, ProgramError};

@@ -34,7 +34,7 @@ pub const REQ_SEQ: u16 = 1;
 pub const REQ_PROGRAM: u16 = 2;
 pub const REQ_FLAGS: u16 = 3;
 pub const REQ_PARAMS: u16 = 4;
-pub const REQ_PARAM_COUNT: usize = 8;
+pub const REQ_PARAM_COUNT: usize = super::measurement::START_PARAMS;
 pub const REQ_PLC_HEARTBEAT: u16 = 20;
 /// A write that changes the sequence covers at least `REQUEST_BASE..REQ_REQUEST_END`.
 pub const REQ_REQUEST_END: u16 = REQ_PARAMS + 2 * REQ_PARAM_COUNT as u16;
@@ -70,8 +70,7 @@ pub const UNC_REAL: u16 = UNC_SEQ_HEAD + 1;
 pub const UNC_SEQ_TAIL: u16 = UNC_REAL + 2 * SLOTS as u16;
 pub const UNCERT_LEN: u16 = UNC_SEQ_TAIL - UNCERT_BASE + 1;
 
-/// Cycle 460's probe table columns, in register order (their names in the results).
-pub const CAL_COLUMNS: [&str; 4] = ["R", "CAL_OF1", "CAL_OF2", "L"];
+pub use super::results::CAL_COLUMNS;
 pub const CALIB_BASE: u16 = UNC_SEQ_TAIL + 1;
 pub const CAL_SEQ_HEAD: u16 = CALIB_BASE;
 pub const CAL_REAL: u16 = CAL_SEQ_HEAD + 1;

@@ -57,6 +57,10 @@ impl fmt::Display for ResultKey {
 /// The results of one cycle, with their uncertainties.
 pub type ResultValues = BTreeMap<ResultKey, f64>;
 
+/// Cycle 460's probe table columns, in the order every face lists them (the PLC's
+/// calibration block, OPC UA's 460 results).
+pub const CAL_COLUMNS: [&str; 4] = ["R", "CAL_OF1", "CAL_OF2", "L"];
+
 /// The result slots of the PLC's result block, in register order: Q141..Q175, Q183,
 /// then the ISO 230-7 errors of A, B and C before optimisation and after.
 pub fn slots() -> Vec<Quantity> {

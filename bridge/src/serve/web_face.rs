@@ -12,6 +12,7 @@
 
 use super::face_log::{Event, FaceLog, Limiter, SUMMARY_EVERY};
 use super::gateway::{lock, Shared};
+use super::measurement::{Origin, State};
 use crate::history::trend::{self, escape, Alarm, Style};
 use crate::history::{Filter, History, HistoryTarget, RunRow};
 use bytes::Bytes;
@@ -440,20 +441,30 @@ fn protocols_page(site: &Site) -> String {
     html
 }
 
-/// The service's state as the PLC sees it; the browser reloads it every 2 s (a meta
-/// refresh: no script).
+/// The service's state as every face shows it; the browser reloads it every 2 s (a
+/// meta refresh: no script).
 fn status_page(site: &Site) -> String {
-    let (state, machine_ok, view) = {
-        let core = lock(&site.shared);
-        (core.state(), core.machine_ok(), core.hs.view().clone())
-    };
+    let status = *lock(&site.shared).service.status();
+    let state = status.state;
     let mut html = String::new();
     nav(&mut html, "status", true);
-    let run = if state == super::handshake::State::Busy {
-        format!(
-            "program {} (request {}), cycle {}",
-            view.program, view.ack_seq, view.cycle
-        )
+    let started = |origin| match origin {
+        Some(Origin::Plc { seq }) => format!("by the PLC, request {seq}"),
+        Some(Origin::OpcUa) => "over OPC UA".into(),
+        None => "none".into(),
+    };
+    // The cycle is that of the results a run that ended done left.
+    let last = match status.origin {
+        None => "none yet".to_string(),
+        origin => format!(
+            "program {} ({}), cycle {}",
+            status.program,
+            started(origin),
+            status.cycle
+        ),
+    };
+    let run = if state == State::Busy {
+        format!("program {} ({})", status.program, started(status.origin))
     } else {
         "none".into()
     };
@@ -464,23 +475,26 @@ fn status_page(site: &Site) -> String {
          <tr><th class=\"l\">machine</th><td id=\"machine-ok\" class=\"{}\">{}</td></tr>\
          <tr><th class=\"l\">current run</th><td id=\"current-run\">{}</td></tr>\
          <tr><th class=\"l\">progress</th><td id=\"progress\"><progress max=\"1000\" value=\"{}\"></progress> {:.1} %, {} point(s)</td></tr>\
-         <tr><th class=\"l\">last request</th><td>{} (program {})</td></tr>",
+         <tr><th class=\"l\">last run</th><td>{}</td></tr>",
         escape(&site.machine),
         state.name(),
-        if machine_ok { "ok" } else { "bad" },
-        if machine_ok { "ok" } else { "not ok: opening it again" },
+        if status.machine_ok { "ok" } else { "bad" },
+        if status.machine_ok {
+            "ok"
+        } else {
+            "not ok: opening it again"
+        },
         escape(&run),
-        view.progress_permille,
-        f64::from(view.progress_permille) / 10.0,
-        view.point,
-        view.ack_seq,
-        view.program,
+        status.progress_permille,
+        f64::from(status.progress_permille) / 10.0,
+        status.point,
+        escape(&last),
     );
-    if state == super::handshake::State::Error {
+    if state == State::Error {
         let _ = write!(
             html,
             "<tr><th class=\"l\">error</th><td class=\"bad\">kind {}, code {}</td></tr>",
-            view.error_kind, view.error_code
+            status.error_kind, status.error_code
         );
     }
     html.push_str("</table>\n</body></html>\n");

@@ -1,5 +1,6 @@
 //! The Modbus codecs (word order, mailbox blocks, latch ring, exceptions) and the
-//! gateway's PLC face (register map and handshake), fed registers and requests.
+//! gateway's PLC face (register map and handshake, on the measurement service), fed
+//! registers, requests, OPC UA's commands and the machine thread's answers.
 
 use crate::driver::Target;
 use crate::sig::Sig;
@@ -13,12 +14,16 @@ use hal::modbus::mailbox::{
     STATUS_LEN,
 };
 use hal::modbus::word_order::WordOrder;
-use probebridge::serve::handshake::{
-    AbortReason, Action, Handshake, Origin, Outcome, Refusal, State, NO_REQUEST,
-};
+use probebridge::serve::handshake::Handshake;
+use probebridge::serve::measurement::{Command, Origin, State, NO_REQUEST, START_PARAMS};
+use probebridge::serve::outcome::{AbortReason, Outcome, Refusal};
+use probebridge::serve::ownership::Ownership;
+use probebridge::serve::plc_face::PlcFace;
 use probebridge::serve::register_map::{self as map, RegisterMap, StateView};
 use probebridge::serve::results::{self, Quantity, ResultKey};
+use probebridge::serve::service::{Service, ToMachine};
 use std::collections::BTreeMap;
+use std::net::{IpAddr, Ipv4Addr};
 use std::time::{Duration, Instant};
 
 macro_rules! target {
@@ -59,7 +64,7 @@ pub fn targets() -> Vec<Target> {
         ),
         target!(
             "gateway-handshake",
-            "the PLC handshake driven by request blocks, progress, ends of runs and time",
+            "the PLC face on the measurement service, driven by request blocks, OPC UA commands, answers, progress, ends of runs and time",
             handshake_ops
         ),
     ]
@@ -348,11 +353,24 @@ fn handshake_ops(u: &mut Unstructured<'_>, sig: &mut Sig) -> Result<()> {
     } else {
         None
     };
-    let mut h = Handshake::new(timeout, now);
-    let mut m = RegisterMap::new(map_order(u)?, 10_000.0);
+    let (jobs_tx, jobs) = std::sync::mpsc::channel();
+    let mut service = Service::new(jobs_tx);
+    let mut plc = PlcFace::new(
+        RegisterMap::new(map_order(u)?, 10_000.0),
+        Handshake::new(timeout, now),
+        Ownership::new(Duration::from_secs(10)),
+    );
+    let ip = IpAddr::V4(Ipv4Addr::LOCALHOST);
+    let reg = |plc: &mut PlcFace, service: &Service, addr: u16| {
+        plc.read(service, addr, 1)
+            .expect("a register of the state block")[0]
+    };
     while !u.is_empty() {
         now += Duration::from_millis(u.int_in_range(0..=3000)?);
-        match u.int_in_range(0..=7)? {
+        let was = service.state();
+        let was_between = service.between_measurements();
+        let refuse = u.arbitrary::<u8>()? % 4 == 0;
+        match u.int_in_range(0..=8)? {
             0..=2 => {
                 // The PLC writes the request block (code, sequence, ...), or part of it.
                 let addr = u.int_in_range(0..=map::REQUEST_LEN)?;
@@ -363,42 +381,46 @@ fn handshake_ops(u: &mut Unstructured<'_>, sig: &mut Sig) -> Result<()> {
                         *code = u.int_in_range(1..=3)?;
                     }
                 }
-                let _ = m.write(addr, &values);
-                let req = m.request();
-                let was = h.state();
-                let refuse = u.arbitrary::<u8>()? % 4 == 0;
-                let action = h.on_request(&req, now);
-                if req.seq == NO_REQUEST {
-                    assert_eq!(action, None, "a request with sequence 0 was taken");
-                }
-                if let Some(Action::Prepare(start)) = &action {
-                    assert!(was != State::Busy, "a start while busy was not refused");
-                    assert_eq!(h.starting(), Some(start), "a start not held as starting");
-                    assert_eq!(start.origin, Origin::Plc { seq: req.seq });
+                let seq_before = reg(&mut plc, &service, map::ST_ACK_SEQ);
+                let _ = plc.write(&mut service, 1, ip, addr, &values);
+                if let Ok(ToMachine::Start(job)) = jobs.try_recv() {
+                    let Origin::Plc { seq } = job.start.origin else {
+                        panic!("a PLC write started {:?}", job.start.origin)
+                    };
+                    assert_ne!(seq, NO_REQUEST, "a request with sequence 0 was taken");
+                    assert!(
+                        was_between,
+                        "a start while busy or starting was not refused"
+                    );
+                    assert_eq!(
+                        reg(&mut plc, &service, map::ST_ACK_SEQ),
+                        seq_before,
+                        "a start acknowledged before it was prepared"
+                    );
                     // Prepared off the lock (the machine thread): taken or refused.
                     let answer = if refuse {
                         Err(Refusal::UnknownProgram)
                     } else {
                         Ok(())
                     };
-                    let taken = h.prepared(start, answer, now);
+                    let taken = service.prepared(&job, answer);
                     assert_eq!(taken, !refuse);
-                    assert_eq!(h.starting(), None);
-                    if taken {
-                        assert_eq!(h.state(), State::Busy);
-                    }
+                    assert!(service.between_measurements() != taken);
                     assert_eq!(
-                        h.view().ack_seq,
-                        req.seq,
+                        reg(&mut plc, &service, map::ST_ACK_SEQ),
+                        seq,
                         "a prepared start not acknowledged"
                     );
+                    if taken {
+                        assert_eq!(
+                            reg(&mut plc, &service, map::RES_SEQ_HEAD),
+                            NO_REQUEST,
+                            "the last results still match a request after a start"
+                        );
+                    }
                 }
-                if matches!(action, Some(Action::Abort)) {
-                    assert_eq!(was, State::Busy, "abort without a running measurement");
-                }
-                sig.debug(&action.map(|a| std::mem::discriminant(&a)));
             }
-            3 => h.progress(u.arbitrary()?, u.arbitrary()?),
+            3 => service.progress(u.arbitrary()?, u.arbitrary()?),
             4 => {
                 let outcome = match u.int_in_range(0..=2)? {
                     0 => Outcome::Done,
@@ -411,16 +433,66 @@ fn handshake_ops(u: &mut Unstructured<'_>, sig: &mut Sig) -> Result<()> {
                             .unwrap_or(AbortReason::Request),
                     ),
                 };
-                h.finish(outcome, u.arbitrary()?);
+                let origin = service.status().origin;
+                service.finish(outcome, u.arbitrary()?, &BTreeMap::new(), None);
+                // The result block carries the PLC's start's sequence, else none.
+                let seq = match origin {
+                    Some(Origin::Plc { seq }) => seq,
+                    _ => NO_REQUEST,
+                };
+                assert_eq!(reg(&mut plc, &service, map::RES_SEQ_TAIL), seq);
             }
-            5 => h.set_machine_ok(u.arbitrary()?),
+            5 => service.set_machine_ok(u.arbitrary()?),
+            6 => opc_ua_command(u, &mut service, &mut plc, &jobs, refuse, was_between)?,
             _ => {
-                sig.value(u64::from(h.heartbeat_lost(now)));
+                sig.value(u64::from(plc.heartbeat_lost(&service, now)));
             }
         }
-        m.set_state(h.view());
-        assert!(h.view().progress_permille <= 1000);
-        sig.debug(&h.state());
+        let state = reg(&mut plc, &service, map::ST_STATE);
+        assert_eq!(state, service.state() as u16);
+        assert!(reg(&mut plc, &service, map::ST_PROGRESS) <= 1000);
+        if was == State::Busy && service.state() != State::Busy {
+            sig.debug(&(was, service.state()));
+        }
+        sig.debug(&service.state());
     }
+    Ok(())
+}
+
+/// OPC UA's methods on the service, by the same rules as the PLC's requests; they leave
+/// the PLC's acknowledge alone.
+fn opc_ua_command(
+    u: &mut Unstructured<'_>,
+    service: &mut Service,
+    plc: &mut PlcFace,
+    jobs: &std::sync::mpsc::Receiver<ToMachine>,
+    refuse: bool,
+    was_between: bool,
+) -> Result<()> {
+    let cmd = match u.int_in_range(0..=2)? {
+        0 => Command::Start {
+            program: u.arbitrary()?,
+            params: [u.arbitrary()?; START_PARAMS],
+            confirm: u.arbitrary()?,
+        },
+        1 => Command::Abort,
+        _ => Command::Acknowledge,
+    };
+    let ack = plc.read(service, map::ST_ACK_SEQ, 3).unwrap();
+    let answer = service.command(cmd, Origin::OpcUa, true, "fuzz");
+    if let Ok(Some(pending)) = answer {
+        assert!(was_between, "an OPC UA start while busy was not refused");
+        let Ok(ToMachine::Start(job)) = jobs.try_recv() else {
+            panic!("a start taken but not handed to the machine thread")
+        };
+        let answer = if refuse {
+            Err(Refusal::HistoryUnavailable)
+        } else {
+            Ok(())
+        };
+        service.prepared(&job, answer);
+        assert_eq!(pending.wait(), answer);
+    }
+    assert_eq!(plc.read(service, map::ST_ACK_SEQ, 3).unwrap(), ack);
     Ok(())
 }

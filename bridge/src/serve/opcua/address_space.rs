@@ -7,8 +7,7 @@
 //! Node ids are strings `Machine.<path>` (stable, whatever the machine's name); the
 //! browse names carry the names a client browses by.
 
-use super::super::register_map::CAL_COLUMNS;
-use super::super::results::{slots, Quantity, ResultKey};
+use super::super::results::{slots, Quantity, ResultKey, CAL_COLUMNS};
 use super::auth::{ABORT, ACKNOWLEDGE, START_PROGRAM};
 use opcua::nodes::{MethodBuilder, ObjectBuilder, VariableBuilder};
 use opcua::server::address_space::AddressSpace;

@@ -184,7 +184,7 @@ async fn connection(
         }
         Some(Ok(Ok(_))) => {}
     }
-    crate::serve::modbus_face::keepalive(&client, server);
+    crate::serve::tcp_keepalive::set(&client, server);
     let _ = client.set_nodelay(true);
     let mut upstream = match TcpStream::connect(server).await {
         Ok(s) => s,

@@ -1,13 +1,12 @@
-//! The methods of Production: StartProgram, Abort, Acknowledge. Each goes through the
-//! gateway's core by the PLC face's rules (one measurement at a time, the same abort
-//! flag) and answers with the PLC face's reason: 0 taken, else the reason register's
+//! The methods of Production: StartProgram, Abort, Acknowledge. Each is a command of
+//! the measurement service, by the rules every face follows (one measurement at a
+//! time, the same abort flag), and answers with the PLC face's reason: 0 taken, else the reason register's
 //! value, and the reason in words. Who may call them the authenticator decides (a
 //! user of the users file; StartProgram only with `may_start`).
 
 use super::auth::{ABORT, ACKNOWLEDGE, START_PROGRAM};
-use crate::serve::gateway::{lock, FaceCommand, Shared};
-use crate::serve::handshake::Command;
-use crate::serve::register_map::REQ_PARAM_COUNT;
+use crate::serve::gateway::{lock, Shared};
+use crate::serve::measurement::{Command, Origin, START_PARAMS};
 use opcua::server::node_manager::memory::SimpleNodeManager;
 use opcua::types::{NodeId, StatusCode, Variant, VariantScalarTypeId};
 
@@ -22,17 +21,16 @@ pub fn register(manager: &SimpleNodeManager, ns: u16, shared: &Shared) {
         manager.inner().add_method_callback(
             NodeId::new(ns, format!("Machine.Production.{name}")),
             move |args| {
-                let cmd = FaceCommand {
-                    command: match command {
-                        Some(c) => c,
-                        None => start_arguments(args)?,
-                    },
-                    who: "OPC UA".into(),
+                let cmd = match command {
+                    Some(c) => c,
+                    None => start_arguments(args)?,
                 };
                 // The lock is released before a start is waited for: it is prepared
                 // (program, machine state, history row) on the machine thread, while
                 // the face's other tasks go on on its other worker.
-                let answer = lock(&shared).command(&cmd);
+                let answer = lock(&shared)
+                    .service
+                    .command(cmd, Origin::OpcUa, true, "OPC UA");
                 let answer = match answer {
                     Ok(Some(pending)) => tokio::task::block_in_place(|| pending.wait()),
                     Ok(None) => Ok(()),
@@ -61,11 +59,11 @@ fn start_arguments(args: &[Variant]) -> Result<Command, StatusCode> {
         Some(_) => return Err(StatusCode::BadTypeMismatch),
         None => return Err(StatusCode::BadArgumentsMissing),
     };
-    let mut params = [0.0f32; REQ_PARAM_COUNT];
+    let mut params = [0.0f32; START_PARAMS];
     match args.get(1) {
         None | Some(Variant::Empty) => {}
         Some(Variant::Array(list)) if list.value_type == VariantScalarTypeId::Float => {
-            if list.values.len() > REQ_PARAM_COUNT {
+            if list.values.len() > START_PARAMS {
                 return Err(StatusCode::BadInvalidArgument);
             }
             for (p, x) in params.iter_mut().zip(&list.values) {

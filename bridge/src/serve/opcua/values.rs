@@ -1,13 +1,15 @@
-//! Keeps the machine's variables up to date: on every change the gateway's core
-//! announces, the face takes a snapshot under the core's lock, and writes only the
+//! Keeps the machine's variables up to date: on every change the measurement service
+//! announces, the face takes a snapshot of it under the gateway's lock, and writes only the
 //! variables whose value changed (each change reaches a subscriber once). The last
 //! runs are read from the history when a run has ended.
 
 use super::address_space::{Nodes, RUN_FIELDS};
 use crate::history::{Filter, History, HistoryTarget, RunRow};
-use crate::serve::gateway::{lock, RunInfo, Shared};
-use crate::serve::handshake::{Face, Outcome, State, BIT_NOT_RECORDED};
+use crate::serve::gateway::{lock, Shared};
+use crate::serve::measurement::{Face, State};
+use crate::serve::outcome::Outcome;
 use crate::serve::results::Quantity;
+use crate::serve::service::RunInfo;
 use opcua::server::node_manager::memory::SimpleNodeManager;
 use opcua::server::SubscriptionCache;
 use opcua::types::{DataValue, DateTime, NodeId, Variant};
@@ -81,16 +83,15 @@ impl Publisher {
 
     /// The state and results as they are now: (node, value) for every variable.
     fn snapshot(&mut self, shared: &Shared) -> (Vec<(NodeId, Variant)>, Option<RunInfo>) {
-        let mut core = lock(shared);
-        let passed = core.take_transitions();
-        let v = core.hs.view().clone();
-        let (state, machine_ok) = (core.state(), core.machine_ok());
-        let run = core.run().cloned();
-        let cycles = core.cycle_results().clone();
-        let heartbeat = core
-            .map
-            .read(super::super::register_map::ST_GATEWAY_HEARTBEAT, 1);
-        drop(core);
+        let mut gateway = lock(shared);
+        let service = &mut gateway.service;
+        let passed = service.take_transitions();
+        let v = *service.status();
+        let (state, machine_ok) = (v.state, v.machine_ok);
+        let run = service.run().cloned();
+        let cycles = service.cycle_results().clone();
+        let heartbeat = service.heartbeat();
+        drop(gateway);
         // Each state the run passed through reaches a subscriber, in order, even when
         // it did not last until this look.
         let (state_id, code_id) = (
@@ -116,11 +117,8 @@ impl Publisher {
             (s("Point"), Variant::from(v.point)),
             (s("ErrorKind"), Variant::from(v.error_kind)),
             (s("ErrorCode"), Variant::from(v.error_code)),
-            (
-                s("ResultsNotRecorded"),
-                Variant::from(v.bits & BIT_NOT_RECORDED != 0),
-            ),
-            (s("Heartbeat"), Variant::from(heartbeat.map_or(0, |h| h[0]))),
+            (s("ResultsNotRecorded"), Variant::from(v.not_recorded)),
+            (s("Heartbeat"), Variant::from(heartbeat)),
         ];
         if let Some(r) = &run {
             out.extend([
@@ -215,9 +213,9 @@ impl Publisher {
         out
     }
 
-    /// Runs until the core's announcements end (the service stops).
+    /// Runs until the service's announcements end (the service stops).
     pub async fn run(mut self, shared: Shared) {
-        let mut changes = lock(&shared).watch();
+        let mut changes = lock(&shared).service.watch();
         let mut ended_seen: Option<Option<SystemTime>> = None;
         loop {
             let (values, run) = self.snapshot(&shared);
