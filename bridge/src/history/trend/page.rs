@@ -4,7 +4,7 @@
 use super::super::RunRow;
 use super::alarm::Alarm;
 use super::chart::chart;
-use super::series::{collect, done_runs, machines, Series, Verdict};
+use super::series::{collect, done_runs, machines, Series, SeriesKind, Verdict};
 use super::style::{escape, head, Style};
 use super::text::{date, num, plain, plain_u, signed};
 use std::fmt::Write;
@@ -122,7 +122,7 @@ pub fn machine_page(
     html.push_str("<p><span class=\"swatch before\"></span>before optimisation (kinematics in use) <span class=\"swatch after\"></span>after optimisation (identified by cycle 451) <span class=\"swatch tol\"></span>tolerance (maxModification) <span class=\"swatch ebar\"></span>&#177; standard uncertainty (k = 1) <span class=\"swatch moved\"></span>changed by more than 2 combined standard uncertainties since the previous run</p>\n");
     let (errs, disp): (Vec<_>, Vec<_>) = rows
         .iter()
-        .partition(|(_, s, _)| !s.title.starts_with("dispersion "));
+        .partition(|(_, s, _)| s.kind == SeriesKind::Error);
     if !errs.is_empty() {
         html.push_str("<h2>ISO 230-7 errors identified by cycle 451</h2>\n");
         for (i, s, v) in errs {

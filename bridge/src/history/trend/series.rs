@@ -58,8 +58,18 @@ pub(super) struct Point {
     pub(super) tol: Option<f64>,
 }
 
+/// What a series shows: the page charts them in two sections.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum SeriesKind {
+    /// An ISO 230-7 error of a rotary axis identified by cycle 451.
+    Error,
+    /// A rotary axis's dispersion over the sphere's points.
+    Dispersion,
+}
+
 #[derive(Clone, Debug)]
 pub(super) struct Series {
+    pub(super) kind: SeriesKind,
     pub(super) title: String,
     pub(super) unit: Unit,
     pub(super) points: Vec<Point>,
@@ -167,11 +177,13 @@ pub(super) fn collect(runs: &[RunRow], machine: &str) -> Vec<Series> {
         }
     }
     let errors = errors.into_iter().map(|(name, points)| Series {
+        kind: SeriesKind::Error,
         title: name.to_string(),
         unit: Unit::of_error(name),
         points,
     });
     let dispersion = dispersion.into_iter().map(|(axis, points)| Series {
+        kind: SeriesKind::Dispersion,
         title: format!("dispersion {axis}"),
         unit: Unit::Um,
         points,
