@@ -666,6 +666,68 @@ fn a_plc_face_that_ends_ends_the_service_non_zero() {
     assert!(g.log().contains("the PLC face is dead"), "{}", g.log());
 }
 
+/// A stop (SIGTERM) while the PLC face is stalled (its thread never returns) ends the
+/// service as any stop does (exit 0), the stalled face left behind. Before: the stop
+/// waited for the face's thread for good, and systemd killed the service after
+/// TimeoutStopSec (30 s: the systemd VM's restart after its wedged face took that much
+/// longer than the others).
+#[test]
+fn a_stop_while_the_plc_face_is_stalled_leaves_the_face_behind() {
+    let dir = tmpdir("face-stall-stop-notify");
+    let socket = dir.join("notify.sock");
+    let listener = std::os::unix::net::UnixDatagram::bind(&socket).unwrap();
+    listener
+        .set_read_timeout(Some(Duration::from_secs(120)))
+        .unwrap();
+    let mut g = Gateway::start(
+        "stall-stop",
+        &[],
+        "",
+        &[
+            ("PROBEBRIDGE_FAULT_PLC_FACE", "stall"),
+            ("NOTIFY_SOCKET", socket.to_str().unwrap()),
+            ("WATCHDOG_USEC", "200000"),
+        ],
+    );
+    let mut buf = [0u8; 512];
+    let mut seen = Vec::new();
+    loop {
+        let n = match listener.recv(&mut buf) {
+            Ok(n) => n,
+            Err(e) => panic!("no notification ({e}) after {seen:?}\n{}", g.log()),
+        };
+        seen.push(String::from_utf8_lossy(&buf[..n]).into_owned());
+        if seen
+            .last()
+            .is_some_and(|s| s.contains("PLC face not answering"))
+        {
+            break;
+        }
+    }
+    // SAFETY: kill(2) on our own child's pid.
+    unsafe { libc::kill(g.child.id() as i32, libc::SIGTERM) };
+    // A safety net, not a timed assertion: without the fix the process never exits.
+    let mut status = None;
+    for _ in 0..600 {
+        status = g.child.try_wait().unwrap();
+        if status.is_some() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let Some(status) = status else {
+        let _ = g.child.kill();
+        panic!("the stop hung on the stalled face's thread\n{}", g.log())
+    };
+    assert_eq!(status.code(), Some(0), "{}", g.log());
+    assert!(
+        g.log()
+            .contains("the PLC face is not answering: stopping without it"),
+        "{}",
+        g.log()
+    );
+}
+
 #[test]
 fn a_stalled_plc_face_starves_the_watchdog_and_ends_the_service() {
     let dir = tmpdir("face-stall-notify");

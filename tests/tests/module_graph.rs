@@ -47,7 +47,7 @@ const IO_FREE_CORES: &[(&str, &str)] = &[
 /// never another face's modules or the machine thread's.
 const FACES_BESIDE_THE_PLC: &[&str] = &["crate::serve::opcua", "crate::serve::web_face"];
 const PLC_FACE: &[&str] = &[
-    "crate::serve::plc_face",
+    "crate::serve::plc_registers",
     "crate::serve::modbus_face",
     "crate::serve::handshake",
     "crate::serve::register_map",
@@ -591,7 +591,7 @@ fn the_face_check_sees_a_face_past_the_service() {
         edge("crate::serve::web_face", &["crate::serve::machine_thread"]),
         // The PLC face may use its own modules, not the machine thread's.
         edge(
-            "crate::serve::plc_face",
+            "crate::serve::plc_registers",
             &["crate::serve::handshake", "crate::serve::prepare"],
         ),
         edge("crate::serve::service", &["crate::serve::measurement"]),
@@ -602,7 +602,7 @@ fn the_face_check_sees_a_face_past_the_service() {
         faces_past_the_service(&g),
         [
             "  crate::serve::opcua::values uses crate::serve::register_map",
-            "  crate::serve::plc_face uses crate::serve::prepare",
+            "  crate::serve::plc_registers uses crate::serve::prepare",
             "  crate::serve::web_face uses crate::serve::machine_thread",
         ]
     );

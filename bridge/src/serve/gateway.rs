@@ -3,7 +3,7 @@
 //! from it. Nothing does I/O under the lock: a start is prepared on the machine thread
 //! ([`super::prepare`]), and the OPC UA face waits for its answer after releasing it.
 
-use super::plc_face::{PlcFace, WriteRefusal};
+use super::plc_registers::{PlcRegisters, WriteRefusal};
 use super::service::Service;
 use std::net::IpAddr;
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -12,7 +12,7 @@ use std::time::Instant;
 pub struct Gateway {
     /// The rules, the runs and the results every face shows.
     pub service: Service,
-    plc: PlcFace,
+    plc: PlcRegisters,
 }
 
 pub type Shared = Arc<Mutex<Gateway>>;
@@ -22,7 +22,7 @@ pub fn lock(shared: &Shared) -> MutexGuard<'_, Gateway> {
 }
 
 impl Gateway {
-    pub fn new(service: Service, plc: PlcFace) -> Self {
+    pub fn new(service: Service, plc: PlcRegisters) -> Self {
         let mut g = Self { service, plc };
         g.plc.sync(&g.service, Instant::now());
         g

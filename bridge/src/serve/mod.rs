@@ -18,7 +18,7 @@ pub mod opcua;
 pub mod outcome;
 pub mod ownership;
 pub mod peer_allow;
-pub mod plc_face;
+pub mod plc_registers;
 pub mod prepare;
 pub mod register_map;
 pub mod results;
@@ -197,7 +197,7 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
         service.set_history(h.clone());
     }
     let _ = ABORT.set(service.abort_flag());
-    let plc = plc_face::PlcFace::new(
+    let plc = plc_registers::PlcRegisters::new(
         RegisterMap::new(order, cfg.plc.int_scale),
         Handshake::new(cfg.heartbeat_timeout(), Instant::now()),
         ownership::Ownership::new(cfg.owner_timeout()),
@@ -254,19 +254,7 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     }
     let _ = jobs_tx.send(ToMachine::Quit);
     let _ = machine.join();
-    match &end {
-        // A stalled face's thread may never return: leave it.
-        End::FaceDied(..) => {
-            face.abandon();
-            if let Some(o) = opcua.take() {
-                o.abandon();
-            }
-        }
-        End::Signal(_) | End::Restart => {
-            drop(face);
-            drop(opcua);
-        }
-    }
+    stop_faces(&end, face, opcua);
     if let Some(h) = &history {
         h.stop();
     }
@@ -276,6 +264,38 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
         End::Signal(_) => Ok(0),
         End::Restart => Ok(RESTART_EXIT),
         End::FaceDied(name, why) => Err(format!("the {name} is dead: {why}")),
+    }
+}
+
+/// Stops the faces once the machine is closed. A stalled face's thread may never
+/// return: it is left behind, whether its stall ended the service or came during a
+/// stop (waiting for it would hold the stop until systemd kills the service at
+/// TimeoutStopSec).
+fn stop_faces(end: &End, face: modbus_face::PlcFace, opcua: Option<opcua::OpcuaFace>) {
+    match end {
+        End::FaceDied(..) => {
+            face.abandon();
+            if let Some(o) = opcua {
+                o.abandon();
+            }
+        }
+        End::Signal(_) | End::Restart => {
+            let mut face = face;
+            if face.health() == FaceHealth::Serving {
+                drop(face);
+            } else {
+                tracing::warn!("the PLC face is not answering: stopping without it");
+                face.abandon();
+            }
+            if let Some(mut o) = opcua {
+                if o.health() == FaceHealth::Serving {
+                    drop(o);
+                } else {
+                    tracing::warn!("the OPC UA face is not answering: stopping without it");
+                    o.abandon();
+                }
+            }
+        }
     }
 }
 

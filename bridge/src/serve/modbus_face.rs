@@ -1,5 +1,5 @@
 //! The Modbus TCP server of the PLC face: an accept loop and one task per connection
-//! around [`super::plc_face::PlcFace`] (in [`super::gateway::Gateway`]). Holding
+//! around [`super::plc_registers::PlcRegisters`] (in [`super::gateway::Gateway`]). Holding
 //! registers only (FC3, FC6, FC16); other functions get IllegalFunction.
 //!
 //! The face must stay reachable for its PLC whatever else is on the network:
@@ -24,7 +24,7 @@ use super::face_log::{Event, FaceLog, SUMMARY_EVERY};
 use super::face_thread::{FaceHealth, FaceThread, Flavour, Heartbeat};
 use super::gateway::{lock, Gateway, Shared};
 use super::peer_allow::AllowList;
-use super::plc_face::WriteRefusal;
+use super::plc_registers::WriteRefusal;
 use super::register_map::MapException;
 use std::collections::BTreeMap;
 use std::io;

@@ -1,9 +1,9 @@
-//! The PLC face's state, an adapter of the service: the register image, the
+//! The PLC face's registers, the face's adapter of the service: the register image, the
 //! handshake (the PLC's requests asked of the service, its acknowledge registers and
 //! heartbeat) and the connection that owns the writes. The state block, the result
 //! blocks and the gateway's heartbeat are drawn from the service before every read and
-//! after every write ([`PlcFace::sync`]), so what the PLC reads is what every face
-//! shows. Without I/O: the Modbus server ([`super::modbus_face`]) does the network.
+//! after every write ([`PlcRegisters::sync`]), so what the PLC reads is what every face
+//! shows. The Modbus server ([`super::modbus_face`]) does the network.
 
 use super::handshake::{Handshake, PlcRequest};
 use super::ownership::{Ownership, Takeover};
@@ -20,7 +20,7 @@ pub enum WriteRefusal {
     Map(MapException),
 }
 
-pub struct PlcFace {
+pub struct PlcRegisters {
     map: RegisterMap,
     hs: Handshake,
     owner: Ownership,
@@ -28,7 +28,7 @@ pub struct PlcFace {
     drawn_results: Option<u64>,
 }
 
-impl PlcFace {
+impl PlcRegisters {
     pub fn new(map: RegisterMap, hs: Handshake, owner: Ownership) -> Self {
         Self {
             map,
@@ -171,7 +171,7 @@ mod tests {
     /// The PLC face on a service, and the machine thread's end of the jobs.
     struct Rig {
         service: Service,
-        plc: PlcFace,
+        plc: PlcRegisters,
         jobs: Receiver<ToMachine>,
     }
 
@@ -181,7 +181,7 @@ mod tests {
         let (tx, jobs) = std::sync::mpsc::channel();
         let mut service = Service::new(tx);
         service.set_machine_ok(true);
-        let plc = PlcFace::new(
+        let plc = PlcRegisters::new(
             RegisterMap::new(WordOrder::HighFirst, 10_000.0),
             Handshake::new(Some(Duration::from_secs(1)), Instant::now()),
             Ownership::new(Duration::from_secs(10)),

@@ -3,7 +3,7 @@
 //! first start wins, abort, acknowledge, progress), hands starts to the machine thread,
 //! holds the stop request, the current run, the last results (written once, read by
 //! every face), the history's "not yet recorded" state and the gateway's heartbeat.
-//! The faces adapt to it: the PLC face ([`super::plc_face`]) draws its registers from
+//! The faces adapt to it: the PLC face ([`super::plc_registers`]) draws its registers from
 //! it, the OPC UA face its nodes, the web face its status page. It knows no face's
 //! encoding, and does no I/O: a start is prepared on the machine thread
 //! ([`super::prepare`]), which answers it with [`Service::prepared`].

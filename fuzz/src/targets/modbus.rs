@@ -18,7 +18,7 @@ use probebridge::serve::handshake::Handshake;
 use probebridge::serve::measurement::{Command, Origin, State, NO_REQUEST, START_PARAMS};
 use probebridge::serve::outcome::{AbortReason, Outcome, Refusal};
 use probebridge::serve::ownership::Ownership;
-use probebridge::serve::plc_face::PlcFace;
+use probebridge::serve::plc_registers::PlcRegisters;
 use probebridge::serve::register_map::{self as map, RegisterMap, StateView};
 use probebridge::serve::results::{self, Quantity, ResultKey};
 use probebridge::serve::service::{Service, ToMachine};
@@ -355,13 +355,13 @@ fn handshake_ops(u: &mut Unstructured<'_>, sig: &mut Sig) -> Result<()> {
     };
     let (jobs_tx, jobs) = std::sync::mpsc::channel();
     let mut service = Service::new(jobs_tx);
-    let mut plc = PlcFace::new(
+    let mut plc = PlcRegisters::new(
         RegisterMap::new(map_order(u)?, 10_000.0),
         Handshake::new(timeout, now),
         Ownership::new(Duration::from_secs(10)),
     );
     let ip = IpAddr::V4(Ipv4Addr::LOCALHOST);
-    let reg = |plc: &mut PlcFace, service: &Service, addr: u16| {
+    let reg = |plc: &mut PlcRegisters, service: &Service, addr: u16| {
         plc.read(service, addr, 1)
             .expect("a register of the state block")[0]
     };
@@ -464,7 +464,7 @@ fn handshake_ops(u: &mut Unstructured<'_>, sig: &mut Sig) -> Result<()> {
 fn opc_ua_command(
     u: &mut Unstructured<'_>,
     service: &mut Service,
-    plc: &mut PlcFace,
+    plc: &mut PlcRegisters,
     jobs: &std::sync::mpsc::Receiver<ToMachine>,
     refuse: bool,
     was_between: bool,
