@@ -666,21 +666,19 @@ fn a_plc_face_that_ends_ends_the_service_non_zero() {
     assert!(g.log().contains("the PLC face is dead"), "{}", g.log());
 }
 
-/// A stop (SIGTERM) while the PLC face is stalled (its thread never returns) ends the
-/// service as any stop does (exit 0), the stalled face left behind. Before: the stop
-/// waited for the face's thread for good, and systemd killed the service after
-/// TimeoutStopSec (30 s: the systemd VM's restart after its wedged face took that much
-/// longer than the others).
-#[test]
-fn a_stop_while_the_plc_face_is_stalled_leaves_the_face_behind() {
-    let dir = tmpdir("face-stall-stop-notify");
+/// A gateway whose PLC face stalls (the test-only fault switch), with systemd's notify
+/// socket and a watchdog: returns once it has said "PLC face not answering", with the
+/// socket and the notifications so far.
+fn stalled_plc_face(name: &str) -> (Gateway, std::os::unix::net::UnixDatagram, Vec<String>) {
+    // Not the gateway's own folder (pb-cli-face-NAME-PID), which it makes afresh.
+    let dir = tmpdir(&format!("face-{name}-notify"));
     let socket = dir.join("notify.sock");
     let listener = std::os::unix::net::UnixDatagram::bind(&socket).unwrap();
     listener
         .set_read_timeout(Some(Duration::from_secs(120)))
         .unwrap();
-    let mut g = Gateway::start(
-        "stall-stop",
+    let g = Gateway::start(
+        name,
         &[],
         "",
         &[
@@ -691,19 +689,26 @@ fn a_stop_while_the_plc_face_is_stalled_leaves_the_face_behind() {
     );
     let mut buf = [0u8; 512];
     let mut seen = Vec::new();
-    loop {
-        let n = match listener.recv(&mut buf) {
-            Ok(n) => n,
+    while !seen
+        .iter()
+        .any(|s: &String| s.contains("PLC face not answering"))
+    {
+        match listener.recv(&mut buf) {
+            Ok(n) => seen.push(String::from_utf8_lossy(&buf[..n]).into_owned()),
             Err(e) => panic!("no notification ({e}) after {seen:?}\n{}", g.log()),
-        };
-        seen.push(String::from_utf8_lossy(&buf[..n]).into_owned());
-        if seen
-            .last()
-            .is_some_and(|s| s.contains("PLC face not answering"))
-        {
-            break;
         }
     }
+    (g, listener, seen)
+}
+
+/// A stop (SIGTERM) while the PLC face is stalled (its thread never returns) ends the
+/// service as any stop does (exit 0), the stalled face left behind. Before: the stop
+/// waited for the face's thread for good, and systemd killed the service after
+/// TimeoutStopSec (30 s: the systemd VM's restart after its wedged face took that much
+/// longer than the others).
+#[test]
+fn a_stop_while_the_plc_face_is_stalled_leaves_the_face_behind() {
+    let (mut g, _, _) = stalled_plc_face("stall-stop");
     // SAFETY: kill(2) on our own child's pid.
     unsafe { libc::kill(g.child.id() as i32, libc::SIGTERM) };
     // A safety net, not a timed assertion: without the fix the process never exits.
@@ -730,32 +735,8 @@ fn a_stop_while_the_plc_face_is_stalled_leaves_the_face_behind() {
 
 #[test]
 fn a_stalled_plc_face_starves_the_watchdog_and_ends_the_service() {
-    let dir = tmpdir("face-stall-notify");
-    let socket = dir.join("notify.sock");
-    let listener = std::os::unix::net::UnixDatagram::bind(&socket).unwrap();
-    listener
-        .set_read_timeout(Some(Duration::from_secs(120)))
-        .unwrap();
-    let socket = socket.to_str().unwrap();
-    let mut g = Gateway::start(
-        "stall",
-        &[],
-        "",
-        &[
-            ("PROBEBRIDGE_FAULT_PLC_FACE", "stall"),
-            ("NOTIFY_SOCKET", socket),
-            ("WATCHDOG_USEC", "200000"),
-        ],
-    );
-    let mut seen = Vec::new();
+    let (mut g, listener, mut seen) = stalled_plc_face("stall");
     let mut buf = [0u8; 512];
-    while !seen
-        .iter()
-        .any(|s: &String| s.contains("PLC face not answering"))
-    {
-        let n = listener.recv(&mut buf).expect("a notification");
-        seen.push(String::from_utf8_lossy(&buf[..n]).into_owned());
-    }
     let status = g.child.wait().unwrap();
     assert_eq!(status.code(), Some(1), "{}", g.log());
     listener.set_nonblocking(true).unwrap();
