@@ -471,8 +471,7 @@ fn no_module_imports_another_in_a_circle() {
 /// The modules `core` (a module path, with its submodules) and every module it uses,
 /// through the import graph `g`.
 fn closure(g: &BTreeMap<String, BTreeSet<String>>, core: &str) -> BTreeSet<String> {
-    let within = |m: &str| m == core || m.starts_with(&format!("{core}::"));
-    let mut seen: BTreeSet<String> = g.keys().filter(|m| within(m)).cloned().collect();
+    let mut seen: BTreeSet<String> = g.keys().filter(|m| within(m, core)).cloned().collect();
     let mut stack: Vec<String> = seen.iter().cloned().collect();
     while let Some(m) = stack.pop() {
         for t in g.get(&m).into_iter().flatten() {
