@@ -65,8 +65,12 @@ impl Heartbeat {
 }
 
 /// A face's thread: its handle, its heartbeat and its stop. Dropping it stops the face
-/// and waits for its thread; [`FaceThread::abandon`] leaves a stalled one behind.
+/// and waits for its thread, unless the face no longer answers: a stalled face's loop
+/// may never return, and waiting for it would hold the service's stop until systemd
+/// kills it (TimeoutStopSec); its thread is left behind, the process ends without it.
 pub struct FaceThread {
+    /// The face, for the log ("PLC face").
+    face: &'static str,
     stop: Option<oneshot::Sender<()>>,
     thread: Option<JoinHandle<Result<(), String>>>,
     epoch: Instant,
@@ -74,10 +78,16 @@ pub struct FaceThread {
 }
 
 impl FaceThread {
-    /// Starts thread `name` with a tokio runtime of `flavour` that runs the future
-    /// `serve` makes of the face's heartbeat and its stop. The future is made on the
-    /// thread, so it need not be `Send`. `Err` from it is why the face ended.
-    pub fn spawn<F, Fut>(name: &str, flavour: Flavour, serve: F) -> io::Result<Self>
+    /// Starts thread `name` for the face `face` with a tokio runtime of `flavour` that
+    /// runs the future `serve` makes of the face's heartbeat and its stop. The future is
+    /// made on the thread, so it need not be `Send`. `Err` from it is why the face
+    /// ended.
+    pub fn spawn<F, Fut>(
+        name: &str,
+        face: &'static str,
+        flavour: Flavour,
+        serve: F,
+    ) -> io::Result<Self>
     where
         F: FnOnce(Heartbeat, oneshot::Receiver<()>) -> Fut + Send + 'static,
         Fut: Future<Output = Result<(), String>>,
@@ -107,6 +117,7 @@ impl FaceThread {
             },
         )?;
         Ok(Self {
+            face,
             stop: Some(tx),
             thread: Some(thread),
             epoch,
@@ -136,18 +147,17 @@ impl FaceThread {
             FaceHealth::Serving
         }
     }
-
-    /// Leaves a stalled face's thread behind instead of waiting for it on drop.
-    pub fn abandon(mut self) {
-        self.stop.take();
-        self.thread.take();
-    }
 }
 
 impl Drop for FaceThread {
     fn drop(&mut self) {
         if let Some(tx) = self.stop.take() {
             let _ = tx.send(());
+        }
+        // An ended face's thread is joined by `health`; a serving one is waited for.
+        if let FaceHealth::Stalled(_) = self.health() {
+            tracing::warn!("the {} is not answering: stopping without it", self.face);
+            self.thread.take();
         }
         if let Some(t) = self.thread.take() {
             let _ = t.join();
@@ -167,6 +177,7 @@ mod tests {
         let (up_tx, up_rx) = std::sync::mpsc::channel();
         let mut face = FaceThread::spawn(
             "test-slow-face",
+            "test face",
             Flavour::CurrentThread,
             move |heartbeat, stop| async move {
                 std::thread::sleep(startup);

@@ -254,7 +254,9 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
     }
     let _ = jobs_tx.send(ToMachine::Quit);
     let _ = machine.join();
-    stop_faces(&end, face, opcua);
+    // A face that stalled (its death, or during the stop) is left behind by its drop.
+    drop(face);
+    drop(opcua);
     if let Some(h) = &history {
         h.stop();
     }
@@ -264,38 +266,6 @@ pub fn run(config_path: &Path) -> Result<u8, String> {
         End::Signal(_) => Ok(0),
         End::Restart => Ok(RESTART_EXIT),
         End::FaceDied(name, why) => Err(format!("the {name} is dead: {why}")),
-    }
-}
-
-/// Stops the faces once the machine is closed. A stalled face's thread may never
-/// return: it is left behind, whether its stall ended the service or came during a
-/// stop (waiting for it would hold the stop until systemd kills the service at
-/// TimeoutStopSec).
-fn stop_faces(end: &End, face: modbus_face::PlcFace, opcua: Option<opcua::OpcuaFace>) {
-    match end {
-        End::FaceDied(..) => {
-            face.abandon();
-            if let Some(o) = opcua {
-                o.abandon();
-            }
-        }
-        End::Signal(_) | End::Restart => {
-            let mut face = face;
-            if face.health() == FaceHealth::Serving {
-                drop(face);
-            } else {
-                tracing::warn!("the PLC face is not answering: stopping without it");
-                face.abandon();
-            }
-            if let Some(mut o) = opcua {
-                if o.health() == FaceHealth::Serving {
-                    drop(o);
-                } else {
-                    tracing::warn!("the OPC UA face is not answering: stopping without it");
-                    o.abandon();
-                }
-            }
-        }
     }
 }
 

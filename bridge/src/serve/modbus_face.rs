@@ -89,6 +89,7 @@ impl PlcFace {
         let fault = std::env::var(FAULT_ENV).unwrap_or_default();
         let thread = FaceThread::spawn(
             "probebridge-plc-face",
+            "PLC face",
             Flavour::CurrentThread,
             move |heartbeat, stop| serve(listener, shared, opts, (heartbeat, stop), fault),
         )?;
@@ -97,11 +98,6 @@ impl PlcFace {
 
     pub fn health(&mut self) -> FaceHealth {
         self.thread.health()
-    }
-
-    /// Leaves a stalled face's thread behind instead of waiting for it on drop.
-    pub fn abandon(self) {
-        self.thread.abandon();
     }
 }
 

@@ -361,6 +361,7 @@ impl OpcuaFace {
         let fault = std::env::var(FAULT_ENV).unwrap_or_default();
         let thread = FaceThread::spawn(
             "probebridge-opcua-face",
+            "OPC UA face",
             Flavour::MultiThread,
             move |heartbeat, stop| serve(setup, ready_tx, stop, heartbeat, fault),
         )
@@ -400,11 +401,6 @@ impl OpcuaFace {
 
     pub fn health(&mut self) -> FaceHealth {
         self.thread.health()
-    }
-
-    /// Leaves a stalled face's thread behind instead of waiting for it on drop.
-    pub fn abandon(self) {
-        self.thread.abandon();
     }
 }
 
