@@ -295,7 +295,7 @@ fn the_mes_browses_subscribes_and_runs_a_431_as_the_plc_does() {
         &format!(
             "security = [\"none\", \"basic256sha256-sign-encrypt\"]\nmay_start = true\n\
              max_queued_notifications = {MAX_QUEUED}\nmax_connections = {MAX_CONNECTIONS}\n\
-             max_sessions = {MAX_CONNECTIONS}\n"
+             max_sessions = {MAX_CONNECTIONS}\nmanufacturer_uri = \"{MANUFACTURER_URI}\"\n"
         ),
         &[],
         true,
@@ -306,6 +306,16 @@ fn the_mes_browses_subscribes_and_runs_a_431_as_the_plc_does() {
     assert_eq!(key.metadata().unwrap().permissions().mode() & 0o777, 0o600);
 
     browse_and_tools(&serve, &py);
+    let idle = companion_types(&serve, &py);
+    assert_eq!(
+        idle["MachineTool:Monitoring/MachineTool:MachineTool/Machinery:MachineryOperationMode/CurrentState"],
+        "None",
+        "no operation mode known outside a run"
+    );
+    assert_eq!(
+        idle["MachineTool:Monitoring/MachineTool:MachineTool/MachineTool:OperationMode"],
+        serde_json::Value::Null
+    );
     trust_the_mes(&serve, &py, machine);
     let r = serve.mes(&py, machine, &["refusals", "431"]);
     assert_eq!(r["anonymous"], "BadUserAccessDenied", "{r}");
@@ -314,10 +324,150 @@ fn the_mes_browses_subscribes_and_runs_a_431_as_the_plc_does() {
     failed_logins_are_throttled(&serve, &py);
 
     the_431_as_the_plc(&serve, &py);
+    // After the MES's 431: the program's state machine says it ended, by its state's
+    // node and number.
+    let ended = companion_types(&serve, &py);
+    let program = "MachineTool:Production/MachineTool:ActiveProgram";
+    for (path, want) in [
+        ("MachineTool:Name", serde_json::json!("431.h")),
+        ("NumberInList", serde_json::json!(0)),
+        ("MachineTool:State/CurrentState", serde_json::json!("Ended")),
+        (
+            "MachineTool:State/CurrentState/Number",
+            serde_json::json!(2),
+        ),
+        ("PB:Number", serde_json::json!(431)),
+    ] {
+        assert_eq!(ended[&format!("{program}/{path}")], want, "{path}");
+    }
+    assert_eq!(
+        ended["MachineTool:Monitoring/MachineTool:MachineTool/Machinery:MachineryItemState/CurrentState"],
+        "NotExecuting"
+    );
     stalled_and_capped(&serve, &py);
     let status = serve.stop();
     assert_eq!(status.code(), Some(0), "{}", serve.log());
     let _ = std::fs::remove_dir_all(&serve.dir);
+}
+
+const MANUFACTURER_URI: &str = "https://machines.acme.example";
+
+/// The machine against OPC 40501-1's types (tests/gateway/companion.py, from the
+/// NodeSet files): found under Machinery's Machines by its type definition, every
+/// Mandatory component there with its browse name, type definition and data type, the
+/// namespace URIs in the namespace array, each state machine's CurrentState naming its
+/// state; and docs/opcua.md's table is the server's. Returns each node's value by its
+/// path below the machine.
+fn companion_types(serve: &Serve, py: &Path) -> serde_json::Map<String, serde_json::Value> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let out = Command::new(py)
+        .arg(root.join("bridge/tests/gateway/companion.py"))
+        .arg(&serve.url)
+        .arg(root.join("third_party/opcua-nodesets"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "companion.py: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let c: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(c["failures"], serde_json::json!([]), "{}", c["failures"]);
+    assert_eq!(
+        c["machines"],
+        serde_json::json!([{"name": format!("PB:{MACHINE}"), "node_id": "ns=8;s=Machine",
+                            "type": "MachineTool:MachineToolType"}]),
+        "{}",
+        c["namespaces"]
+    );
+    // MachineToolType's Mandatory tree: Identification and its three properties,
+    // Monitoring/MachineTool/OperationMode, Production/ActiveProgram with Name,
+    // NumberInList and the State machine's CurrentState with Id and Number, Equipment,
+    // Notification.
+    assert_eq!(c["checked"], 17, "{}", c["machines"]);
+    let nodes = c["nodes"][&format!("PB:{MACHINE}")].as_array().unwrap();
+    let served: std::collections::BTreeSet<(String, String, String)> =
+        nodes.iter().filter_map(table_row).collect();
+    let documented = docs_table();
+    let only_served: Vec<_> = served.difference(&documented).collect();
+    let only_documented: Vec<_> = documented.difference(&served).collect();
+    assert!(
+        only_served.is_empty() && only_documented.is_empty(),
+        "docs/opcua.md's table and the server differ:\nnot in the docs: \
+         {only_served:#?}\nnot on the server: {only_documented:#?}"
+    );
+    nodes
+        .iter()
+        .map(|n| {
+            let path = n["path"].as_str().unwrap().trim_start_matches('/');
+            (path.to_string(), n["value"].clone())
+        })
+        .collect()
+}
+
+/// A node of companion.py's tree as docs/opcua.md's table has it (path, type
+/// definition, data type): the runs as `RunNN`, the cycles as `CycleNNN`, their
+/// results as `<result>`; the AddIns of MachineryBuildingBlocks without their children
+/// (the table shows them where they are components).
+fn table_row(n: &serde_json::Value) -> Option<(String, String, String)> {
+    let mut parts: Vec<String> = n["path"]
+        .as_str()?
+        .trim_start_matches('/')
+        .split('/')
+        .map(str::to_string)
+        .collect();
+    if parts[0] == "Machinery:MachineryBuildingBlocks" && parts.len() > 2 {
+        return None;
+    }
+    for (i, p) in parts.clone().iter().enumerate() {
+        let numbered = |prefix: &str| {
+            p.strip_prefix(prefix)
+                .is_some_and(|d| !d.is_empty() && d.chars().all(|c| c.is_ascii_digit()))
+        };
+        if numbered("PB:Run") {
+            parts[i] = "PB:RunNN".into();
+        }
+        if numbered("PB:Cycle") {
+            parts[i] = "PB:CycleNNN".into();
+            if let Some(r) = parts.get_mut(i + 1) {
+                if !["PB:Time", "PB:ResultNames", "PB:ResultValues"].contains(&r.as_str()) {
+                    *r = "PB:<result>".into();
+                }
+            }
+        }
+    }
+    let text = |v: &serde_json::Value| v.as_str().unwrap_or("").to_string();
+    let ty = match n["class"].as_str() {
+        Some("Method") => "method".to_string(),
+        _ => text(&n["type"]),
+    };
+    Some((parts.join("/"), ty, text(&n["data_type"])))
+}
+
+/// docs/opcua.md's table of the machine's nodes: (path, type definition, data type).
+fn docs_table() -> std::collections::BTreeSet<(String, String, String)> {
+    let doc =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/opcua.md"))
+            .unwrap();
+    let section = doc
+        .split("### The machine\n")
+        .nth(1)
+        .and_then(|s| s.split("\n### ").next())
+        .expect("docs/opcua.md: ### The machine");
+    let rows: std::collections::BTreeSet<_> = section
+        .lines()
+        .filter(|l| l.starts_with("| `"))
+        .map(|l| {
+            let cells: Vec<String> = l
+                .split('|')
+                .skip(1)
+                .map(|c| c.trim_matches(|ch| ch == ' ' || ch == '`').to_string())
+                .collect();
+            (cells[0].clone(), cells[1].clone(), cells[2].clone())
+        })
+        .collect();
+    assert!(rows.len() > 50, "{rows:?}");
+    rows
 }
 
 /// Browse by browse names, anonymously; asyncua's uals and uaread as the docs show them.
@@ -328,10 +478,12 @@ fn browse_and_tools(serve: &Serve, py: &Path) {
     assert_eq!(
         b["children"],
         serde_json::json!([
+            "Equipment",
             "Identification",
-            "MachineryItemState",
+            "MachineryBuildingBlocks",
             "Measurements",
             "Monitoring",
+            "Notification",
             "Production"
         ]),
         "{b}"
@@ -341,16 +493,27 @@ fn browse_and_tools(serve: &Serve, py: &Path) {
         serde_json::json!(["Abort", "Acknowledge", "StartProgram"])
     );
     let v = &b["values"];
-    assert_eq!(v["Identification/Manufacturer"], "ACME Werkzeugmaschinen");
-    assert_eq!(v["Identification/SerialNumber"], "SN-0451");
-    assert!(v["Identification/SoftwareRevision"]
+    assert_eq!(
+        v["DI:Identification/DI:Manufacturer"],
+        "ACME Werkzeugmaschinen"
+    );
+    assert_eq!(v["DI:Identification/DI:SerialNumber"], "SN-0451");
+    assert!(v["DI:Identification/DI:SoftwareRevision"]
         .as_str()
         .unwrap()
         .starts_with("probebridge "));
-    assert_eq!(v["MachineryItemState/CurrentState"], "NotExecuting");
-    assert_eq!(v["Monitoring/MachineOk"], true);
-    assert_eq!(v["Monitoring/Bus"], "simulator");
-    assert_eq!(v["Monitoring/RunState"], "idle");
+    // The manufacturer's URI and the serial number name the machine.
+    assert_eq!(
+        v["DI:Identification/DI:ProductInstanceUri"],
+        format!("{MANUFACTURER_URI}/SN-0451")
+    );
+    assert_eq!(
+        v["MT:Monitoring/MT:MachineTool/M:MachineryItemState/0:CurrentState"],
+        "NotExecuting"
+    );
+    assert_eq!(v["MT:Monitoring/MachineOk"], true);
+    assert_eq!(v["MT:Monitoring/Bus"], "simulator");
+    assert_eq!(v["MT:Monitoring/RunState"], "idle");
     assert!(
         ["BadNotWritable", "BadUserAccessDenied"].contains(&b["anonymous_write"].as_str().unwrap()),
         "{b}"
@@ -362,13 +525,14 @@ fn browse_and_tools(serve: &Serve, py: &Path) {
         ls.contains("Machines") && ls.contains(machine) && ls.contains("Monitoring"),
         "{ls}"
     );
-    let ns = "2";
+    // The namespace indexes of this server (docs/opcua.md): 5 Machinery, 7
+    // MachineTool, 8 the gateway's.
     let read = serve.ua_tool(
         py,
         "uaread",
         &[
             "-p",
-            &format!("0:Objects,{ns}:Machines,{ns}:{machine},{ns}:Monitoring,{ns}:RunState"),
+            &format!("0:Objects,5:Machines,8:{machine},7:Monitoring,8:RunState"),
         ],
     );
     assert_eq!(read.trim(), "idle", "{read}");
@@ -430,12 +594,15 @@ fn the_431_as_the_plc(serve: &Serve, py: &Path) {
         "{states:?}"
     );
     let active = &mes["active"];
-    assert_eq!(active["Production/ActiveProgram/StartedBy"], "opcua");
-    assert_eq!(active["Production/ActiveProgram/State"], "Ended");
-    assert_eq!(active["Production/ActiveProgram/Number"], 431);
+    assert_eq!(active["MT:Production/MT:ActiveProgram/StartedBy"], "opcua");
+    assert_eq!(
+        active["MT:Production/MT:ActiveProgram/MT:State/0:CurrentState"],
+        "Ended"
+    );
+    assert_eq!(active["MT:Production/MT:ActiveProgram/Number"], 431);
     let (start, end) = (
-        active["Production/ActiveProgram/StartTime"].as_f64(),
-        active["Production/ActiveProgram/EndTime"].as_f64(),
+        active["MT:Production/MT:ActiveProgram/StartTime"].as_f64(),
+        active["MT:Production/MT:ActiveProgram/EndTime"].as_f64(),
     );
     assert!(
         matches!((start, end), (Some(s), Some(e)) if s <= e),
@@ -446,17 +613,29 @@ fn the_431_as_the_plc(serve: &Serve, py: &Path) {
     let plc_now = serve.plc(py, &["last"]);
     assert_eq!(plc_now["cycle"], 431, "{plc_now}");
     assert_eq!(plc_now["seq"], 0, "{plc_now}");
-    let results = mes["results"].as_object().unwrap();
+    let all = mes["results"].as_object().unwrap();
+    // Each result and its standard uncertainty are nodes of their own (u.Q158 ...).
+    let (mut results, mut u) = (serde_json::Map::new(), serde_json::Map::new());
+    for (name, v) in all {
+        match name.strip_prefix("u.") {
+            Some(of) => u.insert(of.to_string(), v.clone()),
+            None => results.insert(name.clone(), v.clone()),
+        };
+    }
+    assert_eq!(results.len(), 8, "{all:?}");
+    assert_eq!(u.len(), 8, "an uncertainty node per result: {all:?}");
     // The same run on both faces, and the PLC's own 431 of the same plane before.
-    for real in [&plc_now["real"], &plc["real"]] {
-        let real = real.as_object().unwrap();
-        assert_eq!(results.len(), real.len(), "{results:?} / {real:?}");
-        for (name, v) in results {
-            let (v, p) = (v.as_f64().unwrap(), real[name].as_f64().unwrap());
-            assert!(
-                (v - p).abs() <= 1e-6 * v.abs().max(1.0),
-                "{name}: OPC UA {v}, PLC {p}"
-            );
+    for (mine, block) in [(&results, "real"), (&u, "u")] {
+        for theirs in [&plc_now[block], &plc[block]] {
+            let theirs = theirs.as_object().unwrap();
+            assert_eq!(mine.len(), theirs.len(), "{mine:?} / {theirs:?}");
+            for (name, v) in mine {
+                let (v, p) = (v.as_f64().unwrap(), theirs[name].as_f64().unwrap());
+                assert!(
+                    (v - p).abs() <= 1e-6 * v.abs().max(1.0),
+                    "{block} {name}: OPC UA {v}, PLC {p}"
+                );
+            }
         }
     }
     let h = history(&serve.dir);
@@ -660,10 +839,10 @@ fn a_start_while_the_plc_runs_one_is_refused_and_an_abort_ends_a_451() {
         "{w}"
     );
     assert_eq!(w["abort"][0], 0, "{w}");
-    assert_eq!(w["after"]["Monitoring/RunState"], "aborted", "{w}");
-    assert_eq!(w["after"]["Monitoring/ErrorKind"], 20, "{w}");
+    assert_eq!(w["after"]["MT:Monitoring/RunState"], "aborted", "{w}");
+    assert_eq!(w["after"]["MT:Monitoring/ErrorKind"], 20, "{w}");
     assert_eq!(
-        w["after"]["Production/ActiveProgram/State"], "Aborted",
+        w["after"]["MT:Production/MT:ActiveProgram/MT:State/0:CurrentState"], "Aborted",
         "{w}"
     );
     assert_eq!(w["abort_again"][0], 6, "not busy: {w}");
@@ -700,11 +879,11 @@ fn a_start_while_the_plc_runs_one_is_refused_and_an_abort_ends_a_451() {
     );
     assert_eq!(a["acknowledge"][0], 0, "{a}");
     assert_eq!(a["error_kind_after_ack"], 0, "{a}");
-    assert!(a["after"]["Monitoring/Point"].as_u64() >= Some(1), "{a}");
-    assert_eq!(a["after"]["Monitoring/RunState"], "aborted", "{a}");
-    assert_eq!(a["after"]["Monitoring/ErrorKind"], 20, "{a}");
+    assert!(a["after"]["MT:Monitoring/Point"].as_u64() >= Some(1), "{a}");
+    assert_eq!(a["after"]["MT:Monitoring/RunState"], "aborted", "{a}");
+    assert_eq!(a["after"]["MT:Monitoring/ErrorKind"], 20, "{a}");
     assert_eq!(
-        a["after"]["Production/ActiveProgram/StartedBy"], "opcua",
+        a["after"]["MT:Production/MT:ActiveProgram/StartedBy"], "opcua",
         "{a}"
     );
     let h = history(&serve.dir);

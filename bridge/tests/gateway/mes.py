@@ -20,6 +20,11 @@ from asyncua.ua.ua_binary import struct_from_binary
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
 NS_URI = "urn:probebridge:machine"
+# The companion specifications' namespaces, by the prefixes the paths below use; a
+# path's part without a prefix is of the gateway's namespace.
+PREFIXES = {"0": "http://opcfoundation.org/UA/", "DI": "http://opcfoundation.org/UA/DI/",
+            "M": "http://opcfoundation.org/UA/Machinery/",
+            "MT": "http://opcfoundation.org/UA/MachineTool/"}
 APP_URI = "urn:probebridge:test:mes"
 TIMEOUT = 180.0
 USER, PASSWORD = "mes", "measure 431!"
@@ -57,20 +62,34 @@ class Mes:
         return c
 
     async def machine_node(self, c):
-        ns = await c.get_namespace_index(NS_URI)
+        """Objects/Machinery's Machines/the machine; `ns` maps a path's prefixes to
+        the server's namespace indexes."""
+        array = await c.get_namespace_array()
+        ns = {k: array.index(uri) for k, uri in PREFIXES.items()}
+        ns[""] = array.index(NS_URI)
         node = await c.nodes.root.get_child(
-            ["0:Objects", f"{ns}:Machines", f"{ns}:{self.machine}"])
+            ["0:Objects", f"{ns['M']}:Machines", f"{ns['']}:{self.machine}"])
         return ns, node
 
     @staticmethod
     async def child(node, ns, path):
-        return await node.get_child([f"{ns}:{p}" for p in path.split("/")])
+        """`path`: browse names joined by /, each `PREFIX:Name` or `Name` (the
+        gateway's namespace)."""
+        parts = []
+        for p in path.split("/"):
+            prefix, _, name = p.rpartition(":")
+            parts.append(f"{ns[prefix]}:{name}")
+        return await node.get_child(parts)
+
+
+def plain(v):
+    return v.Text if isinstance(v, ua.LocalizedText) else v
 
 
 async def read_values(mes, c, ns, machine, paths):
     out = {}
     for p in paths:
-        out[p] = await (await mes.child(machine, ns, p)).read_value()
+        out[p] = plain(await (await mes.child(machine, ns, p)).read_value())
     return out
 
 
@@ -82,16 +101,17 @@ async def browse(mes):
         ns, machine = await mes.machine_node(c)
         names = sorted([(await n.read_browse_name()).Name for n in await machine.get_children()])
         values = await read_values(mes, c, ns, machine, [
-            "Identification/Manufacturer", "Identification/Model",
-            "Identification/SerialNumber", "Identification/SoftwareRevision",
-            "MachineryItemState/CurrentState", "Monitoring/MachineOk", "Monitoring/Bus",
-            "Monitoring/RunState",
+            "DI:Identification/DI:Manufacturer", "DI:Identification/DI:Model",
+            "DI:Identification/DI:SerialNumber", "DI:Identification/DI:SoftwareRevision",
+            "DI:Identification/DI:ProductInstanceUri",
+            "MT:Monitoring/MT:MachineTool/M:MachineryItemState/0:CurrentState",
+            "MT:Monitoring/MachineOk", "MT:Monitoring/Bus", "MT:Monitoring/RunState",
         ])
         methods = sorted([(await n.read_browse_name()).Name
-                          for n in await (await mes.child(machine, ns, "Production")).get_methods()])
+                          for n in await (await mes.child(machine, ns, "MT:Production")).get_methods()])
         # Anonymous clients read only (every variable is read-only).
         try:
-            await (await mes.child(machine, ns, "Monitoring/RunState")).write_value(
+            await (await mes.child(machine, ns, "MT:Monitoring/RunState")).write_value(
                 ua.Variant("busy", ua.VariantType.String))
             write = "written"
         except ua.UaStatusCodeError as e:
@@ -151,14 +171,14 @@ async def run_program(mes, program, cycle):
     c = await mes.client(USER, PASSWORD)
     async with c:
         ns, machine = await mes.machine_node(c)
-        watched = ["Monitoring/RunState", "Monitoring/ProgressPermille",
-                   "Production/ActiveProgram/State", f"Measurements/Cycle{cycle}/ResultValues"]
+        watched = ["MT:Monitoring/RunState", "MT:Monitoring/ProgressPermille",
+                   "MT:Production/MT:ActiveProgram/MT:State/0:CurrentState", f"Measurements/Cycle{cycle}/ResultValues"]
         nodes = [await mes.child(machine, ns, p) for p in watched]
         changes = Changes()
         sub = await c.create_subscription(10, changes)
         await sub.subscribe_data_change(nodes, queuesize=10)
         await changes.wait_for("Machine.Monitoring.RunState", lambda v: v is not None)
-        production = await mes.child(machine, ns, "Production")
+        production = await mes.child(machine, ns, "MT:Production")
         params = ua.Variant(PARAMS, ua.VariantType.Float)
         reason, text = await call(c, production, "StartProgram",
                                   ua.Variant(program, ua.VariantType.UInt16), params, True)
@@ -193,12 +213,12 @@ async def run_program(mes, program, cycle):
         for k in ("Started", "Finished"):
             run01[k] = str(run01[k])
         active = await read_values(mes, c, ns, machine, [
-            "Production/ActiveProgram/Number", "Production/ActiveProgram/State",
-            "Production/ActiveProgram/StartedBy", "Production/ActiveProgram/StartTime",
-            "Production/ActiveProgram/EndTime"])
+            "MT:Production/MT:ActiveProgram/Number", "MT:Production/MT:ActiveProgram/MT:State/0:CurrentState",
+            "MT:Production/MT:ActiveProgram/StartedBy", "MT:Production/MT:ActiveProgram/StartTime",
+            "MT:Production/MT:ActiveProgram/EndTime"])
         for k in ("StartTime", "EndTime"):
-            t = active[f"Production/ActiveProgram/{k}"]
-            active[f"Production/ActiveProgram/{k}"] = t.timestamp() if t else None
+            t = active[f"MT:Production/MT:ActiveProgram/{k}"]
+            active[f"MT:Production/MT:ActiveProgram/{k}"] = t.timestamp() if t else None
         latencies = [lat for vals in changes.seen.values() for _, lat in vals[1:] if lat is not None]
         await sub.delete()
         return {"states": states, "results": results, "run01": run01, "active": active,
@@ -212,14 +232,14 @@ async def refusals(mes, program):
     c = await mes.client()
     async with c:
         ns, machine = await mes.machine_node(c)
-        production = await mes.child(machine, ns, "Production")
+        production = await mes.child(machine, ns, "MT:Production")
         try:
             await call(c, production, "StartProgram", ua.Variant(program, ua.VariantType.UInt16),
                        ua.Variant([0.0] * 8, ua.VariantType.Float), False)
             out["anonymous"] = "taken"
         except ua.UaStatusCodeError as e:
             out["anonymous"] = type(e).__name__
-        out["state"] = await (await mes.child(machine, ns, "Monitoring/RunState")).read_value()
+        out["state"] = await (await mes.child(machine, ns, "MT:Monitoring/RunState")).read_value()
     c = await mes.client(USER, "not the password")
     try:
         await c.connect()
@@ -236,18 +256,18 @@ async def start_while_plc_runs(mes, program):
     c = await mes.client(USER, PASSWORD)
     async with c:
         ns, machine = await mes.machine_node(c)
-        production = await mes.child(machine, ns, "Production")
-        state = await (await mes.child(machine, ns, "Monitoring/RunState")).read_value()
-        started_by = await (await mes.child(machine, ns, "Production/ActiveProgram/StartedBy")).read_value()
+        production = await mes.child(machine, ns, "MT:Production")
+        state = await (await mes.child(machine, ns, "MT:Monitoring/RunState")).read_value()
+        started_by = await (await mes.child(machine, ns, "MT:Production/MT:ActiveProgram/StartedBy")).read_value()
         refused = await call(c, production, "StartProgram", ua.Variant(program, ua.VariantType.UInt16),
                              ua.Variant([0.0] * 8, ua.VariantType.Float), True)
         aborted = await call(c, production, "Abort")
         changes = Changes()
         sub = await c.create_subscription(10, changes)
-        await sub.subscribe_data_change([await mes.child(machine, ns, "Monitoring/RunState")])
+        await sub.subscribe_data_change([await mes.child(machine, ns, "MT:Monitoring/RunState")])
         await changes.wait_for("Machine.Monitoring.RunState", lambda v: v != "busy")
         after = await read_values(mes, c, ns, machine, [
-            "Monitoring/RunState", "Monitoring/ErrorKind", "Production/ActiveProgram/State"])
+            "MT:Monitoring/RunState", "MT:Monitoring/ErrorKind", "MT:Production/MT:ActiveProgram/MT:State/0:CurrentState"])
         again = await call(c, production, "Abort")
         return {"state": state, "started_by": started_by, "refused": refused, "abort": aborted,
                 "after": after, "abort_again": again}
@@ -258,7 +278,7 @@ async def start(mes, program):
     c = await mes.client(USER, PASSWORD)
     async with c:
         ns, machine = await mes.machine_node(c)
-        production = await mes.child(machine, ns, "Production")
+        production = await mes.child(machine, ns, "MT:Production")
         t = time.monotonic()
         answer = await call(c, production, "StartProgram", ua.Variant(program, ua.VariantType.UInt16),
                             ua.Variant([0.0] * 8, ua.VariantType.Float), True)
@@ -271,12 +291,12 @@ async def start_abort(mes, program):
     c = await mes.client(USER, PASSWORD)
     async with c:
         ns, machine = await mes.machine_node(c)
-        production = await mes.child(machine, ns, "Production")
+        production = await mes.child(machine, ns, "MT:Production")
         changes = Changes()
         sub = await c.create_subscription(10, changes)
         state, point = "Machine.Monitoring.RunState", "Machine.Monitoring.Point"
         await sub.subscribe_data_change([await mes.child(machine, ns, p)
-                                         for p in ("Monitoring/RunState", "Monitoring/Point")])
+                                         for p in ("MT:Monitoring/RunState", "MT:Monitoring/Point")])
         # The first notifications are the last run's (the PLC's aborted 451, its
         # points): only what comes after them is this run's.
         await changes.wait_for(state, lambda v: v is not None)
@@ -290,11 +310,11 @@ async def start_abort(mes, program):
         aborted = await call(c, production, "Abort")
         await changes.wait_for(state, lambda v: v in ("aborted", "done", "error"), before)
         after = await read_values(mes, c, ns, machine, [
-            "Monitoring/RunState", "Monitoring/ErrorKind", "Monitoring/Point",
-            "Production/ActiveProgram/State", "Production/ActiveProgram/StartedBy"])
+            "MT:Monitoring/RunState", "MT:Monitoring/ErrorKind", "MT:Monitoring/Point",
+            "MT:Production/MT:ActiveProgram/MT:State/0:CurrentState", "MT:Production/MT:ActiveProgram/StartedBy"])
         acknowledged = await call(c, production, "Acknowledge")
         await changes.wait_for(state, lambda v: v == "idle", before)
-        error_kind = await (await mes.child(machine, ns, "Monitoring/ErrorKind")).read_value()
+        error_kind = await (await mes.child(machine, ns, "MT:Monitoring/ErrorKind")).read_value()
         return {"started": started, "abort": aborted, "after": after,
                 "acknowledge": acknowledged, "error_kind_after_ack": error_kind,
                 "states": changes.values(state, before)}
@@ -306,7 +326,7 @@ async def stalled(mes, queued):
     c = await mes.client(secure=False)
     async with c:
         ns, machine = await mes.machine_node(c)
-        hb = await mes.child(machine, ns, "Monitoring/Heartbeat")
+        hb = await mes.child(machine, ns, "MT:Monitoring/Heartbeat")
         params = ua.CreateSubscriptionParameters(
             RequestedPublishingInterval=10, RequestedLifetimeCount=30000,
             RequestedMaxKeepAliveCount=1000, MaxNotificationsPerPublish=0,
@@ -357,7 +377,7 @@ async def call_and_types(mes):
     async with c:
         out = {"connect_s": time.monotonic() - t0}
         ns, machine = await mes.machine_node(c)
-        production = await mes.child(machine, ns, "Production")
+        production = await mes.child(machine, ns, "MT:Production")
         out["acknowledge"] = await call(c, production, "Acknowledge")
         try:
             await call(c, production, "StartProgram", ua.Variant(431, ua.VariantType.Int32))

@@ -67,6 +67,10 @@ pub struct OpcuaSection {
     /// Identification of the machine (OPC 40001-1); empty: not known.
     #[serde(default)]
     pub manufacturer: String,
+    /// The manufacturer's URI (DI's ManufacturerUri); with the serial number it makes
+    /// the machine's ProductInstanceUri.
+    #[serde(default)]
+    pub manufacturer_uri: String,
     #[serde(default)]
     pub model: String,
     #[serde(default)]
@@ -198,12 +202,29 @@ impl OpcuaSection {
         }
         for (key, v) in [
             ("opcua.manufacturer", &self.manufacturer),
+            ("opcua.manufacturer_uri", &self.manufacturer_uri),
             ("opcua.model", &self.model),
             ("opcua.serial_number", &self.serial_number),
         ] {
             if v.len() > 255 || v.chars().any(char::is_control) {
                 return Err((key, "at most 255 characters, no control characters".into()));
             }
+        }
+        // An absolute URI: a scheme, a colon, no spaces (`https://machines.acme.example`).
+        let uri = &self.manufacturer_uri;
+        let scheme = uri.split(':').next().unwrap_or("");
+        if !uri.is_empty()
+            && (!uri.contains(':')
+                || scheme.is_empty()
+                || !scheme
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || "+-.".contains(c))
+                || uri.contains(char::is_whitespace))
+        {
+            return Err((
+                "opcua.manufacturer_uri",
+                format!("{uri:?} is no absolute URI (e.g. \"https://machines.acme.example\")"),
+            ));
         }
         Ok(())
     }
@@ -347,6 +368,16 @@ mod tests {
             ("hostname = \"a b\"", "opcua.hostname", "not a host name"),
             ("certificate_days = 0", "opcua.certificate_days", "outside"),
             ("model = \"a\\nb\"", "opcua.model", "control"),
+            (
+                "manufacturer_uri = \"acme machines\"",
+                "opcua.manufacturer_uri",
+                "no absolute URI",
+            ),
+            (
+                "manufacturer_uri = \"https://acme.example/a b\"",
+                "opcua.manufacturer_uri",
+                "no absolute URI",
+            ),
         ] {
             let (k, why) = section(text).validate().unwrap_err();
             assert_eq!(k, key, "{text}");

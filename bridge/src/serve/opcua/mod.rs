@@ -1,7 +1,9 @@
 //! The OPC UA face of the gateway (`[opcua]`, off unless configured): the machine's
 //! state, its results and its history to the factory's MES and SCADA, and methods to
 //! start, abort and acknowledge by the PLC face's rules. Built on async-opcua's server
-//! (pure-Rust crypto), on a tokio runtime of its own thread like the other faces.
+//! (pure-Rust crypto), on a tokio runtime of its own thread like the other faces. The
+//! machine is a Machine Tools `MachineToolType` built from the companion
+//! specifications' NodeSets ([`companion`], [`address_space`]).
 //!
 //! Security: endpoints Basic256Sha256 Sign and SignAndEncrypt (and `none` only where
 //! configured); the server's certificate is made on first start in the state
@@ -17,8 +19,10 @@
 pub mod address_space;
 pub mod auth;
 pub mod certificate;
+pub mod companion;
 pub mod config;
 pub mod front;
+pub mod gateway_types;
 pub mod login_throttle;
 pub mod methods;
 pub mod users;
@@ -27,8 +31,7 @@ pub mod values;
 use super::face_thread::{FaceHealth, FaceThread, Flavour, Heartbeat};
 use super::gateway::Shared;
 use opcua::crypto::SecurityPolicy;
-use opcua::server::diagnostics::NamespaceMetadata;
-use opcua::server::node_manager::memory::{simple_node_manager, SimpleNodeManager};
+use opcua::server::node_manager::memory::{simple_node_manager_imports, SimpleNodeManager};
 use opcua::server::{ServerBuilder, ANONYMOUS_USER_TOKEN_ID};
 use opcua::types::{BuildInfo, DateTime, MessageSecurityMode};
 use std::net::SocketAddr;
@@ -234,9 +237,11 @@ impl Prepared {
             identity: address_space::Identity {
                 machine: ctx.machine.to_string(),
                 manufacturer: section.manufacturer.clone(),
+                manufacturer_uri: section.manufacturer_uri.clone(),
                 model: section.model.clone(),
                 serial_number: section.serial_number.clone(),
                 bus: ctx.bus.clone(),
+                application_uri: certificate::application_uri(&self.host, ctx.machine),
             },
             history: ctx.cfg.history(),
             last_runs: section.last_runs,
@@ -259,6 +264,7 @@ impl Prepared {
 }
 
 fn server_builder(
+    imports: Vec<Box<dyn opcua::nodes::NodeSetImport>>,
     section: &config::OpcuaSection,
     securities: &[config::Security],
     machine: &str,
@@ -279,13 +285,7 @@ fn server_builder(
             build_number: version.into(),
             build_date: DateTime::now(),
         })
-        .with_node_manager(simple_node_manager(
-            NamespaceMetadata {
-                namespace_uri: address_space::NAMESPACE.to_owned(),
-                ..Default::default()
-            },
-            "probebridge",
-        ))
+        .with_node_manager(simple_node_manager_imports(imports, "probebridge"))
         // Made by the gateway (certificate.rs) before the server starts.
         .create_sample_keypair(false)
         .certificate_path(OWN_CERT)
@@ -464,7 +464,9 @@ async fn bring_up(setup: Setup) -> Result<Parts, String> {
     let a = setup.server;
     let throttle = a.auth.throttle();
     let certificate = certificate::Files::new(&a.pki, OWN_CERT, OWN_KEY);
+    let imports = companion::imports(address_space::NAMESPACE)?;
     let (server, handle) = server_builder(
+        imports,
         &a.section,
         &a.securities,
         &a.machine,
@@ -479,12 +481,21 @@ async fn bring_up(setup: Setup) -> Result<Parts, String> {
         .node_managers()
         .get_of_type::<SimpleNodeManager>()
         .ok_or("the OPC UA server has no node manager of the machine")?;
-    let ns = handle
-        .get_namespace_index(address_space::NAMESPACE)
-        .ok_or("the OPC UA server has no namespace of the machine")?;
+    let index = |uri: &str| {
+        handle
+            .get_namespace_index(uri)
+            .ok_or_else(|| format!("the OPC UA server has no namespace {uri}"))
+    };
+    let namespaces = companion::Namespaces {
+        own: index(address_space::NAMESPACE)?,
+        di: index(companion::DI)?,
+        machinery: index(companion::MACHINERY)?,
+        machine_tool: index(companion::MACHINE_TOOL)?,
+    };
+    let ns = namespaces.own;
     let nodes = {
         let mut space = manager.address_space().write();
-        address_space::build(&mut space, ns, &setup.identity, setup.last_runs)
+        address_space::build(&mut space, namespaces, &setup.identity, setup.last_runs)
     };
     methods::register(&manager, ns, &setup.shared);
     let internal = tokio::net::TcpListener::bind((std::net::Ipv4Addr::LOCALHOST, 0))

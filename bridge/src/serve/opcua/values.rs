@@ -4,6 +4,7 @@
 //! runs are read from the history when a run has ended.
 
 use super::address_space::{Nodes, RUN_FIELDS};
+use super::companion::ids;
 use crate::history::{Filter, History, HistoryTarget, RunRow};
 use crate::serve::gateway::{lock, Shared};
 use crate::serve::measurement::{Face, State};
@@ -12,7 +13,7 @@ use crate::serve::results::Quantity;
 use crate::serve::service::RunInfo;
 use opcua::server::node_manager::memory::SimpleNodeManager;
 use opcua::server::SubscriptionCache;
-use opcua::types::{DataValue, DateTime, NodeId, Variant};
+use opcua::types::{DataValue, DateTime, LocalizedText, NodeId, Variant};
 use std::collections::{BTreeMap, HashMap};
 use std::str::FromStr;
 use std::sync::Arc;
@@ -46,21 +47,45 @@ fn date_time_text(s: Option<&str>) -> Variant {
         .map_or(Variant::Empty, Variant::from)
 }
 
-fn item_state(state: State, machine_ok: bool) -> &'static str {
+/// Machinery's MachineryItemState: what the gateway's machine does. Out of service
+/// while the machine is not ok (bus down, drives faulted), executing while a
+/// measurement runs, else not executing.
+fn item_state(state: State, machine_ok: bool) -> (&'static str, u32) {
     match (machine_ok, state) {
-        (false, _) => "OutOfService",
-        (true, State::Busy) => "Executing",
-        (true, _) => "NotExecuting",
+        (false, _) => ("OutOfService", ids::ITEM_STATE_OUT_OF_SERVICE),
+        (true, State::Busy) => ("Executing", ids::ITEM_STATE_EXECUTING),
+        (true, _) => ("NotExecuting", ids::ITEM_STATE_NOT_EXECUTING),
     }
 }
 
-/// OPC 40501-1's program states for a run.
-fn program_state(run: &RunInfo) -> &'static str {
-    match run.outcome {
-        None => "Running",
-        Some(Outcome::Done) => "Ended",
-        Some(Outcome::Error { .. } | Outcome::Aborted(_)) => "Aborted",
+/// Machinery's MachineryOperationMode and 40501-1's MachineOperationMode as far as the
+/// gateway knows them: while it runs a measuring program the machine processes it in
+/// automatic operation; otherwise the gateway does not know the CNC's mode: Machinery's
+/// "None" (no operation mode available) and no OperationMode value.
+fn operation_mode(state: State) -> ((&'static str, u32), Option<i32>) {
+    if state == State::Busy {
+        (("Processing", ids::OPERATION_MODE_PROCESSING), Some(1))
+    } else {
+        (("None", ids::OPERATION_MODE_NONE), None)
     }
+}
+
+/// OPC 40501-1's program state of a run (ProductionStateMachineType): its name, node
+/// and StateNumber (as the MachineTool NodeSet numbers them).
+fn program_state(run: &RunInfo) -> (&'static str, u32, u32) {
+    match run.outcome {
+        None => ("Running", ids::PROGRAM_RUNNING, 1),
+        Some(Outcome::Done) => ("Ended", ids::PROGRAM_ENDED, 2),
+        Some(Outcome::Error { .. } | Outcome::Aborted(_)) => ("Aborted", ids::PROGRAM_ABORTED, 4),
+    }
+}
+
+/// A state machine's CurrentState and its Id.
+fn current_state(text: &str, id: NodeId) -> (Variant, Variant) {
+    (
+        Variant::from(LocalizedText::new("", text)),
+        Variant::from(id),
+    )
 }
 
 impl Publisher {
@@ -105,10 +130,19 @@ impl Publisher {
             ]);
         }
         let s = |name: &str| self.nodes.state[name].clone();
+        let ns = self.nodes.ns;
+        let (item, item_id) = item_state(state, machine_ok);
+        let (item, item_id) = current_state(item, ns.machinery(item_id));
+        let ((mode, mode_id), operation_mode) = operation_mode(state);
+        let (mode, mode_id) = current_state(mode, ns.machinery(mode_id));
         let mut out = vec![
+            (s("ItemState"), item),
+            (s("ItemStateId"), item_id),
+            (s("OperationModeState"), mode),
+            (s("OperationModeStateId"), mode_id),
             (
-                s("CurrentState"),
-                Variant::from(item_state(state, machine_ok)),
+                s("OperationMode"),
+                operation_mode.map_or(Variant::Empty, Variant::from),
             ),
             (s("MachineOk"), Variant::from(machine_ok)),
             (s("RunState"), Variant::from(state.name())),
@@ -121,10 +155,17 @@ impl Publisher {
             (s("Heartbeat"), Variant::from(heartbeat)),
         ];
         if let Some(r) = &run {
+            let (text, id, number) = program_state(r);
+            let (program, program_id) = current_state(text, ns.machine_tool(id));
             out.extend([
-                (s("Name"), Variant::from(format!("{:03}", r.program))),
+                (s("Name"), Variant::from(format!("{:03}.h", r.program))),
+                // The gateway keeps no production plan: its active program is the
+                // only entry of its list, the first (0).
+                (s("NumberInList"), Variant::from(0u16)),
                 (s("Number"), Variant::from(r.program)),
-                (s("State"), Variant::from(program_state(r))),
+                (s("ProgramState"), program),
+                (s("ProgramStateId"), program_id),
+                (s("ProgramStateNumber"), Variant::from(number)),
                 (
                     s("StartedBy"),
                     Variant::from(match r.face {
