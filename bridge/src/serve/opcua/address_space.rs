@@ -552,9 +552,9 @@ fn production(b: &mut Builder, machine: &NodeId, state: &mut BTreeMap<&'static s
         (ABORT, Vec::new()),
         (ACKNOWLEDGE, Vec::new()),
     ] {
-        let id = b.id(&format!("Production.{name}"));
         let qn = b.own(name);
-        types::method(b.space, &id, qn, &production, &inputs);
+        let path = format!("Machine.Production.{name}");
+        types::method(b.space, b.ns.own, &path, qn, &production, &inputs);
     }
 }
 

@@ -88,28 +88,36 @@ pub fn method_outputs() -> Vec<Argument> {
     ]
 }
 
-/// A method with its arguments, below `parent` (an object or an object type).
+/// A method `ns;s=PATH` with its arguments (`PATH.InputArguments`,
+/// `PATH.OutputArguments`), below `parent` (an object or an object type).
 pub fn method(
     space: &mut AddressSpace,
-    id: &NodeId,
+    ns: u16,
+    path: &str,
     name: QualifiedName,
     parent: &NodeId,
     inputs: &[Argument],
-) {
-    let sub = |what: &str| match &id.identifier {
-        opcua::types::Identifier::String(s) => NodeId::new(id.namespace, format!("{s}.{what}")),
-        _ => NodeId::null(),
-    };
+) -> NodeId {
+    let id = NodeId::new(ns, path);
     let display = name.name.to_string();
-    let mut b = MethodBuilder::new(id, name, display)
+    let mut b = MethodBuilder::new(&id, name, display)
         .component_of(parent.clone())
         .executable(true)
         .user_executable(true);
     if !inputs.is_empty() {
-        b = b.input_args(space, &sub("InputArguments"), inputs);
+        b = b.input_args(
+            space,
+            &NodeId::new(ns, format!("{path}.InputArguments")),
+            inputs,
+        );
     }
-    b = b.output_args(space, &sub("OutputArguments"), &method_outputs());
+    b = b.output_args(
+        space,
+        &NodeId::new(ns, format!("{path}.OutputArguments")),
+        &method_outputs(),
+    );
     b.insert(space);
+    id
 }
 
 /// The gateway's types, into `space`.
@@ -176,8 +184,8 @@ pub fn build(space: &mut AddressSpace, ns: Namespaces) {
         (super::auth::ABORT, Vec::new()),
         (super::auth::ACKNOWLEDGE, Vec::new()),
     ] {
-        let id = NodeId::new(own, format!("Types.{PROBING_PRODUCTION_TYPE}.{name}"));
-        method(space, &id, qn(name), &production, &inputs);
+        let path = format!("Types.{PROBING_PRODUCTION_TYPE}.{name}");
+        let id = method(space, own, &path, qn(name), &production, &inputs);
         mandatory(space, &id);
         for args in ["InputArguments", "OutputArguments"] {
             let arg = NodeId::new(
