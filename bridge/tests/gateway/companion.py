@@ -3,7 +3,9 @@ OPC Foundation's NodeSet2 files (no code of the gateway's). Usage:
 
     companion.py URL NODESET_DIR
 
-Anonymous, over the `none` endpoint. Finds the machines under Machinery's Machines
+Anonymous, over the `none` endpoint. Loads the server's data type definitions (as a
+type-aware client does: MachineOperationMode must come out as its enumeration). Finds
+the machines under Machinery's Machines
 folder by their type definition (MachineToolType or a subtype, by namespace URI and
 id, not by browse name), then walks each machine's tree against the type definitions:
 every component a type marks Mandatory (its supertypes' and interfaces' included, and
@@ -305,6 +307,12 @@ async def main():
         if check.failures:
             print(json.dumps({"namespaces": uris, "failures": check.failures}))
             return
+        # The data types as the server defines them (DataTypeDefinition): the
+        # enumeration OperationMode has is built from the server's own definition.
+        await c.load_data_type_definitions()
+        mode = getattr(ua, "MachineOperationMode", None)
+        if mode is None or [m.name for m in mode][:2] != ["Manual", "Automatic"]:
+            check.fail("DataTypeDefinitions", f"MachineOperationMode not loaded: {mode}")
         machine_tool_type = s.node_id((MACHINE_TOOL, 13))
         machines = s.node_id((MACHINERY, 1001))
         found = []
