@@ -5,7 +5,7 @@
 //! Exported as type nodes, so that a client reads what a gateway's machine has from
 //! the types, as it does for the companion specifications'.
 
-use super::address_space::RUN_FIELDS;
+use super::super::results::{slots, Quantity, ResultKey, CAL_COLUMNS};
 use super::companion::{ids, Namespaces};
 use opcua::nodes::{MethodBuilder, ObjectBuilder, ObjectTypeBuilder, VariableBuilder};
 use opcua::server::address_space::AddressSpace;
@@ -28,6 +28,60 @@ pub const CYCLE_RESULTS: [(&str, DataTypeId, i32); 3] = [
 
 /// The cycles with a results object under Measurements.
 pub const CYCLES: [u16; 4] = [431, 444, 451, 460];
+
+/// The fields of a run of the history (MeasurementRunType): name, data type, rank.
+pub const RUN_FIELDS: [(&str, DataTypeId, i32); 12] = [
+    ("Id", DataTypeId::Int64, -1),
+    ("Status", DataTypeId::String, -1),
+    ("Source", DataTypeId::String, -1),
+    ("ProgramNumber", DataTypeId::UInt16, -1),
+    ("Program", DataTypeId::String, -1),
+    ("Started", DataTypeId::DateTime, -1),
+    ("Finished", DataTypeId::DateTime, -1),
+    ("Message", DataTypeId::String, -1),
+    ("Parameters", DataTypeId::Double, 1),
+    ("ResultNames", DataTypeId::String, 1),
+    ("ResultValues", DataTypeId::Double, 1),
+    // How long the run's cycles kept the machine, s.
+    ("MachineTime", DataTypeId::Double, -1),
+];
+
+/// The cycles with a results object, and the result names each shows: the PLC face's
+/// result slots of each cycle, each with its standard uncertainty (`u.NAME`) where the
+/// cycle gives one (431 every result, 444 the point and deviation, 451 the errors
+/// after optimisation), and for 460 its calibration block (the probe table row and the
+/// columns' standard uncertainties).
+pub fn cycle_result_names() -> Vec<(u16, Vec<String>)> {
+    let q = |r: std::ops::RangeInclusive<u16>| r.map(|n| format!("Q{n}")).collect::<Vec<_>>();
+    let u = |names: &[String]| -> Vec<String> {
+        names
+            .iter()
+            .map(|n| ResultKey::Uncertainty(Quantity::named(n)).to_string())
+            .collect()
+    };
+    let mut c431 = q(158..=159);
+    c431.extend(q(170..=175));
+    c431.extend(u(&c431));
+    let mut c444 = q(151..=153);
+    c444.extend(q(161..=164));
+    c444.extend(u(&c444));
+    c444.push("Q183".into());
+    let mut c451 = q(141..=149);
+    let errors: Vec<Quantity> = slots()
+        .into_iter()
+        .filter(|q| !matches!(q, Quantity::Named(_)))
+        .collect();
+    c451.extend(errors.iter().map(ToString::to_string));
+    c451.extend(
+        errors
+            .into_iter()
+            .filter(|q| matches!(q, Quantity::ErrorAfter(_)))
+            .map(|q| ResultKey::Uncertainty(q).to_string()),
+    );
+    let mut c460: Vec<String> = CAL_COLUMNS.iter().map(|c| c.to_string()).collect();
+    c460.extend(u(&c460));
+    vec![(431, c431), (444, c444), (451, c451), (460, c460)]
+}
 
 pub fn type_id(ns: u16, name: &str) -> NodeId {
     NodeId::new(ns, format!("Types.{name}"))
@@ -196,5 +250,35 @@ pub fn build(space: &mut AddressSpace, ns: Namespaces) {
                 mandatory(space, &arg);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::BTreeMap;
+
+    /// Every result the faces list has a node, and so has its uncertainty where the
+    /// cycle gives one (issue 36: `u.Q158` was listed and held by no node).
+    #[test]
+    fn each_result_and_its_uncertainty_has_a_node() {
+        let names: BTreeMap<u16, Vec<String>> = cycle_result_names().into_iter().collect();
+        let has = |c: u16, n: &str| names[&c].iter().any(|x| x == n);
+        for n in ["Q158", "u.Q158", "Q175", "u.Q175"] {
+            assert!(has(431, n), "431 {n}");
+        }
+        for n in ["Q151", "u.Q151", "Q164", "u.Q164", "Q183"] {
+            assert!(has(444, n), "444 {n}");
+        }
+        assert!(!has(444, "u.Q183"), "444 gives no uncertainty of Q183");
+        for n in ["Q141", "before.EX0C", "after.EX0C", "u.after.EX0C"] {
+            assert!(has(451, n), "451 {n}");
+        }
+        assert!(!has(451, "u.before.EX0C"), "451's errors before have none");
+        for n in ["R", "u.R", "L", "u.L"] {
+            assert!(has(460, n), "460 {n}");
+        }
+        let types: Vec<u16> = CYCLES.to_vec();
+        assert_eq!(names.keys().copied().collect::<Vec<_>>(), types);
     }
 }

@@ -3,8 +3,9 @@
 //! variables whose value changed (each change reaches a subscriber once). The last
 //! runs are read from the history when a run has ended.
 
-use super::address_space::{Nodes, RUN_FIELDS};
+use super::address_space::Nodes;
 use super::companion::ids;
+use super::gateway_types::RUN_FIELDS;
 use crate::history::{Filter, History, HistoryTarget, RunRow};
 use crate::serve::gateway::{lock, Shared};
 use crate::serve::measurement::{Face, State};
