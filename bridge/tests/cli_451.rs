@@ -203,7 +203,7 @@ fn check_refuses_what_run_would_refuse_before_moving() {
     let (code, stderr) = check(&wide, None);
     assert_eq!(code, Some(2), "{stderr}");
     assert!(
-        stderr.contains("block 16 (cycle 451)") && stderr.contains("outside the software limits"),
+        stderr.contains("block 19 (cycle 451)") && stderr.contains("outside the software limits"),
         "{stderr}"
     );
 

@@ -234,7 +234,7 @@ fn a_444_probing_path_beyond_the_software_limits_is_refused() {
 #[test]
 fn a_q253_below_the_minimum_feed_is_refused_by_check_and_run() {
     let program = std::fs::read_to_string(configs().join("programs/451-check.h")).unwrap();
-    let text = program.replace("Q253=+750 ", "Q253=+0.0001 ");
+    let text = program.replace("Q253=+3000 ", "Q253=+0.0001 ");
     let d = tmpdir("q253");
     let p = d.join("p.h");
     std::fs::write(&p, text).unwrap();

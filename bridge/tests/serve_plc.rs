@@ -479,7 +479,7 @@ fn with_m_strobe_rot_ax_pos_the_plcs_start_confirms_451() {
     // clear) and C alone, to keep it short.
     let program = std::fs::read_to_string(configs().join("programs/451-check.h"))
         .unwrap()
-        .replace("Q408=+0 ", "Q408=+150 ")
+        .replace("Q408=+50 ", "Q408=+150 ")
         .replace("Q411=-90 ", "Q411=+0 ")
         .replace("Q412=+90 ", "Q412=+0 ")
         .replace("Q414=+3 ", "Q414=+0 ");

@@ -8,19 +8,22 @@
 7 ; The probe is put over the sphere in machine coordinates (M91), whatever the
 8 ; active preset; cycle 247 makes row 1, the sphere centre, the row Q431 sets,
 9 ; so the program runs again and again, and row 0 stays at the machine origin.
-10 TOOL CALL "TOUCH_PROBE" Z
-11 CYCL DEF 247 DATUM SETTING ~
+10 ; Q408=50: before the rotary axes turn (unmonitored, at Q253=3000 deg/min) the
+11 ; probe retracts to 50 mm over the sphere centre, 27 mm or more above the lowest
+12 ; height that clears the sphere at every angle (a lower Q408 in `check` names it).
+13 TOOL CALL "TOUCH_PROBE" Z
+14 CYCL DEF 247 DATUM SETTING ~
     Q339=+1        ;DATUM NUMBER
-12 L Z+150 R0 FMAX M91
-13 L A+0 C+0 R0 FMAX M91 ; the table level first, at the safe height: a run stopped mid-cycle leaves it tilted
-14 L X+50 Y-30 R0 FMAX M91
-15 L Z+102.5 R0 FMAX M91
-16 TCH PROBE 451 MEASURE KINEMATICS ~
+15 L Z+150 R0 FMAX M91
+16 L A+0 C+0 R0 FMAX M91 ; the table level first, at the safe height: a run stopped mid-cycle leaves it tilted
+17 L X+50 Y-30 R0 FMAX M91
+18 L Z+102.5 R0 FMAX M91
+19 TCH PROBE 451 MEASURE KINEMATICS ~
     Q406=+0        ;MODE ~
     Q407=+12.5     ;SPHERE RADIUS ~
     Q320=+0        ;SET-UP CLEARANCE ~
-    Q408=+0        ;RETR. HEIGHT ~
-    Q253=+750      ;F PRE-POSITIONING ~
+    Q408=+50       ;RETR. HEIGHT ~
+    Q253=+3000     ;F PRE-POSITIONING ~
     Q380=+0        ;REFERENCE ANGLE ~
     Q411=-90       ;START ANGLE A AXIS ~
     Q412=+90       ;END ANGLE A AXIS ~
@@ -37,5 +40,5 @@
     Q423=+4        ;NO. OF PROBE POINTS ~
     Q431=+1        ;PRESET ~
     Q432=+0        ;BACKLASH, ANG. RANGE
-17 L Z+150 R0 FMAX M91
-18 END PGM 451-check MM
+20 L Z+150 R0 FMAX M91
+21 END PGM 451-check MM

@@ -5,17 +5,20 @@
 4 ; its pole; cycle 451 finds the sphere from there (Q431=1; mode 0 writes nothing, so
 5 ; neither the preset nor the kinematics change). B tilts the probe from -60 to +60
 6 ; degrees: the pole and the points follow the tilted tool axis.
-7 TOOL CALL "TOUCH_PROBE" Z
-8 L Z+150 R0 FMAX M91
-9 L B+0 C+0 R0 FMAX M91 ; the head upright first, at the safe height
-10 L X+40 Y+25 R0 FMAX M91
-11 L Z+82.5 R0 FMAX M91
-12 TCH PROBE 451 MEASURE KINEMATICS ~
+7 ; Q408=50: before the rotary axes turn (unmonitored, at Q253=3000 deg/min) the
+8 ; probe retracts to 50 mm over the sphere centre, 27 mm or more above the lowest
+9 ; height that clears the sphere at every angle (a lower Q408 in `check` names it).
+10 TOOL CALL "TOUCH_PROBE" Z
+11 L Z+150 R0 FMAX M91
+12 L B+0 C+0 R0 FMAX M91 ; the head upright first, at the safe height
+13 L X+40 Y+25 R0 FMAX M91
+14 L Z+82.5 R0 FMAX M91
+15 TCH PROBE 451 MEASURE KINEMATICS ~
     Q406=+0        ;MODE ~
     Q407=+12.5     ;SPHERE RADIUS ~
     Q320=+0        ;SET-UP CLEARANCE ~
-    Q408=+0        ;RETR. HEIGHT ~
-    Q253=+750      ;F PRE-POSITIONING ~
+    Q408=+50       ;RETR. HEIGHT ~
+    Q253=+3000     ;F PRE-POSITIONING ~
     Q380=+0        ;REFERENCE ANGLE ~
     Q411=+0        ;START ANGLE A AXIS ~
     Q412=+0        ;END ANGLE A AXIS ~
@@ -32,5 +35,5 @@
     Q423=+4        ;NO. OF PROBE POINTS ~
     Q431=+1        ;PRESET ~
     Q432=+0        ;BACKLASH, ANG. RANGE
-13 L Z+150 R0 FMAX M91
-14 END PGM 451-head-b MM
+16 L Z+150 R0 FMAX M91
+17 END PGM 451-head-b MM

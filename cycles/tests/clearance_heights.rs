@@ -21,7 +21,7 @@ fn program451(cfg: &CyclesConfig, q407: f64, q408: f64) -> Program {
     let text = std::fs::read_to_string(root().join("configs/programs/451-check.h")).unwrap();
     let text = text
         .replacen("Q407=+12.5", &format!("Q407={q407:+}"), 1)
-        .replacen("Q408=+0", &format!("Q408={q408:+}"), 1)
+        .replacen("Q408=+50", &format!("Q408={q408:+}"), 1)
         .replacen("Q414=+3", "Q414=+0", 1);
     Program::parse(&text, cfg).unwrap_or_else(|e| panic!("{e}"))
 }

@@ -19,6 +19,7 @@ fn table_ac() -> CyclesConfig {
 /// configs/programs/451-check.h with `from` replaced by `to`.
 fn params(cfg: &CyclesConfig, from: &str, to: &str) -> KinematicsParams {
     let text = std::fs::read_to_string(root().join("configs/programs/451-check.h")).unwrap();
+    assert!(text.contains(from), "451-check.h has no {from}");
     let text = text.replacen(from, to, 1);
     let p = Program::parse(&text, cfg).unwrap_or_else(|e| panic!("{e}"));
     let call = p.cycles().next().unwrap();
@@ -70,7 +71,7 @@ fn plan_errors_have_their_kind() {
 fn rotary_axes_positioned_by_an_m_function() {
     let mut cfg = table_ac();
     let probe = cfg.probes[0].clone();
-    let retracted = params(&cfg, "Q408=+0", "Q408=+30");
+    let retracted = params(&cfg, "Q408=+50", "Q408=+30");
     // Not set (-1): as before.
     assert_eq!(plan_on(&retracted, &probe, &cfg).unwrap().rotary_m, None);
     assert!(written_params(&cfg).is_empty());
@@ -93,7 +94,7 @@ fn rotary_axes_positioned_by_an_m_function() {
             && e.to_string().contains("mStrobeRotAxPos = 203"),
         "{e}"
     );
-    let direct = params(&cfg, "", "");
+    let direct = params(&cfg, "Q408=+50", "Q408=+0");
     assert_eq!(direct.retract_height, 0.0);
     let e = plan_on(&direct, &probe, &cfg).unwrap_err();
     assert_eq!(e.kind(), PlanErrorKind::DirectMoveWithMFunction, "{e}");

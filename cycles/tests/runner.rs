@@ -257,9 +257,9 @@ fn a_refusal_says_nothing_moved_once() {
     std::fs::write(&kinematics, "not = [a kinematics file").unwrap();
     for (from, to) in [
         // Slower than the slowest feed the axes run (1 mm/min): the plan refuses it.
-        ("Q253=+750", "Q253=+0.25"),
+        ("Q253=+3000", "Q253=+0.25"),
         // A valid plan; the active kinematics file cannot be read.
-        ("Q253=+750", "Q253=+750"),
+        ("Q253=+3000", "Q253=+3000"),
     ] {
         let program = Program::parse(&text.replacen(from, to, 1), &cfg).unwrap();
         let e = preflight_program(&program, cfg.machine.axis_mask(), &cfg, &kinematics)

@@ -560,13 +560,13 @@ fn check_and_run_agree_at_the_same_move() {
         ("demo-sphere.toml", read("450-save-restore.h"), None, false),
         (
             "demo-sphere.toml",
-            check451.replace("Q408=+0 ", "Q408=+350 "),
+            check451.replace("Q408=+50 ", "Q408=+350 "),
             None,
             true,
         ),
         (
             "demo-sphere.toml",
-            check451.replace("Q408=+0 ", "Q408=+5 "),
+            check451.replace("Q408=+50 ", "Q408=+5 "),
             None,
             true,
         ),

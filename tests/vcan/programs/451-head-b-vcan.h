@@ -1,24 +1,27 @@
 0 BEGIN PGM 451-head-b-vcan MM
-; configs/programs/451-head-b.h for the vcan VM (tests/vcan/cases): the same
-; cycle 451 in mode 0 with Q253 (pre-positioning feed) 10000 (the axes' max feed) instead of 750, so it
-; runs in about 1 min of real time instead of 4. tests/vcan/check.rs makes sure the
-; two differ in nothing else.
+; configs/programs/451-head-b.h for the vcan VM (tests/vcan/cases): the same cycle 451
+; in mode 0 with Q253 (pre-positioning feed) 10000 (the axes' max feed) instead of the
+; example's 3000, so that it takes less of the VM's real time. tests/vcan/check.rs makes
+; sure the two differ in nothing else.
 1 ; Cycle 451 MEASURE KINEMATICS, mode 0 (check), on configs/scenarios/head-b-table-c.toml:
 2 ; the calibration sphere R12.5 at X+40 Y+25 Z+60 on the machine with a B swivel head
 3 ; and a C rotary table. The probe goes over the sphere, 5 mm above Q320 + SET_UP over
 4 ; its pole; cycle 451 finds the sphere from there (Q431=1; mode 0 writes nothing, so
 5 ; neither the preset nor the kinematics change). B tilts the probe from -60 to +60
 6 ; degrees: the pole and the points follow the tilted tool axis.
-7 TOOL CALL "TOUCH_PROBE" Z
-8 L Z+150 R0 FMAX M91
-9 L B+0 C+0 R0 FMAX M91 ; the head upright first, at the safe height
-10 L X+40 Y+25 R0 FMAX M91
-11 L Z+82.5 R0 FMAX M91
-12 TCH PROBE 451 MEASURE KINEMATICS ~
+7 ; Q408=50: before the rotary axes turn (unmonitored, at Q253=3000 deg/min) the
+8 ; probe retracts to 50 mm over the sphere centre, 27 mm or more above the lowest
+9 ; height that clears the sphere at every angle (a lower Q408 in `check` names it).
+10 TOOL CALL "TOUCH_PROBE" Z
+11 L Z+150 R0 FMAX M91
+12 L B+0 C+0 R0 FMAX M91 ; the head upright first, at the safe height
+13 L X+40 Y+25 R0 FMAX M91
+14 L Z+82.5 R0 FMAX M91
+15 TCH PROBE 451 MEASURE KINEMATICS ~
     Q406=+0        ;MODE ~
     Q407=+12.5     ;SPHERE RADIUS ~
     Q320=+0        ;SET-UP CLEARANCE ~
-    Q408=+0        ;RETR. HEIGHT ~
+    Q408=+50       ;RETR. HEIGHT ~
     Q253=+10000    ;F PRE-POSITIONING ~
     Q380=+0        ;REFERENCE ANGLE ~
     Q411=+0        ;START ANGLE A AXIS ~
@@ -36,5 +39,5 @@
     Q423=+4        ;NO. OF PROBE POINTS ~
     Q431=+1        ;PRESET ~
     Q432=+0        ;BACKLASH, ANG. RANGE
-13 L Z+150 R0 FMAX M91
-14 END PGM 451-head-b-vcan MM
+16 L Z+150 R0 FMAX M91
+17 END PGM 451-head-b-vcan MM

@@ -421,7 +421,7 @@ impl<M: Machine> Measure<'_, '_, M> {
 
 /// Where the rotary axes stood when the sphere was not found, if any was off 0: a run
 /// stopped mid-cycle leaves the table turned, and the sphere turned with it.
-fn turned_table(start: &Angles) -> String {
+pub(super) fn turned_table(start: &Angles) -> String {
     let off: Vec<(Axis, f64)> = Axis::ROTARY
         .iter()
         .zip(start)

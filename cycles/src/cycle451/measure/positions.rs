@@ -241,7 +241,10 @@ impl<M: Machine> Measure<'_, '_, M> {
         );
         if h < lowest {
             return Err(CycleError::Plan(format!(
-                "Q408={h}: the retraction height does not clear the sphere by the ball radius + SET_UP at every angle the rotary axes turn through (the sphere rises with them); the lowest Q408 that clears it is {lowest:.4}"
+                "Q408={h}: the retraction height does not clear the sphere by the ball radius + SET_UP at every angle the rotary axes turn through (the sphere rises with them); the lowest Q408 that clears it is {lowest:.4}{}",
+                // The cycle turns from where the axes stood and back there: a table
+                // left tilted by a stopped run is the likelier cause than Q408.
+                super::locate::turned_table(&self.start)
             )));
         }
         let [main, minor, _] = self.tool.indices();
