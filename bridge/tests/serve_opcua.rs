@@ -158,40 +158,23 @@ impl Serve {
 
     /// mes.py COMMAND ARGS; its JSON (`ok`: it must succeed).
     fn mes(&self, py: &Path, machine: &str, args: &[&str]) -> serde_json::Value {
-        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/gateway/mes.py");
-        let out = Command::new(py)
-            .arg(script)
+        let mut cmd = Command::new(py);
+        cmd.arg(gateway_script("mes.py"))
             .arg(&self.url)
             .arg(machine)
             .arg(&self.dir)
             .arg(self.dir.join("pki/own/cert.der"))
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "MES {args:?}: {}\nserve log:\n{}",
-            String::from_utf8_lossy(&out.stderr),
-            self.log()
-        );
-        serde_json::from_slice(&out.stdout).unwrap()
+            .args(args);
+        python_peer(cmd, &format!("MES {args:?}"), || self.log())
     }
 
+    /// plc.py COMMAND ARGS against the PLC face; its JSON.
     fn plc(&self, py: &Path, args: &[&str]) -> serde_json::Value {
-        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/gateway/plc.py");
-        let out = Command::new(py)
-            .arg(script)
+        let mut cmd = Command::new(py);
+        cmd.arg(gateway_script("plc.py"))
             .args(["127.0.0.1", &self.plc_port.to_string()])
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "PLC {args:?}: {}\nserve log:\n{}",
-            String::from_utf8_lossy(&out.stderr),
-            self.log()
-        );
-        serde_json::from_slice(&out.stdout).unwrap()
+            .args(args);
+        python_peer(cmd, &format!("PLC {args:?}"), || self.log())
     }
 
     /// asyncua's own command-line tool `tool` (in the venv's bin/) with `args`.
@@ -359,19 +342,11 @@ const MANUFACTURER_URI: &str = "https://machines.acme.example";
 /// state; and docs/opcua.md's table is the server's. Returns each node's value by its
 /// path below the machine.
 fn companion_types(serve: &Serve, py: &Path) -> serde_json::Map<String, serde_json::Value> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let out = Command::new(py)
-        .arg(root.join("bridge/tests/gateway/companion.py"))
+    let mut cmd = Command::new(py);
+    cmd.arg(gateway_script("companion.py"))
         .arg(&serve.url)
-        .arg(root.join("third_party/opcua-nodesets"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "companion.py: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let c: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../third_party/opcua-nodesets"));
+    let c = python_peer(cmd, "companion.py", || serve.log());
     assert_eq!(c["failures"], serde_json::json!([]), "{}", c["failures"]);
     assert_eq!(
         c["machines"],
@@ -1052,19 +1027,44 @@ open(sys.argv[2], "wb").write(key.private_bytes(serialization.Encoding.PEM,
     serialization.PrivateFormat.PKCS8, serialization.NoEncryption()))
 "#;
 
+/// `python -c SCRIPT ARGS`: its JSON, or null when it prints none.
 fn python_json(py: &Path, script: &str, args: &[&Path]) -> serde_json::Value {
-    let out = Command::new(py)
-        .arg("-c")
-        .arg(script)
-        .args(args)
-        .output()
-        .unwrap();
+    let mut cmd = Command::new(py);
+    cmd.arg("-c").arg(script).args(args);
+    python_peer(cmd, "python -c", String::new)
+}
+
+/// A script of `bridge/tests/gateway/`.
+fn gateway_script(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/gateway")
+        .join(name)
+}
+
+/// Runs a Python peer (`cmd`); it must succeed, else the test fails with `what`, its
+/// stderr and `context()` (serve's log). Its stdout is JSON; null when it prints
+/// nothing (a peer that only writes files).
+fn python_peer(
+    mut cmd: Command,
+    what: &str,
+    context: impl FnOnce() -> String,
+) -> serde_json::Value {
+    let out = cmd.output().unwrap_or_else(|e| panic!("{what}: {e}"));
     assert!(
         out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+        "{what}: {}\nserve log:\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        context()
     );
-    serde_json::from_slice(&out.stdout).unwrap_or(serde_json::Value::Null)
+    if out.stdout.iter().all(u8::is_ascii_whitespace) {
+        return serde_json::Value::Null;
+    }
+    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "{what}: its output is no JSON ({e}): {}",
+            String::from_utf8_lossy(&out.stdout)
+        )
+    })
 }
 
 /// The certificate: its lifetime as configured, its names the host name and the

@@ -3,10 +3,15 @@
 //! bound, one row per cycle: the table of docs/cycles.md ("Machine time"), from the
 //! current tree, so that the next change can be measured against it. Each example runs
 //! in a fresh state folder of its own, by this very binary (`check --json`, then
-//! `run --json`), as a user would.
+//! `run --json`), as a user would. With `--realtime` each also runs paced in real time
+//! (`run --realtime`), and the wall time of each cycle, from the line that starts it
+//! to the one that ends it on `run`'s stderr, stands beside the machine time it
+//! reported: a measurement that prints, not a test (the machines are shared).
 
+use std::io::BufRead as _;
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, Stdio};
+use std::time::Instant;
 
 /// The shipped examples and the scenario each is written for (docs/cycles.md,
 /// "Example programs").
@@ -35,6 +40,11 @@ pub struct CyclesBenchArgs {
     /// Write the rows as JSON too.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Also run each example paced in real time (`run --realtime`) and print each
+    /// cycle's wall time beside the machine time that run reported; takes as long as
+    /// the examples keep the machine (about 16 minutes for all).
+    #[arg(long)]
+    pub realtime: bool,
 }
 
 /// One cycle of one example.
@@ -46,6 +56,16 @@ struct Row {
     predicted_s: f64,
     measured_s: f64,
     lower_bound_s: f64,
+    /// `--realtime`: the machine time the paced run reported, and the cycle's wall time.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    paced: Option<Paced>,
+}
+
+/// One cycle of a run paced in real time.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+struct Paced {
+    machine_time_s: f64,
+    wall_time_s: f64,
 }
 
 pub fn run(args: &CyclesBenchArgs) -> Result<(), String> {
@@ -59,7 +79,15 @@ pub fn run(args: &CyclesBenchArgs) -> Result<(), String> {
             continue;
         }
         let state = scratch.join(format!("{i}"));
-        match example(&exe, &args.configs, program, scenario, &state, i) {
+        let rows_of = example(&exe, &args.configs, program, scenario, &state, i).and_then(|r| {
+            if args.realtime {
+                let paced_state = scratch.join(format!("{i}-realtime"));
+                paced(&exe, &args.configs, program, scenario, &paced_state, i, r)
+            } else {
+                Ok(r)
+            }
+        });
+        match rows_of {
             Ok(mut r) => rows.append(&mut r),
             Err(e) => {
                 failed = Some(format!("{program}: {e}"));
@@ -149,15 +177,93 @@ fn example(
             predicted_s: f(p, "predicted_machine_time_s"),
             measured_s: f(r, "machine_time_s"),
             lower_bound_s: f(p, "lower_bound_s"),
+            paced: None,
         })
         .collect())
 }
 
-/// The rows as a Markdown table (docs/cycles.md's form).
+/// `run --realtime --json` of one example in the state folder `state`: each cycle's
+/// wall time, from its `[k/n] block B (line L): cycle C` line on stderr to its status
+/// line (`    Ok`, `    Error`, `    Aborted`), beside the machine time it reported.
+fn paced(
+    exe: &Path,
+    configs: &Path,
+    program: &str,
+    scenario: &str,
+    state: &Path,
+    i: usize,
+    mut rows: Vec<Row>,
+) -> Result<Vec<Row>, String> {
+    let json = state.join("run.json");
+    std::fs::create_dir_all(state).map_err(|e| format!("{}: {e}", state.display()))?;
+    let service = format!("pb-bench-cycles-rt-{}-{i}", std::process::id());
+    let mut child = Command::new(exe)
+        .arg("run")
+        .arg(configs.join("programs").join(program))
+        .arg("--scenario")
+        .arg(configs.join("scenarios").join(scenario))
+        .arg("--state-dir")
+        .arg(state)
+        .arg("--json")
+        .arg(&json)
+        .args(["--yes", "--realtime", "--service", &service])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(|e| format!("run --realtime: {e}"))?;
+    let stderr = child.stderr.take().expect("piped");
+    let mut walls = Vec::new();
+    let mut started = None;
+    let mut said = Vec::new();
+    for line in std::io::BufReader::new(stderr).lines() {
+        let line = line.map_err(|e| format!("run --realtime's stderr: {e}"))?;
+        let now = Instant::now();
+        if line.starts_with('[') && line.contains("] block ") && line.contains("): cycle ") {
+            started = Some(now);
+        } else if let ("    Ok" | "    Error" | "    Aborted", Some(t0)) = (line.as_str(), started)
+        {
+            walls.push(now.duration_since(t0).as_secs_f64());
+            started = None;
+        }
+        said.push(line);
+    }
+    let status = child.wait().map_err(|e| format!("run --realtime: {e}"))?;
+    if !status.success() {
+        return Err(format!("run --realtime failed: {}", said.join("\n")));
+    }
+    let text = std::fs::read_to_string(&json).map_err(|e| format!("{}: {e}", json.display()))?;
+    let ran: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| format!("run --realtime --json: {e}"))?;
+    let cycles = ran["cycles"].as_array().cloned().unwrap_or_default();
+    if cycles.len() != rows.len() || walls.len() != rows.len() {
+        return Err(format!(
+            "run --realtime: {} cycles in its JSON, {} ended on its stderr, {} planned",
+            cycles.len(),
+            walls.len(),
+            rows.len()
+        ));
+    }
+    for ((row, c), wall) in rows.iter_mut().zip(&cycles).zip(walls) {
+        row.paced = Some(Paced {
+            machine_time_s: c["machine_time_s"].as_f64().unwrap_or(f64::NAN),
+            wall_time_s: wall,
+        });
+    }
+    Ok(rows)
+}
+
+/// The rows as a Markdown table (docs/cycles.md's form), with the paced runs' columns
+/// when there are any.
 fn table(rows: &[Row]) -> String {
+    let realtime = rows.iter().any(|r| r.paced.is_some());
     let mut s = String::from(
-        "| program | block | cycle | predicted | measured | predicted - measured | lower bound | measured / lower bound |\n|---|---|---|---|---|---|---|---|\n",
+        "| program | block | cycle | predicted | measured | predicted - measured | lower bound | measured / lower bound |",
     );
+    s.push_str(if realtime {
+        " paced: machine time | paced: wall time | wall - machine |\n|---|---|---|---|---|---|---|---|---|---|---|\n"
+    } else {
+        "\n|---|---|---|---|---|---|---|---|\n"
+    });
     for r in rows {
         let ratio = if r.lower_bound_s > 0.0 {
             format!("{:.2}", r.measured_s / r.lower_bound_s)
@@ -173,9 +279,24 @@ fn table(rows: &[Row]) -> String {
             "-".into()
         };
         s.push_str(&format!(
-            "| `{}` | {} | {} | {:.2} s | {:.2} s | {off} | {:.2} s | {ratio} |\n",
+            "| `{}` | {} | {} | {:.2} s | {:.2} s | {off} | {:.2} s | {ratio} |",
             r.program, r.block, r.cycle, r.predicted_s, r.measured_s, r.lower_bound_s
         ));
+        match r.paced {
+            // A cycle that moves nothing (450) takes milliseconds: no ratio there.
+            Some(p) if p.machine_time_s >= 0.05 => s.push_str(&format!(
+                " {:.2} s | {:.2} s | {:+.1} % |\n",
+                p.machine_time_s,
+                p.wall_time_s,
+                (p.wall_time_s - p.machine_time_s) / p.machine_time_s * 100.0
+            )),
+            Some(p) => s.push_str(&format!(
+                " {:.2} s | {:.2} s | - |\n",
+                p.machine_time_s, p.wall_time_s
+            )),
+            None if realtime => s.push_str(" - | - | - |\n"),
+            None => s.push('\n'),
+        }
     }
     s
 }
