@@ -78,11 +78,16 @@ pub fn run(args: &CyclesBenchArgs) -> Result<(), String> {
         if args.only.as_deref().is_some_and(|o| !program.contains(o)) {
             continue;
         }
-        let state = scratch.join(format!("{i}"));
-        let rows_of = example(&exe, &args.configs, program, scenario, &state, i).and_then(|r| {
+        let ex = Example {
+            exe: &exe,
+            configs: &args.configs,
+            program,
+            scenario,
+            index: i,
+        };
+        let rows_of = example(&ex, &scratch.join(format!("{i}"))).and_then(|r| {
             if args.realtime {
-                let paced_state = scratch.join(format!("{i}-realtime"));
-                paced(&exe, &args.configs, program, scenario, &paced_state, i, r)
+                paced(&ex, &scratch.join(format!("{i}-realtime")), r)
             } else {
                 Ok(r)
             }
@@ -104,28 +109,50 @@ pub fn run(args: &CyclesBenchArgs) -> Result<(), String> {
     failed.map_or(Ok(()), Err)
 }
 
-/// `check --json` then `run --json` of one example in the state folder `state`.
-fn example(
-    exe: &Path,
-    configs: &Path,
-    program: &str,
-    scenario: &str,
-    state: &Path,
-    i: usize,
-) -> Result<Vec<Row>, String> {
-    let program_path = configs.join("programs").join(program);
-    let scenario_path = configs.join("scenarios").join(scenario);
-    let common = |cmd: &mut Command| {
-        cmd.arg(&program_path)
+/// One shipped example, run by this very binary.
+struct Example<'a> {
+    exe: &'a Path,
+    configs: &'a Path,
+    program: &'a str,
+    scenario: &'a str,
+    /// Its place in [`EXAMPLES`]: names its iceoryx2 services.
+    index: usize,
+}
+
+impl Example<'_> {
+    /// `probebridge VERB PROGRAM --scenario SCENARIO --state-dir STATE`; a `run` gets
+    /// an iceoryx2 service prefix of its own (`tag` tells the runs of one example apart).
+    fn command(&self, verb: &str, state: &Path, tag: &str) -> Command {
+        let mut cmd = Command::new(self.exe);
+        cmd.arg(verb)
+            .arg(self.configs.join("programs").join(self.program))
             .arg("--scenario")
-            .arg(&scenario_path)
+            .arg(self.configs.join("scenarios").join(self.scenario))
             .arg("--state-dir")
             .arg(state);
-    };
-    let mut check = Command::new(exe);
-    check.arg("check");
-    common(&mut check);
-    let out = check
+        if verb == "run" {
+            let service = format!("pb-bench-cycles-{tag}{}-{}", std::process::id(), self.index);
+            cmd.args(["--yes", "--service", &service]);
+        }
+        cmd
+    }
+}
+
+/// The cycles of a `run --json` file.
+fn ran_cycles(json: &Path) -> Result<Vec<serde_json::Value>, String> {
+    let text = std::fs::read_to_string(json).map_err(|e| format!("{}: {e}", json.display()))?;
+    let ran: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| format!("run --json: {e}"))?;
+    ran["cycles"]
+        .as_array()
+        .cloned()
+        .ok_or_else(|| format!("{}: no cycles", json.display()))
+}
+
+/// `check --json` then `run --json` of one example in the state folder `state`.
+fn example(ex: &Example, state: &Path) -> Result<Vec<Row>, String> {
+    let out = ex
+        .command("check", state, "")
         .arg("--json")
         .output()
         .map_err(|e| format!("check: {e}"))?;
@@ -138,14 +165,10 @@ fn example(
     let planned: serde_json::Value =
         serde_json::from_slice(&out.stdout).map_err(|e| format!("check --json: {e}"))?;
     let json = state.join("run.json");
-    let mut run = Command::new(exe);
-    run.arg("run");
-    common(&mut run);
-    let service = format!("pb-bench-cycles-{}-{i}", std::process::id());
-    let out = run
+    let out = ex
+        .command("run", state, "")
         .arg("--json")
         .arg(&json)
-        .args(["--yes", "--service", &service])
         .output()
         .map_err(|e| format!("run: {e}"))?;
     if !out.status.success() {
@@ -154,11 +177,9 @@ fn example(
             String::from_utf8_lossy(&out.stderr)
         ));
     }
-    let text = std::fs::read_to_string(&json).map_err(|e| format!("{}: {e}", json.display()))?;
-    let ran: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| format!("run --json: {e}"))?;
-    let (Some(p), Some(r)) = (planned["cycles"].as_array(), ran["cycles"].as_array()) else {
-        return Err("no cycles".into());
+    let r = ran_cycles(&json)?;
+    let Some(p) = planned["cycles"].as_array() else {
+        return Err("check --json: no cycles".into());
     };
     if p.len() != r.len() {
         return Err(format!(
@@ -169,9 +190,9 @@ fn example(
     }
     let f = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
     Ok(p.iter()
-        .zip(r)
+        .zip(&r)
         .map(|(p, r)| Row {
-            program: program.to_string(),
+            program: ex.program.to_string(),
             block: p["block"].as_u64().unwrap_or(0),
             cycle: p["cycle"].as_u64().unwrap_or(0),
             predicted_s: f(p, "predicted_machine_time_s"),
@@ -185,28 +206,14 @@ fn example(
 /// `run --realtime --json` of one example in the state folder `state`: each cycle's
 /// wall time, from its `[k/n] block B (line L): cycle C` line on stderr to its status
 /// line (`    Ok`, `    Error`, `    Aborted`), beside the machine time it reported.
-fn paced(
-    exe: &Path,
-    configs: &Path,
-    program: &str,
-    scenario: &str,
-    state: &Path,
-    i: usize,
-    mut rows: Vec<Row>,
-) -> Result<Vec<Row>, String> {
+fn paced(ex: &Example, state: &Path, mut rows: Vec<Row>) -> Result<Vec<Row>, String> {
     let json = state.join("run.json");
     std::fs::create_dir_all(state).map_err(|e| format!("{}: {e}", state.display()))?;
-    let service = format!("pb-bench-cycles-rt-{}-{i}", std::process::id());
-    let mut child = Command::new(exe)
-        .arg("run")
-        .arg(configs.join("programs").join(program))
-        .arg("--scenario")
-        .arg(configs.join("scenarios").join(scenario))
-        .arg("--state-dir")
-        .arg(state)
+    let mut child = ex
+        .command("run", state, "rt-")
         .arg("--json")
         .arg(&json)
-        .args(["--yes", "--realtime", "--service", &service])
+        .arg("--realtime")
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -231,10 +238,7 @@ fn paced(
     if !status.success() {
         return Err(format!("run --realtime failed: {}", said.join("\n")));
     }
-    let text = std::fs::read_to_string(&json).map_err(|e| format!("{}: {e}", json.display()))?;
-    let ran: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| format!("run --realtime --json: {e}"))?;
-    let cycles = ran["cycles"].as_array().cloned().unwrap_or_default();
+    let cycles = ran_cycles(&json)?;
     if cycles.len() != rows.len() || walls.len() != rows.len() {
         return Err(format!(
             "run --realtime: {} cycles in its JSON, {} ended on its stderr, {} planned",
