@@ -6,9 +6,10 @@
 # SYNC period, 10 ms.
 VM_SYNC_US=${PROBEBRIDGE_VM_SYNC_US:-10000}
 # The master's heartbeat timeout for the drives. It also sets the master's enable and
-# settle timeouts (3 times it) and its probe arming timeout (once): 2 s once ran out
-# arming a probe mid-451 in the vcan VM, and in the systemd VM a drive's heartbeat was
-# 2010 ms late on the first move after the package's upgrade (CI of ce23731).
+# settle timeouts (3 times it) and its probe arming timeout (twice it; once it ran out
+# when it was once the heartbeat timeout: at 2 s mid-451 in the vcan VM, at 4 s in the
+# systemd VM of CI 66). In the systemd VM a drive's heartbeat was 2010 ms late on the
+# first move after the package's upgrade (CI of ce23731).
 VM_HEARTBEAT_TIMEOUT_MS=${PROBEBRIDGE_VM_HEARTBEAT_TIMEOUT_MS:-4000}
 # The master's own heartbeat period; the drives consume it with 3 times this period
 # (6 s; a 3 s consumer time once ran out in a loaded CI host's VM).

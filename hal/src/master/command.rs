@@ -84,7 +84,14 @@ pub enum Detail {
         state: u16,
         waited_ms: f64,
     },
-    ArmTimeout,
+    /// Touch probe 1 of the node did not report armed within `waited_ms` of loop
+    /// time, after `enables` touch probe functions sent; `status`: the last touch
+    /// probe status (0x60B9) it reported since the last one, `None` if none came.
+    ArmTimeout {
+        waited_ms: f64,
+        enables: u32,
+        status: Option<u16>,
+    },
     Transport,
     Busy,
     Stopped,
@@ -150,7 +157,32 @@ impl From<RtError> for MachineError {
                 crate::cia402::state::State::from_statusword(state)
                     .map_or_else(|| "no valid state".to_string(), |s| format!("{s:?}"))
             ),
-            Detail::ArmTimeout => "touch probe did not report armed in time; nothing moved".into(),
+            Detail::ArmTimeout {
+                waited_ms,
+                enables,
+                status,
+            } => {
+                let node = e.node.unwrap_or(0);
+                let answer = match status {
+                    None => "no touch probe status (TPDO2) came since the last".to_string(),
+                    Some(s) => {
+                        let st = crate::cia402::touch_probe::TouchProbeStatus::from_bits(s);
+                        let probe = crate::cia402::touch_probe::Probe::One;
+                        format!(
+                            "its touch probe status 0x{s:04X} (probe 1 {}, {}) answered the last",
+                            if st.enabled(probe) { "enabled" } else { "disabled" },
+                            if st.positive_edge_stored(probe) {
+                                "an edge stored"
+                            } else {
+                                "no edge stored"
+                            }
+                        )
+                    }
+                };
+                format!(
+                    "touch probe 1 of node {node} did not report armed in {waited_ms:.0} ms: {answer} of {enables} enables sent; nothing moved"
+                )
+            }
             Detail::Transport => "CAN transport failed; all axes stopped".into(),
             Detail::Busy => "a command is already running".into(),
             Detail::Stopped => "the real-time loop has stopped".into(),

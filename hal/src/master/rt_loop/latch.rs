@@ -182,6 +182,7 @@ impl<S: SampleSink> RtLoop<S> {
                     d.tp_status_fresh = false;
                 }
                 self.arm_waits = 0;
+                self.arm_enables += 1;
                 ArmStage::WaitArmed
             }
             ArmStage::WaitArmed => {
@@ -232,9 +233,15 @@ impl<S: SampleSink> RtLoop<S> {
                 request,
             };
         } else if now - since_ns > self.cfg.arm_timeout_ns {
-            let mut err = RtError::new(ErrorKind::Timeout, Detail::ArmTimeout);
-            // The first drive that did not report armed.
-            err.node = self.drives.iter().find(|d| !is_armed(d)).map(|d| d.node);
+            // The first drive that did not report armed, with what it last reported.
+            let late = self.drives.iter().find(|d| !is_armed(d));
+            let detail = Detail::ArmTimeout {
+                waited_ms: (now - since_ns) as f64 / 1e6,
+                enables: self.arm_enables,
+                status: late.filter(|d| d.tp_status_fresh).map(|d| d.tp_status),
+            };
+            let mut err = RtError::new(ErrorKind::Timeout, detail);
+            err.node = late.map(|d| d.node);
             self.disarm_all();
             self.reply = Some(Reply::Error(err));
             self.activity = Activity::Idle;

@@ -101,9 +101,13 @@ impl LoopConfig {
             // (RPDO1 out, TPDO1 back): a bus whose drives may be silent for up to
             // the heartbeat timeout (a slow or emulated host) gets that long for each.
             enable_timeout_ns: (3 * bus.heartbeat_timeout_ms as u64 * 1_000_000).max(2_000_000_000),
-            // Arming is a round trip per drive (RPDO2 out, TPDO2 back): a bus whose
-            // drives may be silent for longer (a slow or emulated host) gets as long.
-            arm_timeout_ns: (bus.heartbeat_timeout_ms as u64 * 1_000_000).max(200_000_000),
+            // Arming is a round trip per drive (RPDO2 out, TPDO2 back). A drive may
+            // be silent for up to the heartbeat timeout and still count as alive, so
+            // its answer may come that long after the enable went out, which is
+            // itself a tick or more after the request: twice the heartbeat timeout.
+            // (Once was not enough in an emulated VM, 2026-11-30: an answer more
+            // than 4 s late from drives whose heartbeats were not.)
+            arm_timeout_ns: (2 * bus.heartbeat_timeout_ms as u64 * 1_000_000).max(200_000_000),
             heartbeat_timeout_ns: bus.heartbeat_timeout_ms as u64 * 1_000_000,
             master_node: bus.master_node,
             master_heartbeat_ns: bus.master_heartbeat_ms as u64 * 1_000_000,
@@ -270,6 +274,9 @@ pub struct RtLoop<S: SampleSink> {
     nmt_start_due: bool,
     /// Arming: cycles waited for the drives to report armed since the last enable.
     arm_waits: u32,
+    /// Arming: touch probe functions enabled since the probe request (the first and
+    /// the retries), for the timeout's message.
+    arm_enables: u32,
     /// Arming again after a wait: only the drives that did not report armed.
     arm_retry: bool,
     /// When the master's next heartbeat is due (`None`: the first tick sends one).
@@ -322,6 +329,7 @@ impl<S: SampleSink> RtLoop<S> {
             nmt_start_at_ns: 0,
             nmt_start_due: false,
             arm_waits: 0,
+            arm_enables: 0,
             arm_retry: false,
             heartbeat_due_ns: None,
             shutdown_ticks: 0,
@@ -456,6 +464,7 @@ impl<S: SampleSink> RtLoop<S> {
                 run_id,
             } => {
                 self.arm_retry = false;
+                self.arm_enables = 0;
                 self.activity = Activity::Arming {
                     stage: ArmStage::Disarm,
                     since_ns: self.supervised_ns,
@@ -565,6 +574,7 @@ mod tests {
     use crate::cia402::touch_probe::{TouchProbeFunction, TouchProbeStatus};
     use crate::contact_sample::SinkError;
     use crate::contact_sample::{ContactSample, FLAG_HW_LATCH};
+    use crate::machine::MachineError;
     use crate::master::process_data::{ProcessData, Rpdo1, Rpdo2, Tpdo1, Tpdo2};
     use std::path::Path;
 
@@ -610,6 +620,8 @@ mod tests {
         last_tpdo2: Option<Tpdo2>,
         /// A drive that ignores Switch on (stays in Ready to switch on).
         refuses_switch_on: bool,
+        /// A drive whose stored edge survives enabling touch probe 1 again.
+        keeps_stored_edge: bool,
     }
 
     impl FakeDrive {
@@ -625,6 +637,7 @@ mod tests {
                 latched: 0,
                 last_tpdo2: None,
                 refuses_switch_on: false,
+                keeps_stored_edge: false,
             }
         }
 
@@ -643,8 +656,11 @@ mod tests {
                 }
                 CobKind::Rpdo { num: 2, node } if node == self.node => {
                     self.tp_function = Rpdo2::decode(f).unwrap().touch_probe_function;
-                    let level = self.tp_status & TouchProbeStatus::INPUT_LEVEL;
-                    self.tp_status = level
+                    let mut kept = TouchProbeStatus::INPUT_LEVEL;
+                    if self.keeps_stored_edge {
+                        kept |= TouchProbeStatus::POSITIVE_EDGE_STORED;
+                    }
+                    self.tp_status = self.tp_status & kept
                         | if self.tp_function & TouchProbeFunction::ENABLE != 0 {
                             TouchProbeStatus::ENABLED
                         } else {
@@ -1039,17 +1055,73 @@ mod tests {
         let timeout = b.rt.config().arm_timeout_ns;
         let t0 = b.now;
         let reply = b.until_reply();
-        match reply {
-            Reply::Error(e) => {
-                assert_eq!(e.kind, ErrorKind::Timeout, "{e:?}");
-                assert_eq!(e.node, Some(1));
-            }
-            other => panic!("{other:?}"),
-        }
+        let Reply::Error(e) = reply else {
+            panic!("{reply:?}")
+        };
+        assert_eq!(e.kind, ErrorKind::Timeout, "{e:?}");
+        assert_eq!(e.node, Some(1));
         let waited = b.now - t0;
         assert!(
             waited > timeout && waited <= timeout + 4 * PERIOD,
             "{waited}"
+        );
+        // The error says what was tried and what came back: nothing, after the
+        // first enable and a retry every quarter of the timeout.
+        match e.detail {
+            Detail::ArmTimeout {
+                waited_ms,
+                enables,
+                status,
+            } => {
+                assert_eq!(status, None);
+                assert_eq!(enables, 4);
+                let ns = waited_ms * 1e6;
+                assert!(
+                    ns > timeout as f64 && ns <= (timeout + 4 * PERIOD) as f64,
+                    "{waited_ms}"
+                );
+            }
+            ref other => panic!("{other:?}"),
+        }
+        let m = MachineError::from(e).to_string();
+        assert!(
+            m.contains("touch probe 1 of node 1 did not report armed in ")
+                && m.contains(
+                    "no touch probe status (TPDO2) came since the last of 4 enables sent"
+                ),
+            "{m}"
+        );
+    }
+
+    /// A drive that answers the enable with an edge still stored (one that does not
+    /// clear it on enabling again): never armed, and the timeout shows its status.
+    #[test]
+    fn an_arm_timeout_names_the_drive_and_the_status_it_answered() {
+        let mut b = Bench::enabled();
+        b.drives[1].keeps_stored_edge = true;
+        b.drives[1].tp_status |= TouchProbeStatus::POSITIVE_EDGE_STORED;
+        b.rt.submit(Command::Probe {
+            direction: [0.0, 0.0, -1.0],
+            feed: 600.0,
+            max_distance: 5.0,
+            run_id: 9,
+        });
+        let Reply::Error(e) = b.until_reply() else {
+            panic!("armed with an edge stored")
+        };
+        assert_eq!((e.kind, e.node), (ErrorKind::Timeout, Some(2)), "{e:?}");
+        let m = MachineError::from(e).to_string();
+        assert!(
+            m.contains("touch probe 1 of node 2 did not report armed in 30")
+                && m.contains(
+                    " ms: its touch probe status 0x0003 (probe 1 enabled, an edge stored) answered the last of 4 enables sent; nothing moved"
+                ),
+            "{m}"
+        );
+        assert_eq!(
+            b.rpdo1(3).target_position,
+            0,
+            "nothing moved: the probing move never started"
         );
     }
 
